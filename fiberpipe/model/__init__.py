@@ -1,0 +1,1 @@
+"""The beam model built from traced fibers: meshing and exports."""
