@@ -1,0 +1,626 @@
+"""YAML configs: loading, ``extends:``, unit conversion and validation (SPEC section 3).
+
+# Strategy: read the YAML (and, recursively, the file it ``extends:``), resolve relative paths
+# against the folder of the file that names them, deep-merge the variant over its base, then
+# validate the whole tree with pydantic models that forbid unknown keys. Quantities accept bare
+# SI numbers or unit strings ("0.5 mm", "15 GPa", "1000 mm/min") and are stored as SI floats,
+# so everything after :func:`load_config` is SI. Every failure becomes one :class:`ConfigError`
+# line naming the file and the dotted key, with a close-match suggestion for misspelt keys.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Optional, Union
+
+import yaml
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from fiberpipe.errors import ConfigError
+from fiberpipe.units import to_si
+
+# ----------------------------------------------------------------------------------------------
+# Quantity types
+
+
+def _quantity(dimension: str):
+    def convert(value):
+        if value is None:
+            return None
+        return to_si(value, dimension)
+
+    return BeforeValidator(convert)
+
+
+def _vector(dimension: str, size: int = 3):
+    def convert(value):
+        if value is None:
+            return None
+        if not isinstance(value, (list, tuple)) or len(value) != size:
+            raise ValueError(f"expected a list of {size} {dimension} values, got {value!r}")
+        return [to_si(v, dimension) for v in value]
+
+    return BeforeValidator(convert)
+
+
+Length = Annotated[float, _quantity("length")]
+Time = Annotated[float, _quantity("time")]
+Rate = Annotated[float, _quantity("rate")]
+Velocity = Annotated[float, _quantity("velocity")]
+Pressure = Annotated[float, _quantity("pressure")]
+Density = Annotated[float, _quantity("density")]
+Angle = Annotated[float, _quantity("angle")]
+Acceleration3 = Annotated[list[float], _vector("acceleration")]
+Force3 = Annotated[list[float], _vector("force")]
+LineForce3 = Annotated[list[float], _vector("line_force")]
+Length3 = Annotated[list[float], _vector("length")]
+Stiffness = Annotated[float, _quantity("stiffness")]
+
+
+class Section(BaseModel):
+    """Base of every config section: unknown keys are errors, values are validated on assignment."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+def _positive(name: str, value: Optional[float]) -> Optional[float]:
+    if value is not None and not (value > 0 and math.isfinite(value)):
+        raise ValueError(f"{name} must be positive and finite, got {value}")
+    return value
+
+
+# ----------------------------------------------------------------------------------------------
+# input
+
+
+class PhantomConfig(Section):
+    """Synthetic volume of curved, touching fibers (``input.phantom``)."""
+
+    n_fibers: int = Field(16, ge=1, le=5000)
+    shape: list[int] = Field(default_factory=lambda: [150, 64, 64], description="z y x, voxels")
+    radius_vox: float = Field(4.0, gt=0.5)
+    voxel_size: Length = 62.5e-6
+    touching_fraction: float = Field(1 / 3, ge=0, le=1)
+    contrast_to_noise: float = Field(5.0, gt=0)
+    blur_sigma_vox: float = Field(1.0, ge=0)
+    seed: int = 0
+
+    @field_validator("shape")
+    @classmethod
+    def _shape(cls, v):
+        if len(v) != 3 or min(v) < 8:
+            raise ValueError(f"shape must be 3 sizes (z y x) of at least 8 voxels, got {v}")
+        return v
+
+
+class InputConfig(Section):
+    """What the run starts from: a volume file, a phantom, a fibers artifact or inline polylines."""
+
+    volume: Optional[str] = None
+    voxel_size: Optional[Length] = None
+    dataset: Optional[str] = None
+    shape: Optional[list[int]] = None
+    dtype: Optional[str] = None
+    phantom: Optional[PhantomConfig] = None
+    fibers: Optional[str] = None
+    polylines: Optional[list[list[Length3]]] = None
+    truth: Optional[str] = None
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        given = [k for k in ("volume", "phantom", "fibers", "polylines") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one of input.volume, input.phantom, input.fibers, input.polylines"
+                + (f" (got {', '.join(given)})" if given else "")
+            )
+        _positive("input.voxel_size", self.voxel_size)
+        if self.polylines is not None:
+            for i, line in enumerate(self.polylines):
+                if len(line) < 2:
+                    raise ValueError(f"input.polylines[{i}] needs at least 2 points")
+        return self
+
+    @property
+    def source(self) -> str:
+        for k in ("volume", "phantom", "fibers", "polylines"):
+            if getattr(self, k) is not None:
+                return k
+        raise AssertionError
+
+
+# ----------------------------------------------------------------------------------------------
+# imaging stages
+
+
+class SegmentConfig(Section):
+    method: Literal["otsu", "fixed"] = "otsu"
+    threshold: Optional[float] = None
+    smooth_sigma_vox: float = Field(1.0, ge=0)
+    min_object_vox: int = Field(64, ge=0)
+    fill_holes: bool = True
+
+    @model_validator(mode="after")
+    def _threshold(self):
+        if self.method == "fixed" and self.threshold is None:
+            raise ValueError("segment.method 'fixed' needs segment.threshold")
+        return self
+
+
+class SkeletonizeConfig(Section):
+    enabled: Optional[bool] = Field(
+        None, description="compute the skeleton; default: only when trace.method is skeleton"
+    )
+
+
+class TraceConfig(Section):
+    method: Literal["slices", "skeleton"] = "slices"
+    max_jump_vox: float = Field(3.0, gt=0)
+    max_skip: int = Field(3, ge=0)
+    min_length_vox: float = Field(20.0, ge=0)
+    smooth_sigma_vox: float = Field(2.0, ge=0)
+    expected_radius: Optional[Length] = None
+
+
+class MeshConfig(Section):
+    element_length: Length = 0.3e-3
+    smooth_sigma: Length = 0.0
+
+    @field_validator("element_length")
+    @classmethod
+    def _el(cls, v):
+        return _positive("mesh.element_length", v)
+
+
+class MaterialConfig(Section):
+    youngs_modulus: Pressure = 15e9
+    poisson_ratio: Optional[float] = None
+    shear_modulus: Optional[Pressure] = None
+    density: Density = 1380.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("material.youngs_modulus", self.youngs_modulus)
+        _positive("material.density", self.density)
+        if self.poisson_ratio is not None and self.shear_modulus is not None:
+            raise ValueError("give material.poisson_ratio or material.shear_modulus, not both")
+        if self.poisson_ratio is not None and not (-1 < self.poisson_ratio < 0.5):
+            raise ValueError(f"material.poisson_ratio must be in (-1, 0.5), got {self.poisson_ratio}")
+        _positive("material.shear_modulus", self.shear_modulus)
+        return self
+
+    @property
+    def shear_modulus_pa(self) -> float:
+        if self.shear_modulus is not None:
+            return self.shear_modulus
+        nu = 0.3 if self.poisson_ratio is None else self.poisson_ratio
+        return self.youngs_modulus / (2 * (1 + nu))
+
+    @property
+    def poisson_ratio_value(self) -> float:
+        if self.poisson_ratio is not None:
+            return self.poisson_ratio
+        if self.shear_modulus is not None:
+            return self.youngs_modulus / (2 * self.shear_modulus) - 1
+        return 0.3
+
+
+class FiberConfig(Section):
+    radius: Optional[Length] = None
+
+    @field_validator("radius")
+    @classmethod
+    def _r(cls, v):
+        return _positive("fiber.radius", v)
+
+
+# ----------------------------------------------------------------------------------------------
+# scene (SPEC section 3.1)
+
+EFFECTS = ("gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives")
+Effect = Literal["gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives"]
+
+
+class GravityConfig(Section):
+    acceleration: Acceleration3 = Field(default_factory=lambda: [0.0, 0.0, -9.81])
+
+
+class DampingConfig(Section):
+    alpha: Rate = 0.0
+    beta: Time = 0.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.alpha < 0 or self.beta < 0:
+            raise ValueError("damping.alpha and damping.beta must be >= 0")
+        return self
+
+
+class ContactConfig(Section):
+    law: Literal["linear", "scaled_stiffness", "hertz_parallel", "hertz_crossed", "hertz_oriented"] = (
+        "hertz_oriented"
+    )
+    stiffness: Optional[float] = Field(None, description="linear law: N/m² per unit length")
+    preset: Optional[str] = None
+    k_def: Optional[float] = None
+    s0: Optional[float] = None
+    s: Optional[float] = None
+    d: Optional[Length] = None
+    angle: Optional[Angle] = None
+    skin: Optional[Length] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.law == "linear" and self.stiffness is None:
+            raise ValueError("contact.law 'linear' needs contact.stiffness (N/m², force per unit length per metre)")
+        if self.law == "hertz_crossed" and self.angle is None:
+            raise ValueError("contact.law 'hertz_crossed' needs contact.angle (e.g. '6 deg')")
+        if self.law == "scaled_stiffness" and self.preset is None and None in (self.k_def, self.s0, self.s, self.d):
+            raise ValueError("contact.law 'scaled_stiffness' needs contact.preset or all of k_def, s0, s, d")
+        if self.stiffness is not None:
+            _positive("contact.stiffness", self.stiffness)
+        if self.angle is not None and not (0 <= self.angle <= math.pi / 2 + 1e-12):
+            raise ValueError("contact.angle must be between 0 and 90 deg")
+        return self
+
+
+class FrictionConfig(Section):
+    mu: float = 0.2
+    stiffness: Optional[float] = None
+
+    @field_validator("mu")
+    @classmethod
+    def _mu(cls, v):
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"friction.mu must be >= 0, got {v}")
+        return v
+
+
+PlateMode = Literal["moving", "fixed", "none"]
+
+
+class PlatesConfig(Section):
+    axis: Literal["x", "y", "z"] = "z"
+    lower: PlateMode = "moving"
+    upper: PlateMode = "fixed"
+    lower_position: Optional[Length] = None
+    upper_position: Optional[Length] = None
+
+
+class WallsConfig(Section):
+    x: Optional[list[Length]] = None
+    y: Optional[list[Length]] = None
+    z: Optional[list[Length]] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        for axis in "xyz":
+            v = getattr(self, axis)
+            if v is not None and (len(v) != 2 or not v[0] < v[1]):
+                raise ValueError(f"walls.{axis} must be [lower, upper] with lower < upper, got {v}")
+        return self
+
+
+class LoadingConfig(Section):
+    displacement: Length = 0.0
+    velocity: Velocity = 1000e-3 / 60
+    ramp: Literal["smooth", "linear"] = "smooth"
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("loading.velocity", self.velocity)
+        return self
+
+
+Anchor = Union[Literal["start", "end"], int]
+
+
+class ClampConfig(Section):
+    fiber: int = Field(ge=0)
+    at: Anchor = "start"
+
+
+class LoadConfig(Section):
+    fiber: int = Field(ge=0)
+    at: Optional[Anchor] = None
+    force: Optional[Force3] = None
+    line_force: Optional[LineForce3] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        if (self.force is None) == (self.line_force is None):
+            raise ValueError("a load needs exactly one of force (with at) or line_force")
+        if self.force is not None and self.at is None:
+            raise ValueError("a point load needs 'at' (start, end or a node index)")
+        return self
+
+
+class DriveConfig(Section):
+    fiber: int = Field(ge=0)
+    displacement: Length3
+    velocity: Velocity
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("drives.velocity", self.velocity)
+        return self
+
+
+class SceneConfig(Section):
+    effects: list[Effect] = Field(default_factory=list)
+    gravity: Optional[GravityConfig] = None
+    damping: Optional[DampingConfig] = None
+    contact: Optional[ContactConfig] = None
+    friction: Optional[FrictionConfig] = None
+    plates: Optional[PlatesConfig] = None
+    walls: Optional[WallsConfig] = None
+    loading: Optional[LoadingConfig] = None
+    clamps: list[ClampConfig] = Field(default_factory=list)
+    loads: list[LoadConfig] = Field(default_factory=list)
+    drives: list[DriveConfig] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _defaults_for_effects(self):
+        if len(set(self.effects)) != len(self.effects):
+            raise ValueError("scene.effects lists an effect twice")
+        # An effect listed without its block takes the block's defaults.
+        defaults = {
+            "gravity": GravityConfig,
+            "damping": DampingConfig,
+            "contact": ContactConfig,
+            "friction": FrictionConfig,
+            "plates": PlatesConfig,
+            "walls": WallsConfig,
+        }
+        for name, cls in defaults.items():
+            if name in self.effects and getattr(self, name) is None:
+                object.__setattr__(self, name, cls())
+        if "plates" in self.effects and self.loading is None:
+            object.__setattr__(self, "loading", LoadingConfig())
+        for name in ("clamps", "loads", "drives"):
+            if name in self.effects and not getattr(self, name):
+                raise ValueError(f"scene.effects lists {name} but scene.{name} is empty")
+        return self
+
+    def warnings(self) -> list[str]:
+        """Effects that are configured but cannot act, as messages for the user."""
+        out = []
+        if "friction" in self.effects and "contact" not in self.effects and "plates" not in self.effects and "walls" not in self.effects:
+            out.append("scene.effects has friction but no contact, plates or walls: friction cannot act")
+        for name in ("gravity", "damping", "contact", "friction", "plates", "walls"):
+            if getattr(self, name) is not None and name not in self.effects:
+                out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
+        for name in ("clamps", "loads", "drives"):
+            if getattr(self, name) and name not in self.effects:
+                out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
+        return out
+
+
+class SolverConfig(Section):
+    dt_safety: float = 0.9
+    dt: Optional[Time] = Field(None, description="fixed time step; default: the stable step × dt_safety")
+    end_time: Optional[Time] = None
+    output_frames: int = Field(21, ge=2)
+    history_every: Optional[int] = Field(None, ge=1)
+    checkpoint_every: Optional[int] = Field(None, ge=1, description="steps between checkpoints")
+    rotational_inertia_scaling: float = 1.0
+    mass_scaling: float = 1.0
+    threads: int = Field(1, ge=1)
+    settle_time: Time = 0.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        if not (0 < self.dt_safety <= 1):
+            raise ValueError(f"solver.dt_safety must be in (0, 1], got {self.dt_safety}")
+        _positive("solver.dt", self.dt)
+        _positive("solver.end_time", self.end_time)
+        if self.rotational_inertia_scaling < 1 or self.mass_scaling < 1:
+            raise ValueError("solver.rotational_inertia_scaling and solver.mass_scaling must be >= 1")
+        return self
+
+
+class PostConfig(Section):
+    reference_fibers: Optional[str] = None
+    plots: bool = True
+    quasi_static_ratio: float = Field(1e-2, gt=0)
+
+
+class Config(Section):
+    """A whole fiberpipe config (SPEC section 3). All quantities are SI floats."""
+
+    name: str = "run"
+    input: InputConfig
+    segment: SegmentConfig = Field(default_factory=SegmentConfig)
+    skeletonize: SkeletonizeConfig = Field(default_factory=SkeletonizeConfig)
+    trace: TraceConfig = Field(default_factory=TraceConfig)
+    mesh: MeshConfig = Field(default_factory=MeshConfig)
+    material: MaterialConfig = Field(default_factory=MaterialConfig)
+    fiber: FiberConfig = Field(default_factory=FiberConfig)
+    scene: SceneConfig = Field(default_factory=SceneConfig)
+    solver: SolverConfig = Field(default_factory=SolverConfig)
+    post: PostConfig = Field(default_factory=PostConfig)
+
+    # Where the config came from, for messages and relative paths (not part of the YAML).
+    source_path: Optional[str] = Field(None, exclude=True)
+
+    def section_sha256(self, *names: str) -> str:
+        """Content hash of the validated (SI) sections ``names``, for stage cache keys."""
+        data = {n: getattr(self, n).model_dump(mode="json") for n in names}
+        blob = json.dumps(data, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(blob.encode()).hexdigest()
+
+    def sha256(self) -> str:
+        blob = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(blob.encode()).hexdigest()
+
+
+# ----------------------------------------------------------------------------------------------
+# Loading
+
+#: Dotted keys whose values are paths, resolved against the folder of the file that sets them.
+PATH_KEYS = (("input", "volume"), ("input", "fibers"), ("input", "truth"), ("post", "reference_fibers"))
+
+
+def _read_yaml(path: Path) -> dict:
+    if not path.exists():
+        raise ConfigError("config file not found", where=str(path))
+    if path.is_dir():
+        raise ConfigError("is a folder, not a config file", where=str(path))
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ConfigError("is not a text (YAML) file", where=str(path)) from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" at line {mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or "syntax error"
+        raise ConfigError(f"is not valid YAML{line}: {problem}", where=str(path)) from None
+    if data is None:
+        raise ConfigError("is empty", where=str(path))
+    if not isinstance(data, dict):
+        raise ConfigError("must be a YAML mapping of sections (name, input, scene, ...)", where=str(path))
+    return data
+
+
+def _resolve_paths(data: dict, folder: Path) -> None:
+    for section, key in PATH_KEYS:
+        sec = data.get(section)
+        if isinstance(sec, dict) and isinstance(sec.get(key), str):
+            p = Path(sec[key]).expanduser()
+            if not p.is_absolute():
+                sec[key] = str((folder / p).resolve())
+
+
+def _deep_merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _deep_merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def load_raw(path: str | Path, _seen: tuple = ()) -> dict:
+    """Read a config file and the chain of files it ``extends:``, merged, paths resolved."""
+    path = Path(path).resolve()
+    if path in _seen:
+        raise ConfigError("extends: forms a cycle", where=str(path))
+    data = _read_yaml(path)
+    _resolve_paths(data, path.parent)
+    base = data.pop("extends", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError("extends: must be the path of another config file", where=str(path))
+    base_path = (path.parent / base).resolve()
+    if not base_path.exists():
+        raise ConfigError(f"extends: {base} not found", where=str(path))
+    return _deep_merge(load_raw(base_path, _seen + (path,)), data)
+
+
+def _model_at(model: type[BaseModel], loc: tuple) -> Optional[type[BaseModel]]:
+    """The pydantic model class that owns the field at ``loc`` (for key suggestions)."""
+    current: Any = model
+    for part in loc:
+        if isinstance(part, int) or current is None:
+            continue
+        fields = getattr(current, "model_fields", None)
+        if not fields or part not in fields:
+            return current if fields else None
+        ann = fields[part].annotation
+        current = _unwrap_model(ann)
+    return current
+
+
+def _unwrap_model(ann) -> Optional[type[BaseModel]]:
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return ann
+    for arg in getattr(ann, "__args__", ()) or ():
+        found = _unwrap_model(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _format_error(err: dict, where: str) -> str:
+    loc = tuple(err["loc"])
+    # Drop pydantic's tagged-union and validator markers from the dotted key.
+    parts = [str(p) if not isinstance(p, int) else f"[{p}]" for p in loc if not str(p).startswith("function-")]
+    key = ".".join(parts).replace(".[", "[")
+    kind = err["type"]
+    if kind == "extra_forbidden":
+        owner = _model_at(Config, loc[:-1])
+        name = str(loc[-1])
+        hint = ""
+        if owner is not None:
+            close = difflib.get_close_matches(name, list(owner.model_fields), n=1, cutoff=0.6)
+            if close:
+                hint = f" (did you mean '{close[0]}'?)"
+            else:
+                hint = f" (known keys: {', '.join(k for k in owner.model_fields if k != 'source_path')})"
+        return f"unknown key '{key}'{hint}"
+    if kind == "missing":
+        return f"missing required key '{key}'"
+    msg = err["msg"]
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, ") :]
+    if kind == "literal_error":
+        return f"'{key}': {msg}, got {err.get('input')!r}"
+    if not key:
+        return msg
+    return f"'{key}': {msg}"
+
+
+def validate_config(data: dict, *, where: str = "<config>") -> Config:
+    """Validate a merged config mapping; raise :class:`ConfigError` naming the first bad key."""
+    try:
+        cfg = Config.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors()
+        first = _format_error(errors[0], where)
+        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+        raise ConfigError(first + more, where=where) from None
+    cfg.source_path = where
+    return cfg
+
+
+def load_config(path: str | Path, overrides: Optional[dict] = None) -> Config:
+    """Load, merge (``extends:``), apply dotted-key ``overrides`` and validate a config file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The YAML file.
+    overrides : dict, optional
+        ``{"scene.damping.alpha": "1e4 1/s", ...}`` applied after merging (used by studies).
+    """
+    data = load_raw(path)
+    for dotted, value in (overrides or {}).items():
+        set_dotted(data, dotted, value)
+    return validate_config(data, where=str(path))
+
+
+def set_dotted(data: dict, dotted: str, value) -> None:
+    """Set ``data["a"]["b"]["c"] = value`` for ``dotted = "a.b.c"``, creating sections as needed."""
+    parts = dotted.split(".")
+    cur = data
+    for p in parts[:-1]:
+        if not isinstance(cur.get(p), dict):
+            cur[p] = {}
+        cur = cur[p]
+    cur[parts[-1]] = value
