@@ -1,0 +1,302 @@
+"""Versioned HDF5 artifacts (SPEC section 4).
+
+Every artifact is one HDF5 file whose root attributes say what it is (``kind``,
+``schema_version``) and where it came from (``fiberpipe_version``, ``created_utc``,
+``config_sha256``, ``inputs``: JSON of the sha256 of each input artifact). Datasets carry a
+``units`` attribute. Writes are atomic: the file is written under a temporary name in the same
+folder and renamed over the target, so a crash never leaves a half-written artifact that a later
+stage trusts. Readers refuse a wrong kind or an unknown schema version.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import h5py
+import numpy as np
+
+from fiberpipe import __version__
+from fiberpipe.errors import ArtifactError
+
+#: Schema version of each artifact kind this fiberpipe writes and reads.
+SCHEMA_VERSIONS = {
+    "volume": 1,
+    "mask": 1,
+    "skeleton": 1,
+    "fibers": 1,
+    "mesh": 1,
+    "simulation": 1,
+    "checkpoint": 1,
+}
+
+
+@dataclass
+class Artifact:
+    """An artifact read into memory: root attributes and datasets by path."""
+
+    path: Path
+    attrs: dict[str, Any]
+    data: dict[str, np.ndarray] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    group_attrs: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return self.attrs["kind"]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        name = name.strip("/")
+        if name not in self.data:
+            raise ArtifactError(f"has no dataset /{name}", where=str(self.path))
+        return self.data[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name.strip("/") in self.data
+
+    @property
+    def inputs(self) -> dict[str, str]:
+        return json.loads(self.attrs.get("inputs", "{}"))
+
+
+def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    """sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while True:
+            b = f.read(chunk)
+            if not b:
+                break
+            h.update(b)
+    return h.hexdigest()
+
+
+@contextmanager
+def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it over ``path`` only if the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix + ".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_artifact(
+    path: str | Path,
+    kind: str,
+    datasets: dict[str, Any],
+    *,
+    units: dict[str, str] | None = None,
+    attrs: dict[str, Any] | None = None,
+    group_attrs: dict[str, dict[str, Any]] | None = None,
+    config_sha256: str = "",
+    inputs: dict[str, str] | None = None,
+    compression: str | None = None,
+) -> Path:
+    """Write an artifact atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Target file (``.h5``).
+    kind : str
+        One of :data:`SCHEMA_VERSIONS`.
+    datasets : dict
+        ``{"fibers/points": array, ...}``: dataset paths (groups created as needed) to arrays.
+    units : dict, optional
+        ``{"fibers/points": "m"}``; datasets without an entry get ``units = ""`` (dimensionless).
+    attrs : dict, optional
+        Extra root attributes (scalars, strings; dicts and lists are stored as JSON).
+    group_attrs : dict, optional
+        Attributes of groups or datasets, by path.
+    config_sha256 : str
+        Hash of the validated config section(s) that produced the artifact.
+    inputs : dict, optional
+        ``{name: sha256}`` of the input artifacts.
+    compression : str, optional
+        h5py compression for large arrays (e.g. ``"gzip"``); None stores them raw.
+    """
+    if kind not in SCHEMA_VERSIONS:
+        raise ValueError(f"unknown artifact kind {kind!r}")
+    units = units or {}
+    root = {
+        "kind": kind,
+        "schema_version": SCHEMA_VERSIONS[kind],
+        "fiberpipe_version": __version__,
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "config_sha256": config_sha256,
+        "inputs": json.dumps(inputs or {}, sort_keys=True),
+    }
+    for k, v in (attrs or {}).items():
+        root[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            for k, v in root.items():
+                f.attrs[k] = v
+            for name, arr in datasets.items():
+                name = name.strip("/")
+                arr = np.asarray(arr)
+                kw = {}
+                if compression and arr.size > 4096:
+                    kw = {"compression": compression, "shuffle": True, "chunks": True}
+                ds = f.create_dataset(name, data=arr, **kw)
+                ds.attrs["units"] = units.get(name, "")
+            for name, gattrs in (group_attrs or {}).items():
+                obj = f.require_group(name.strip("/")) if name.strip("/") not in f else f[name.strip("/")]
+                for k, v in gattrs.items():
+                    obj.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+    return Path(path)
+
+
+def _decode(v):
+    if isinstance(v, bytes):
+        return v.decode()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def open_checked(path: str | Path, kind: str | tuple[str, ...]) -> h5py.File:
+    """Open an artifact read-only after checking it exists, is HDF5, and has the right kind/version."""
+    path = Path(path)
+    kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+    if not path.exists():
+        raise ArtifactError("file not found", where=str(path))
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        raise ArtifactError("is not a readable HDF5 artifact (damaged or another format)", where=str(path)) from None
+    try:
+        got = _decode(f.attrs.get("kind"))
+        if got is None:
+            raise ArtifactError("is HDF5 but not a fiberpipe artifact (no 'kind' attribute)", where=str(path))
+        if got not in kinds:
+            raise ArtifactError(f"is a {got} artifact, but a {' or '.join(kinds)} artifact is needed", where=str(path))
+        version = _decode(f.attrs.get("schema_version"))
+        known = SCHEMA_VERSIONS.get(got)
+        if not isinstance(version, int) or version != known:
+            raise ArtifactError(
+                f"has {got} schema version {version}, this fiberpipe {__version__} reads version {known}; "
+                "re-run the stage that made it",
+                where=str(path),
+            )
+    except Exception:
+        f.close()
+        raise
+    return f
+
+
+def read_artifact(path: str | Path, kind: str | tuple[str, ...], *, names: tuple[str, ...] | None = None) -> Artifact:
+    """Read an artifact (all datasets, or only ``names``) after checking its kind and version."""
+    path = Path(path)
+    with open_checked(path, kind) as f:
+        attrs = {k: _decode(v) for k, v in f.attrs.items()}
+        art = Artifact(path=path, attrs=attrs)
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                if names is None or name in names:
+                    art.data[name] = obj[()]
+                    art.units[name] = _decode(obj.attrs.get("units", ""))
+            if obj.attrs:
+                art.group_attrs[name] = {k: _decode(v) for k, v in obj.attrs.items() if k != "units"}
+
+        try:
+            f.visititems(visit)
+        except OSError:
+            raise ArtifactError("is damaged (a dataset cannot be read)", where=str(path)) from None
+    if names is not None:
+        missing = [n for n in names if n not in art.data]
+        if missing:
+            raise ArtifactError(f"has no dataset /{missing[0]}", where=str(path))
+    return art
+
+
+# ----------------------------------------------------------------------------------------------
+# Typed helpers for the artifacts whose layout SPEC section 4 fixes.
+
+
+def write_fibers(path, polylines, **kw) -> Path:
+    """Write a ``fibers`` artifact with the fixed layout /fibers/points, /fibers/offsets, /fibers/radius."""
+    return write_artifact(
+        path,
+        "fibers",
+        {
+            "fibers/points": polylines.points_m,
+            "fibers/offsets": polylines.offsets,
+            "fibers/radius": polylines.radius_m,
+        },
+        units={"fibers/points": "m", "fibers/radius": "m"},
+        **kw,
+    )
+
+
+def read_fibers(path):
+    """Read a ``fibers`` artifact into :class:`~fiberpipe.polylines.Polylines`."""
+    from fiberpipe.polylines import Polylines
+
+    art = read_artifact(path, "fibers")
+    try:
+        return Polylines(art["fibers/points"], art["fibers/offsets"], art["fibers/radius"])
+    except ValueError as exc:
+        raise ArtifactError(f"inconsistent fibers layout: {exc}", where=str(path)) from None
+
+
+def write_mesh(path, mesh, *, material: dict | None = None, **kw) -> Path:
+    """Write a ``mesh`` artifact: nodes, per-fiber node offsets, connectivity, radius."""
+    attrs = dict(kw.pop("attrs", {}) or {})
+    if material:
+        attrs["material"] = material
+    return write_artifact(
+        path,
+        "mesh",
+        {
+            "mesh/nodes": mesh.nodes_m,
+            "mesh/node_offsets": mesh.node_offsets,
+            "mesh/elements": mesh.elements(),
+            "mesh/element_fiber": mesh.element_fiber(),
+            "mesh/radius": mesh.radius_m,
+        },
+        units={"mesh/nodes": "m", "mesh/radius": "m"},
+        attrs=attrs,
+        **kw,
+    )
+
+
+def read_mesh(path):
+    """Read a ``mesh`` artifact into :class:`~fiberpipe.model.mesh.Mesh`."""
+    from fiberpipe.model.mesh import Mesh
+
+    art = read_artifact(path, "mesh")
+    try:
+        return Mesh(art["mesh/nodes"], art["mesh/node_offsets"], art["mesh/radius"])
+    except ValueError as exc:
+        raise ArtifactError(f"inconsistent mesh layout: {exc}", where=str(path)) from None
+
+
+def write_volume(path, kind: str, volume: np.ndarray, voxel_size_m, *, name: str | None = None, **kw) -> Path:
+    """Write a ``volume``, ``mask`` or ``skeleton`` artifact (gzip-compressed, voxel size attribute)."""
+    name = name or kind
+    attrs = dict(kw.pop("attrs", {}) or {})
+    attrs["voxel_size_m"] = list(np.broadcast_to(np.asarray(voxel_size_m, float), (3,)))
+    datasets = {name: volume}
+    datasets.update(kw.pop("extra", {}) or {})
+    return write_artifact(path, kind, datasets, attrs=attrs, compression="gzip", **kw)

@@ -1,0 +1,1 @@
+"""Writers for the formats users open elsewhere: VTK (ParaView) and Abaqus input files."""
