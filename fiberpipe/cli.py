@@ -1,0 +1,200 @@
+"""Command line: ``fiberpipe run CONFIG``, one subcommand per stage, ``inspect``, ``verify``...
+
+The CLI is a thin layer over :mod:`fiberpipe.pipeline` and :mod:`fiberpipe.stages`. A
+:class:`~fiberpipe.errors.FiberpipeError` (bad config, bad input, wrong artifact) is printed as
+one line on stderr with a non-zero exit status; ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+import click
+
+from fiberpipe import __version__
+from fiberpipe.errors import FiberpipeError
+
+
+class _Group(click.Group):
+    """Turns user errors into one line (no traceback) unless ``--debug``."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except FiberpipeError as exc:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+        except MemoryError:
+            click.echo("error: out of memory", err=True)
+            sys.exit(2)
+        except (OSError, ValueError) as exc:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
+            sys.exit(2)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="fiberpipe")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or per-stage lines.")
+@click.pass_context
+def main(ctx, debug, quiet):
+    """fiberpipe: from a tomography volume of a fiber bundle to its simulated compaction curve."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+    ctx.obj["quiet"] = quiet or not sys.stderr.isatty()
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s: %(message)s")
+    for handler in logging.getLogger().handlers:  # the console shows warnings; run.log gets everything
+        handler.setLevel(logging.WARNING)
+
+
+def _load(config):
+    from fiberpipe.config import load_config
+
+    cfg = load_config(config)
+    for w in cfg.scene.warnings():
+        click.echo(f"warning: {w}", err=True)
+    return cfg
+
+
+def _default_out(config) -> Path:
+    return Path("runs") / Path(config).stem
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
+@click.option("--from", "from_stage", help="First stage to run.")
+@click.option("--to", "to_stage", help="Last stage to run.")
+@click.option("--force", is_flag=True, help="Rerun stages even when their inputs and settings are unchanged.")
+@click.pass_context
+def run(ctx, config, out, from_stage, to_stage, force):
+    """Run the stages CONFIG asks for, skipping those that are up to date."""
+    from fiberpipe.pipeline import run_pipeline
+
+    cfg = _load(config)
+    out = Path(out) if out else _default_out(config)
+    run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=click.echo)
+    click.echo(f"run folder: {out}")
+
+
+def _stage_command(name: str, doc: str):
+    @click.argument("config", type=click.Path(dir_okay=False))
+    @click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
+    @click.option("--force", is_flag=True, help="Rerun even if up to date.")
+    @click.pass_context
+    def cmd(ctx, config, out, force):
+        from fiberpipe.pipeline import run_pipeline
+
+        cfg = _load(config)
+        out = Path(out) if out else _default_out(config)
+        run_pipeline(cfg, out, from_stage=name, to_stage=name, force=force, echo=click.echo)
+
+    cmd.__doc__ = doc + " Reads its inputs from, and writes into, the run folder."
+    return main.command(name=name)(cmd)
+
+
+_stage_command("segment", "Segment the volume into a fiber mask (mask.h5).")
+_stage_command("skeletonize", "Thin the mask to a skeleton with local radii (skeleton.h5).")
+_stage_command("mesh", "Mesh the fibers into beam elements (mesh.h5, mesh.vtu, model.inp).")
+_stage_command("simulate", "Simulate the scene on the mesh (simulation.h5, frames/*.vtu, simulation.pvd).")
+_stage_command("post", "Post-process a simulation: curves, energies, plots, report (post/).")
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
+@click.option("--force", is_flag=True, help="Rerun even if up to date.")
+@click.option("--truth", type=click.Path(dir_okay=False), help="Ground-truth fibers.h5: print the tracing accuracy.")
+def trace(config, out, force, truth):
+    """Trace one mid-line per fiber from the mask (fibers.h5)."""
+    from fiberpipe.pipeline import run_pipeline
+    from fiberpipe.stages.trace import trace_accuracy_report
+
+    cfg = _load(config)
+    out = Path(out) if out else _default_out(config)
+    run_pipeline(cfg, out, from_stage="trace", to_stage="trace", force=force, echo=click.echo)
+    if truth:
+        from fiberpipe.artifacts import read_artifact
+        from fiberpipe.stages.skeletonize import eval_list
+
+        vs = eval_list(read_artifact(out / "mask.h5", "mask", names=()).attrs["voxel_size_m"])[0]
+        acc = trace_accuracy_report(out / "fibers.h5", Path(truth), vs, out / "trace_accuracy.json")
+        for k, v in acc.items():
+            click.echo(f"{k:28s} {v}")
+
+
+@main.command()
+@click.option("--out", "out", type=click.Path(file_okay=False), required=True, help="Folder for volume.tif and truth.h5.")
+@click.option("--n-fibers", default=16, show_default=True, type=int)
+@click.option("--shape", nargs=3, type=int, default=(150, 64, 64), show_default=True, help="z y x voxels")
+@click.option("--radius-vox", default=4.0, show_default=True, type=float)
+@click.option("--voxel-size", default="62.5 um", show_default=True, help="Quantity, e.g. '15 um'.")
+@click.option("--touching-fraction", default=1 / 3, show_default=True, type=float)
+@click.option("--cnr", "contrast_to_noise", default=5.0, show_default=True, type=float, help="Contrast-to-noise ratio.")
+@click.option("--blur", "blur_sigma_vox", default=1.0, show_default=True, type=float, help="PSF sigma, voxels.")
+@click.option("--seed", default=0, show_default=True, type=int)
+def phantom(out, **kw):
+    """Make a synthetic CT volume of curved, touching fibers with its ground truth."""
+    from fiberpipe.config import PhantomConfig
+    from fiberpipe.errors import ConfigError
+    from fiberpipe.stages.phantom import run_phantom
+
+    kw["shape"] = list(kw["shape"])
+    kw["voxel_size"] = kw["voxel_size"]
+    try:
+        pcfg = PhantomConfig(**kw)
+    except Exception as exc:  # pydantic ValidationError
+        raise ConfigError(str(exc).splitlines()[-1] if str(exc) else "invalid phantom options") from None
+    figures = run_phantom(pcfg, Path(out))
+    click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: {figures['fibers']} fibers, shape {figures['shape']}")
+
+
+@main.command()
+@click.argument("artifact", type=click.Path(dir_okay=False))
+@click.option("--check", is_flag=True, help="Verify the artifact's integrity and the hashes of its inputs.")
+def inspect(artifact, check):
+    """Print an artifact's kind, schema version, provenance and contents."""
+    from fiberpipe.inspect import inspect_artifact
+
+    ok = inspect_artifact(Path(artifact), check=check, echo=click.echo)
+    if not ok:
+        sys.exit(1)
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+def study(config):
+    """Parameter sweeps: accuracy versus wall time (SPEC section 9). Arrives with issue 6."""
+    raise FiberpipeError("fiberpipe study is not implemented in this version yet (issue 6)")
+
+
+@main.command()
+@click.option("--quick", is_flag=True, help="Small sizes only.")
+def bench(quick):
+    """Performance benchmarks (SPEC section 10). Arrives with issue 7."""
+    raise FiberpipeError("fiberpipe bench is not implemented in this version yet (issue 7); see benchmarks/")
+
+
+@main.command()
+@click.option("--quick", is_flag=True, help="Only the fast cases.")
+def verify(quick):
+    """Run the verification cases of SPEC section 8 and print the table."""
+    try:
+        from fiberpipe.verification import __main__ as vmain
+    except ImportError:
+        raise FiberpipeError("verification cases are not available in this version yet") from None
+    sys.exit(vmain.main(["--quick"] if quick else []))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,48 @@
+"""``fiberpipe inspect``: what an artifact is, where it came from, and what it holds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from fiberpipe.artifacts import SCHEMA_VERSIONS, open_checked
+from fiberpipe.errors import ArtifactError
+
+
+def inspect_artifact(path: Path, *, check: bool = False, echo=print) -> bool:
+    """Print an artifact's root attributes and datasets; with ``check``, read every dataset.
+
+    Returns False when the check finds a problem.
+    """
+    with open_checked(path, tuple(SCHEMA_VERSIONS)) as f:
+        echo(f"{path}")
+        for k in sorted(f.attrs):
+            v = f.attrs[k]
+            v = v.decode() if isinstance(v, bytes) else v
+            if k == "inputs":
+                v = json.loads(v)
+            echo(f"  {k}: {v}")
+        ok = True
+
+        def show(name, obj):
+            nonlocal ok
+            if isinstance(obj, h5py.Dataset):
+                units = obj.attrs.get("units", "")
+                line = f"  /{name}: {obj.dtype} {obj.shape}" + (f" [{units}]" if units else "")
+                if check:
+                    try:
+                        data = obj[()]
+                        if np.issubdtype(obj.dtype, np.floating) and data.size and not np.all(np.isfinite(data)):
+                            line += "  (contains NaN/inf)"
+                    except OSError:
+                        line += "  DAMAGED"
+                        ok = False
+                echo(line)
+
+        f.visititems(show)
+    if check:
+        echo("  check: " + ("ok" if ok else "FAILED"))
+    return ok

@@ -1,0 +1,320 @@
+"""The runner: which stages a config asks for, in order, skipping those that are up to date.
+
+# Strategy: every stage has a cache key, sha256 of (stage name, artifact schema version, the
+# validated SI config sections the stage reads, the sha256 of each input artifact). The key is
+# stored in ``<run>/fiberpipe.lock.json`` beside the outputs; a stage whose key matches and whose
+# outputs exist is skipped (``--force`` reruns). Since artifacts are written atomically and their
+# hashes feed the next key, a rerun upstream invalidates exactly what depends on it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from fiberpipe import __version__
+from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, write_text_atomic
+from fiberpipe.config import Config
+from fiberpipe.errors import ConfigError, FiberpipeError
+
+log = logging.getLogger("fiberpipe")
+
+STAGE_ORDER = ("phantom", "input", "segment", "skeletonize", "trace", "mesh", "simulate", "post")
+
+
+@dataclass
+class Stage:
+    """One step of the pipeline: what it reads and writes, and the function that does it."""
+
+    name: str
+    sections: tuple[str, ...]
+    inputs: Callable[[Config, Path], dict[str, Path]]
+    outputs: Callable[[Config, Path], list[Path]]
+    func: Callable[[Config, Path, dict[str, Path], str], dict]
+    artifact_kind: str | None = None
+
+
+def _volume_path(cfg: Config, run_dir: Path) -> Path:
+    if cfg.input.phantom is not None:
+        return run_dir / "phantom" / "volume.tif"
+    return Path(cfg.input.volume)
+
+
+def _truth_path(cfg: Config, run_dir: Path) -> Path | None:
+    if cfg.input.truth:
+        return Path(cfg.input.truth)
+    if cfg.input.phantom is not None:
+        return run_dir / "phantom" / "truth.h5"
+    return None
+
+
+def _fibers_path(cfg: Config, run_dir: Path) -> Path:
+    if cfg.input.fibers is not None:
+        return Path(cfg.input.fibers)
+    return run_dir / "fibers.h5"
+
+
+def _skeleton_needed(cfg: Config) -> bool:
+    enabled = cfg.skeletonize.enabled
+    return True if enabled is None else bool(enabled) or cfg.trace.method == "skeleton"
+
+
+# -- stage functions (thin adapters from the runner's calling convention to the stage modules) --
+
+
+def _do_phantom(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.phantom import run_phantom
+
+    return run_phantom(cfg.input.phantom, run_dir / "phantom", config_sha256=key)
+
+
+def _do_input(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.polylines import run_inline_polylines
+
+    return run_inline_polylines(cfg, run_dir / "fibers.h5", config_sha256=key)
+
+
+def _do_segment(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.segment import run_segment
+
+    vs = cfg.input.phantom.voxel_size if cfg.input.phantom is not None else None
+    return run_segment(cfg, inputs["volume"], run_dir / "mask.h5", voxel_size_m=vs, config_sha256=key)
+
+
+def _do_skeletonize(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.skeletonize import run_skeletonize
+
+    return run_skeletonize(cfg, inputs["mask"], run_dir / "skeleton.h5", config_sha256=key)
+
+
+def _do_trace(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.trace import run_trace
+
+    return run_trace(
+        cfg,
+        inputs["mask"],
+        run_dir / "fibers.h5",
+        skeleton_path=inputs.get("skeleton"),
+        truth_path=_truth_path(cfg, run_dir),
+        config_sha256=key,
+    )
+
+
+def _do_mesh(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.mesh import run_mesh
+
+    return run_mesh(cfg, inputs["fibers"], run_dir / "mesh.h5", config_sha256=key)
+
+
+def _do_simulate(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.simulate import run_simulate
+
+    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key)
+
+
+def _do_post(cfg, run_dir, inputs, key):
+    from fiberpipe.stages.post import run_post
+
+    return run_post(cfg, inputs["simulation"], run_dir / "post", config_sha256=key)
+
+
+def _has_module(name: str) -> bool:
+    return importlib.util.find_spec(name) is not None
+
+
+STAGES: dict[str, Stage] = {
+    "phantom": Stage(
+        "phantom", ("input",), lambda c, d: {}, lambda c, d: [d / "phantom" / "volume.tif", d / "phantom" / "truth.h5"], _do_phantom
+    ),
+    "input": Stage("input", ("input",), lambda c, d: {}, lambda c, d: [d / "fibers.h5"], _do_input, "fibers"),
+    "segment": Stage(
+        "segment", ("input", "segment"), lambda c, d: {"volume": _volume_path(c, d)}, lambda c, d: [d / "mask.h5"], _do_segment, "mask"
+    ),
+    "skeletonize": Stage(
+        "skeletonize", ("skeletonize",), lambda c, d: {"mask": d / "mask.h5"}, lambda c, d: [d / "skeleton.h5"], _do_skeletonize, "skeleton"
+    ),
+    "trace": Stage(
+        "trace",
+        ("trace", "fiber"),
+        lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" else {})},
+        lambda c, d: [d / "fibers.h5"],
+        _do_trace,
+        "fibers",
+    ),
+    "mesh": Stage(
+        "mesh",
+        ("mesh", "material", "fiber"),
+        lambda c, d: {"fibers": _fibers_path(c, d)},
+        lambda c, d: [d / "mesh.h5", d / "mesh.vtu", d / "model.inp"],
+        _do_mesh,
+        "mesh",
+    ),
+    "simulate": Stage(
+        "simulate",
+        ("material", "scene", "solver"),
+        lambda c, d: {"mesh": d / "mesh.h5"},
+        lambda c, d: [d / "simulation.h5"],
+        _do_simulate,
+        "simulation",
+    ),
+    "post": Stage(
+        "post", ("post",), lambda c, d: {"simulation": d / "simulation.h5"}, lambda c, d: [d / "post" / "summary.json"], _do_post
+    ),
+}
+
+
+def planned_stages(cfg: Config) -> list[str]:
+    """The stages this config asks for, in order."""
+    src = cfg.input.source
+    names: list[str] = []
+    if src == "phantom":
+        names.append("phantom")
+    if src in ("phantom", "volume"):
+        names += ["segment"] + (["skeletonize"] if _skeleton_needed(cfg) else []) + ["trace"]
+    if src == "polylines":
+        names.append("input")
+    names.append("mesh")
+    if cfg.scene.effects or cfg.solver.end_time is not None:
+        names.append("simulate")
+        names.append("post")
+    return names
+
+
+def available(name: str) -> bool:
+    """Whether the code of a stage exists in this version (simulate and post arrive with the solver)."""
+    mod = {"simulate": "fiberpipe.stages.simulate", "post": "fiberpipe.stages.post"}.get(name)
+    return mod is None or _has_module(mod)
+
+
+def stage_key(stage: Stage, cfg: Config, inputs: dict[str, Path]) -> str:
+    h = hashlib.sha256()
+    h.update(stage.name.encode())
+    h.update(str(SCHEMA_VERSIONS.get(stage.artifact_kind or "", 0)).encode())
+    h.update(cfg.section_sha256(*stage.sections).encode())
+    for name in sorted(inputs):
+        p = inputs[name]
+        h.update(name.encode())
+        h.update(file_sha256(p).encode() if Path(p).is_file() else b"missing")
+    return h.hexdigest()
+
+
+@dataclass
+class RunReport:
+    run_dir: Path
+    stages: dict[str, dict] = field(default_factory=dict)
+
+
+def _setup_run_log(run_dir: Path) -> logging.Handler:
+    handler = logging.FileHandler(run_dir / "run.log")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    logging.getLogger("fiberpipe").addHandler(handler)
+    logging.getLogger("fiberpipe").setLevel(logging.INFO)
+    return handler
+
+
+def run_pipeline(
+    cfg: Config,
+    run_dir: str | Path,
+    *,
+    from_stage: str | None = None,
+    to_stage: str | None = None,
+    force: bool = False,
+    echo: Callable[[str], None] | None = None,
+) -> RunReport:
+    """Run the stages of ``cfg`` into ``run_dir``; return what each stage did.
+
+    Parameters
+    ----------
+    from_stage, to_stage : str, optional
+        Restrict to a slice of the planned stages (names of :data:`STAGE_ORDER`).
+    force : bool
+        Rerun even the stages whose cache key is unchanged.
+    echo : callable, optional
+        Receives one human-readable line per stage (the CLI prints them).
+    """
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    echo = echo or (lambda s: None)
+    plan = planned_stages(cfg)
+    for label, name in (("--from", from_stage), ("--to", to_stage)):
+        if name is not None and name not in plan:
+            raise ConfigError(f"{label} {name}: this config runs the stages {', '.join(plan)}")
+    if from_stage:
+        plan = plan[plan.index(from_stage) :]
+    if to_stage:
+        plan = plan[: plan.index(to_stage) + 1]
+
+    handler = _setup_run_log(run_dir)
+    lock_path = run_dir / "fiberpipe.lock.json"
+    summary_path = run_dir / "summary.json"
+    lock = json.loads(lock_path.read_text()) if lock_path.exists() else {}
+    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    summary.update({"name": cfg.name, "fiberpipe_version": __version__, "config": cfg.source_path})
+    summary.setdefault("stages", {})
+    report = RunReport(run_dir)
+    log.info("run %s -> %s: stages %s", cfg.source_path, run_dir, ", ".join(plan))
+    try:
+        for name in plan:
+            stage = STAGES[name]
+            if not available(name):
+                msg = f"{name}: not available in fiberpipe {__version__} yet, stopping after the previous stage"
+                log.warning(msg)
+                echo(msg)
+                break
+            inputs = stage.inputs(cfg, run_dir)
+            for iname, p in inputs.items():
+                if not Path(p).exists():
+                    raise FiberpipeError(
+                        f"stage {name} needs {iname} at {p}, which does not exist; run the earlier stages first"
+                    )
+            key = stage_key(stage, cfg, inputs)
+            outputs = stage.outputs(cfg, run_dir)
+            entry = lock.get(name, {})
+            if not force and entry.get("key") == key and all(Path(o).exists() for o in outputs):
+                log.info("%s: up to date, skipped", name)
+                echo(f"{name:12s} up to date (skipped)")
+                report.stages[name] = {"skipped": True, **summary["stages"].get(name, {})}
+                continue
+            t0 = time.perf_counter()
+            log.info("%s: started", name)
+            figures = stage.func(cfg, run_dir, inputs, key) or {}
+            wall = time.perf_counter() - t0
+            figures = {"wall_time_s": round(wall, 3), **figures}
+            log.info("%s: done in %.2f s %s", name, wall, json.dumps(figures, default=str))
+            echo(f"{name:12s} done in {wall:7.2f} s  " + _short(figures))
+            lock[name] = {"key": key, "outputs": [str(Path(o).relative_to(run_dir)) if Path(o).is_relative_to(run_dir) else str(o) for o in outputs]}
+            summary["stages"][name] = figures
+            report.stages[name] = figures
+            write_text_atomic(lock_path, json.dumps(lock, indent=2))
+            write_text_atomic(summary_path, json.dumps(summary, indent=2, default=_json_default))
+    finally:
+        logging.getLogger("fiberpipe").removeHandler(handler)
+        handler.close()
+    return report
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _short(figures: dict) -> str:
+    keep = []
+    for k, v in figures.items():
+        if k == "wall_time_s" or isinstance(v, (dict, list)):
+            continue
+        if isinstance(v, float):
+            v = f"{v:.4g}"
+        keep.append(f"{k}={v}")
+    return ", ".join(keep[:6])

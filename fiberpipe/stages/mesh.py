@@ -1,0 +1,48 @@
+"""Stage ``mesh``: ``fibers.h5`` -> ``mesh.h5``, ``mesh.vtu`` (ParaView) and ``model.inp`` (Abaqus)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fiberpipe.artifacts import read_fibers, write_mesh
+from fiberpipe.config import Config
+from fiberpipe.io.abaqus import write_abaqus_inp
+from fiberpipe.io.vtk import mesh_vtu
+from fiberpipe.model.mesh import mesh_polylines
+from fiberpipe.stages._common import input_hashes
+
+
+def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = "") -> dict:
+    polylines = read_fibers(fibers_path)
+    mesh = mesh_polylines(
+        polylines,
+        cfg.mesh.element_length,
+        smooth_sigma_m=cfg.mesh.smooth_sigma,
+        radius_m=cfg.fiber.radius,
+    )
+    m = cfg.material
+    write_mesh(
+        out,
+        mesh,
+        material={"youngs_modulus_pa": m.youngs_modulus, "shear_modulus_pa": m.shear_modulus_pa, "density_kg_m3": m.density},
+        config_sha256=config_sha256,
+        inputs=input_hashes({"fibers": Path(fibers_path)}),
+    )
+    out = Path(out)
+    mesh_vtu(out.with_name("mesh.vtu"), mesh)
+    write_abaqus_inp(
+        out.with_name("model.inp"),
+        mesh,
+        youngs_modulus_pa=m.youngs_modulus,
+        poisson_ratio=m.poisson_ratio_value,
+        density_kg_m3=m.density,
+        heading=f"fiberpipe {cfg.name}",
+    )
+    lengths = mesh.element_lengths_m()
+    return {
+        "fibers": mesh.n_fibers,
+        "nodes": mesh.n_nodes,
+        "elements": mesh.n_elements,
+        "mean_element_length_m": float(lengths.mean()),
+        "min_element_length_m": float(lengths.min()),
+    }
