@@ -1,0 +1,68 @@
+import h5py
+import numpy as np
+import pytest
+
+from fiberpipe.artifacts import read_artifact, read_fibers, read_mesh, write_artifact, write_fibers, write_mesh
+from fiberpipe.errors import ArtifactError
+from fiberpipe.model.mesh import mesh_polylines
+from fiberpipe.polylines import Polylines
+
+
+def _fibers():
+    rng = np.random.default_rng(0)
+    return Polylines.from_list([np.cumsum(rng.random((6, 3)), axis=0) * 1e-3 for _ in range(3)], 0.25e-3)
+
+
+def test_fibers_layout_and_root_attributes(tmp_path):
+    p = write_fibers(tmp_path / "fibers.h5", _fibers(), config_sha256="abc", inputs={"mask": "123"})
+    with h5py.File(p) as f:
+        assert f["fibers/points"].shape == (18, 3) and f["fibers/points"].dtype == np.float64
+        assert f["fibers/offsets"].dtype == np.int64 and list(f["fibers/offsets"][()]) == [0, 6, 12, 18]
+        assert f["fibers/radius"].attrs["units"] == "m"
+        for key in ("kind", "schema_version", "fiberpipe_version", "created_utc", "config_sha256", "inputs"):
+            assert key in f.attrs
+    back = read_fibers(p)
+    np.testing.assert_array_equal(back.points_m, _fibers().points_m)
+
+
+def test_reader_refuses_wrong_kind_version_and_garbage(tmp_path):
+    p = write_fibers(tmp_path / "fibers.h5", _fibers())
+    with pytest.raises(ArtifactError, match="is a fibers artifact, but a mesh"):
+        read_mesh(p)
+    with h5py.File(p, "a") as f:
+        f.attrs["schema_version"] = 99
+    with pytest.raises(ArtifactError, match="schema version 99"):
+        read_fibers(p)
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not hdf5 at all")
+    with pytest.raises(ArtifactError, match="not a readable HDF5"):
+        read_fibers(junk)
+    with pytest.raises(ArtifactError, match="not found"):
+        read_fibers(tmp_path / "missing.h5")
+
+
+def test_write_is_atomic(tmp_path, monkeypatch):
+    target = write_fibers(tmp_path / "fibers.h5", _fibers())
+    before = target.read_bytes()
+
+    class Boom(Exception):
+        pass
+
+    def bad(*a, **k):
+        raise Boom
+
+    monkeypatch.setattr(np, "asarray", bad)
+    with pytest.raises(Boom):
+        write_artifact(target, "fibers", {"fibers/points": [1, 2]})
+    monkeypatch.undo()
+    assert target.read_bytes() == before  # the earlier artifact is untouched
+    assert [x.name for x in tmp_path.iterdir()] == ["fibers.h5"]  # no temporary file left behind
+
+
+def test_mesh_round_trip(tmp_path):
+    mesh = mesh_polylines(_fibers(), 0.3e-3)
+    p = write_mesh(tmp_path / "mesh.h5", mesh, material={"youngs_modulus_pa": 15e9})
+    back = read_mesh(p)
+    np.testing.assert_array_equal(back.nodes_m, mesh.nodes_m)
+    art = read_artifact(p, "mesh")
+    np.testing.assert_array_equal(art["mesh/elements"], mesh.elements())

@@ -1,0 +1,95 @@
+import pytest
+
+from fiberpipe.config import load_config
+from fiberpipe.errors import ConfigError
+
+TIP = """
+name: tip
+input:
+  polylines:
+    - [[0, 0, 0], ["15 mm", 0, 0]]
+material: {youngs_modulus: "15 GPa", poisson_ratio: 0.3, density: "1380 kg/m^3"}
+fiber: {radius: "0.25 mm"}
+scene:
+  effects: [clamps, loads, damping]
+  clamps: [{fiber: 0, at: start}]
+  loads: [{fiber: 0, at: end, force: [0, 0, -1e-3]}]
+  damping: {alpha: "2000 1/s"}
+  loading: {velocity: "1000 mm/min"}
+"""
+
+
+def test_units_are_converted_to_si(write_yaml):
+    cfg = load_config(write_yaml(TIP))
+    assert cfg.material.youngs_modulus == pytest.approx(15e9)
+    assert cfg.fiber.radius == pytest.approx(0.25e-3)
+    assert cfg.input.polylines[0][1] == pytest.approx([0.015, 0, 0])
+    assert cfg.scene.damping.alpha == pytest.approx(2000)
+    assert cfg.scene.loading.velocity == pytest.approx(1 / 60)
+    assert cfg.scene.loads[0].force == pytest.approx([0, 0, -1e-3])  # "1e-3" is a string in YAML 1.1
+
+
+def test_extends_overrides_and_resolves_paths(tmp_path, write_yaml):
+    write_yaml(TIP, "base.yaml")
+    sub = tmp_path / "variants"
+    sub.mkdir()
+    (sub / "v.yaml").write_text("extends: ../base.yaml\nscene: {damping: {alpha: 10}}\npost: {reference_fibers: ref.h5}\n")
+    cfg = load_config(sub / "v.yaml")
+    assert cfg.scene.damping.alpha == 10
+    assert cfg.scene.clamps[0].fiber == 0  # kept from the base
+    assert cfg.post.reference_fibers == str((sub / "ref.h5").resolve())
+
+
+@pytest.mark.parametrize(
+    "patch, expected",
+    [
+        ("scene: {dampng: {alpha: 1}}", "unknown key 'scene.dampng' (did you mean 'damping'?)"),
+        ("material: {youngs_modulus: '15 kg'}", "'material.youngs_modulus'"),
+        ("material: {youngs_modulus: -3}", "youngs_modulus must be positive"),
+        ("solver: {dt_safety: 1.5}", "dt_safety must be in (0, 1]"),
+        ("scene: {friction: {mu: -0.1}}", "friction.mu must be >= 0"),
+        ("fiber: {radius: '-0.25 mm'}", "fiber.radius must be positive"),
+        ("scene: {contact: {law: hertz_paralel}}", "'scene.contact.law'"),
+        ("solver: {output_frames: many}", "'solver.output_frames'"),
+        ("mesh: {element_length: '0.3 parsec/s'}", "'mesh.element_length'"),
+    ],
+)
+def test_bad_values_name_the_key(tmp_path, write_yaml, patch, expected):
+    write_yaml(TIP, "base.yaml")
+    p = write_yaml("extends: base.yaml\n" + patch + "\n", "bad.yaml")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert expected in str(err.value)
+    assert "bad.yaml" in str(err.value)
+
+
+def test_not_yaml_missing_and_empty(tmp_path, write_yaml):
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config(write_yaml("a: [\n", "broken.yaml"))
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match="empty"):
+        load_config(write_yaml("", "empty.yaml"))
+    with pytest.raises(ConfigError, match="mapping"):
+        load_config(write_yaml("- 1\n- 2\n", "list.yaml"))
+    with pytest.raises(ConfigError, match="exactly one of input"):
+        load_config(write_yaml("name: x\ninput: {}\n", "noinput.yaml"))
+
+
+def test_extends_cycle_is_an_error(write_yaml):
+    write_yaml("extends: b.yaml\n", "a.yaml")
+    p = write_yaml("extends: a.yaml\n", "b.yaml")
+    with pytest.raises(ConfigError, match="cycle"):
+        load_config(p)
+
+
+def test_effect_warnings(write_yaml):
+    cfg = load_config(write_yaml(TIP.replace("[clamps, loads, damping]", "[clamps, loads, damping, friction]")))
+    assert any("friction cannot act" in w for w in cfg.scene.warnings())
+
+
+def test_stage_hash_tracks_only_its_sections(write_yaml, tmp_path):
+    a = load_config(write_yaml(TIP, "a.yaml"))
+    b = load_config(write_yaml(TIP.replace('"2000 1/s"', '"3000 1/s"'), "b.yaml"))
+    assert a.section_sha256("mesh", "material") == b.section_sha256("mesh", "material")
+    assert a.section_sha256("scene") != b.section_sha256("scene")
