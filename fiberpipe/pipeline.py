@@ -188,7 +188,7 @@ def planned_stages(cfg: Config) -> list[str]:
 
 def available(name: str) -> bool:
     """Whether the code of a stage exists in this version (simulate and post arrive with the solver)."""
-    mod = {"simulate": "fiberpipe.stages.simulate", "post": "fiberpipe.stages.post"}.get(name)
+    mod = {"simulate": "fiberpipe.solver.build", "post": "fiberpipe.stages.post"}.get(name)
     return mod is None or _has_module(mod)
 
 
