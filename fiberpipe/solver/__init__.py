@@ -1,0 +1,19 @@
+"""Explicit dynamics of fiber bundles: geometrically exact 3D beams, central difference, effects.
+
+Model (static) / State (dynamic) / Integrator (step loop) split; see docs/solver.md.
+"""
+
+from .effects import (Clamp, Clamps, ContactHook, Damping, Drive, Drives, Gravity, LineLoad, Loads,
+                      Plates, PointLoad, Walls)
+from .integrator import (ENERGY_NAMES, Integrator, SimulationResult, SimulationSettings, advance,
+                         choose_time_step, simulate)
+from .model import Material, Model, build_model, model_from_mesh
+from .state import State
+from .timestep import TimeStepReport, stable_time_step
+
+__all__ = [
+    "Clamp", "Clamps", "ContactHook", "Damping", "Drive", "Drives", "Gravity", "LineLoad", "Loads",
+    "Plates", "PointLoad", "Walls", "ENERGY_NAMES", "Integrator", "SimulationResult",
+    "SimulationSettings", "advance", "choose_time_step", "simulate", "Material", "Model",
+    "build_model", "model_from_mesh", "State", "TimeStepReport", "stable_time_step",
+]

@@ -1,0 +1,235 @@
+"""Numba kernels of the geometrically exact (Simo–Reissner) 2-node beam with one-point quadrature.
+
+Formulation (Simo & Vu-Quoc, "A three-dimensional finite-strain rod model. Part II", CMAME 58,
+1986; Crisfield & Jelenić, Proc. R. Soc. A 455, 1999, for the interpolation of rotations; the
+reduced one-point rule is the B31 choice of Abaqus, "Beam element formulation", Abaqus Theory
+Manual 3.5):
+
+* every node carries a position ``x`` (m) and a rotation ``R`` stored as a unit quaternion
+  ``q = (w, x, y, z)``, with the columns of ``R`` the material directors ``d1, d2, d3`` (``d3``
+  along the fiber at rest);
+* the element midpoint rotation is the geodesic mid-point ``R_m = R_1 exp(θ/2)``, where
+  ``θ = log(R_1ᵀ R_2)`` is the relative rotation vector. For quaternions in the same hemisphere
+  this is ``q_m = (q_1 + q_2)/|q_1 + q_2|``;
+* strains at the single Gauss point (the midpoint), in the material frame:
+  ``Γ = R_mᵀ (x_2 − x_1)/L_0 − Γ_rest`` (shear 1, shear 2, axial; Γ_rest includes ``e_3``) and
+  ``κ = (θ − θ_rest)/L_0`` (bending 1, bending 2, torsion). θ is an eigenvector of
+  ``exp(θ/2)``, so its components are the same in the node-1 and the midpoint frame.
+  Subtracting the rest values ``Γ_rest`` and ``θ_rest`` of the traced geometry makes an
+  initially curved fiber stress-free;
+* stress resultants ``n = R_m C Γ`` with ``C = diag(k_s G A, k_s G A, E A)`` (Cowper's shear
+  factor ``k_s = 6(1+ν)/(7+6ν)``) and ``m = R_m D κ`` with ``D = diag(E I, E I, G J)``;
+* internal nodal forces and moments (virtual work of the one-point rule with the midpoint spin
+  ``(δφ_1 + δφ_2)/2`` and ``δκ ≈ (δφ_2 − δφ_1)/L_0``): node 1 gets ``+n`` and
+  ``+m + ½ (x_2 − x_1) × n``; node 2 gets ``−n`` and ``−m + ½ (x_2 − x_1) × n``. The moment
+  pair is exact to first order in the element's relative rotation (the tangent operator of the
+  exponential map ``T(θ) = I + O(θ)`` is dropped), which with 0.3 mm elements is < 0.1 rad.
+* strain energy ``½ L_0 (Γ·CΓ + κ·Dκ)``.
+
+All kernels take flat arrays only (structure of arrays by field, fibers joined in CSR order); the
+element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def quat_to_matrix(w, x, y, z):
+    """Rotation matrix entries (row major) of the unit quaternion ``(w, x, y, z)``."""
+    xx = x * x
+    yy = y * y
+    zz = z * z
+    xy = x * y
+    xz = x * z
+    yz = y * z
+    wx = w * x
+    wy = w * y
+    wz = w * z
+    return (
+        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
+        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
+        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
+    )
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2):
+    """Rotation vector ``log(R_1ᵀ R_2)`` (rad, in the node-1 frame); q2 already in q1's hemisphere."""
+    # conj(q1) ⊗ q2
+    rw = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+    rx = w1 * x2 - w2 * x1 - (y1 * z2 - z1 * y2)
+    ry = w1 * y2 - w2 * y1 - (z1 * x2 - x1 * z2)
+    rz = w1 * z2 - w2 * z1 - (x1 * y2 - y1 * x2)
+    s2 = rx * rx + ry * ry + rz * rz
+    if s2 < 1e-2:
+        # 2 asin(s)/s, s = |v| (rw >= 0): series to s^6, relative error < 5e-8 at s = 0.1
+        fac = 2.0 * (1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0))))
+    else:
+        s = math.sqrt(s2)
+        fac = 2.0 * math.atan2(s, rw) / s
+    return fac * rx, fac * ry, fac * rz
+
+
+@njit(cache=True, fastmath=True)
+def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
+    """Rest strains of every element.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — rest node positions.
+    q : (N, 4) float64 — rest node quaternions.
+    el_n1 : (E,) int64 — first node of each element.
+    el_invL0 : (E,) float64, 1/m — inverse rest lengths.
+    gamma_rest : (E, 3) float64 — out: ``R_mᵀ (x_2 − x_1)/L_0`` at rest (≈ e_3).
+    theta_rest : (E, 3) float64, rad — out: rest relative rotation ``log(R_1ᵀ R_2)``.
+    """
+    for e in range(el_n1.shape[0]):
+        a = el_n1[e]
+        b = a + 1
+        w1, x1, y1, z1 = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
+        w2, x2, y2, z2 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        if w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2 < 0.0:
+            w2, x2, y2, z2 = -w2, -x2, -y2, -z2
+        tx, ty, tz = _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2)
+        theta_rest[e, 0] = tx
+        theta_rest[e, 1] = ty
+        theta_rest[e, 2] = tz
+        mw = w1 + w2
+        mx = x1 + x2
+        my = y1 + y2
+        mz = z1 + z2
+        inv = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(mw * inv, mx * inv, my * inv, mz * inv)
+        il = el_invL0[e]
+        dx = (x[b, 0] - x[a, 0]) * il
+        dy = (x[b, 1] - x[a, 1]) * il
+        dz = (x[b, 2] - x[a, 2]) * il
+        gamma_rest[e, 0] = r00 * dx + r10 * dy + r20 * dz
+        gamma_rest[e, 1] = r01 * dx + r11 * dy + r21 * dz
+        gamma_rest[e, 2] = r02 * dx + r12 * dy + r22 * dz
+
+
+@njit(cache=True, fastmath=True)
+def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                record, beta_over_dt, strain_prev):
+    """Add the internal forces and moments of all elements to ``f`` and ``mom``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    q : (N, 4) float64 — node quaternions (unit).
+    el_n1 : (E,) int64 — first node of each element (second is ``el_n1 + 1``).
+    el_invL0 : (E,) float64, 1/m — inverse rest lengths.
+    el_C : (E, 3) float64, N — ``(k_s G A, k_s G A, E A)``.
+    el_Dk : (E, 3) float64, N·m/rad — ``(E I, E I, G J) / L_0``.
+    gamma_rest, theta_rest : (E, 3) float64 — rest strains (see :func:`element_rest_strains`).
+    f : (N, 3) float64, N — forces, accumulated into.
+    mom : (N, 3) float64, N·m — spatial moments, accumulated into.
+    record : bool — return the strain energy (J) if true (else 0).
+    beta_over_dt : float, 1 — stiffness-proportional damping β/Δt (0: off).
+    strain_prev : (E, 6) float64 — previous ``(Γ, θ)`` per element (only read/written if
+        ``beta_over_dt > 0``); the damping stress is ``β C Γ̇`` and ``β D κ̇`` (backward difference).
+
+    Returns
+    -------
+    (strain_energy_J, damping_power_W) : the stored energy if ``record``; the power dissipated by
+    the stiffness-proportional damping stress (0 if off).
+    """
+    se = 0.0
+    pd = 0.0
+    use_beta = beta_over_dt > 0.0
+    for e in range(el_n1.shape[0]):
+        a = el_n1[e]
+        b = a + 1
+        w1, x1, y1, z1 = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
+        w2, x2, y2, z2 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        if w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2 < 0.0:
+            w2, x2, y2, z2 = -w2, -x2, -y2, -z2
+        tx, ty, tz = _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2)
+        mw = w1 + w2
+        mx = x1 + x2
+        my = y1 + y2
+        mz = z1 + z2
+        inv = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(mw * inv, mx * inv, my * inv, mz * inv)
+        ex = x[b, 0] - x[a, 0]
+        ey = x[b, 1] - x[a, 1]
+        ez = x[b, 2] - x[a, 2]
+        il = el_invL0[e]
+        # strains in the midpoint material frame
+        g0 = (r00 * ex + r10 * ey + r20 * ez) * il - gamma_rest[e, 0]
+        g1 = (r01 * ex + r11 * ey + r21 * ez) * il - gamma_rest[e, 1]
+        g2 = (r02 * ex + r12 * ey + r22 * ez) * il - gamma_rest[e, 2]
+        k0 = tx - theta_rest[e, 0]
+        k1 = ty - theta_rest[e, 1]
+        k2 = tz - theta_rest[e, 2]
+        c0 = el_C[e, 0]
+        c1 = el_C[e, 1]
+        c2 = el_C[e, 2]
+        d0 = el_Dk[e, 0]
+        d1 = el_Dk[e, 1]
+        d2 = el_Dk[e, 2]
+        nb0 = c0 * g0
+        nb1 = c1 * g1
+        nb2 = c2 * g2
+        mb0 = d0 * k0
+        mb1 = d1 * k1
+        mb2 = d2 * k2
+        if record:
+            se += 0.5 * ((nb0 * g0 + nb1 * g1 + nb2 * g2) / il + mb0 * k0 + mb1 * k1 + mb2 * k2)
+        if use_beta:
+            dg0 = g0 - strain_prev[e, 0]
+            dg1 = g1 - strain_prev[e, 1]
+            dg2 = g2 - strain_prev[e, 2]
+            dk0 = k0 - strain_prev[e, 3]
+            dk1 = k1 - strain_prev[e, 4]
+            dk2 = k2 - strain_prev[e, 5]
+            strain_prev[e, 0] = g0
+            strain_prev[e, 1] = g1
+            strain_prev[e, 2] = g2
+            strain_prev[e, 3] = k0
+            strain_prev[e, 4] = k1
+            strain_prev[e, 5] = k2
+            sn0 = beta_over_dt * c0 * dg0
+            sn1 = beta_over_dt * c1 * dg1
+            sn2 = beta_over_dt * c2 * dg2
+            sm0 = beta_over_dt * d0 * dk0
+            sm1 = beta_over_dt * d1 * dk1
+            sm2 = beta_over_dt * d2 * dk2
+            # power = stress · strain rate (per unit time: Δstrain/Δt = (β/Δt)⁻¹ ... ) — use β/Δt form
+            pd += ((sn0 * dg0 + sn1 * dg1 + sn2 * dg2) / il + sm0 * dk0 + sm1 * dk1 + sm2 * dk2)
+            nb0 += sn0
+            nb1 += sn1
+            nb2 += sn2
+            mb0 += sm0
+            mb1 += sm1
+            mb2 += sm2
+        # spatial resultants
+        n0 = r00 * nb0 + r01 * nb1 + r02 * nb2
+        n1 = r10 * nb0 + r11 * nb1 + r12 * nb2
+        n2 = r20 * nb0 + r21 * nb1 + r22 * nb2
+        m0 = r00 * mb0 + r01 * mb1 + r02 * mb2
+        m1 = r10 * mb0 + r11 * mb1 + r12 * mb2
+        m2 = r20 * mb0 + r21 * mb1 + r22 * mb2
+        # ½ (x2 − x1) × n
+        h0 = 0.5 * (ey * n2 - ez * n1)
+        h1 = 0.5 * (ez * n0 - ex * n2)
+        h2 = 0.5 * (ex * n1 - ey * n0)
+        f[a, 0] += n0
+        f[a, 1] += n1
+        f[a, 2] += n2
+        f[b, 0] -= n0
+        f[b, 1] -= n1
+        f[b, 2] -= n2
+        mom[a, 0] += m0 + h0
+        mom[a, 1] += m1 + h1
+        mom[a, 2] += m2 + h2
+        mom[b, 0] += h0 - m0
+        mom[b, 1] += h1 - m1
+        mom[b, 2] += h2 - m2
+    return se, pd

@@ -1,0 +1,345 @@
+"""The explicit central-difference step loop (many steps per jitted call).
+
+Central difference / leapfrog (Belytschko, Liu & Moran, *Nonlinear Finite Elements*, 2000,
+§6.2.1; Abaqus/Explicit, "Explicit dynamic analysis", Abaqus Analysis User's Guide 6.3.3):
+
+    v_{n+½} = [ (1 − α Δt/2) v_{n−½} + Δt f_n / m ] / (1 + α Δt/2)
+    x_{n+1} = x_n + Δt v_{n+½}
+
+and for the rotations (Simo & Wong, IJNME 31, 1991, explicit variant; body angular velocity Ω,
+Euler's equations ``J Ω̇ + Ω × J Ω = M_body``, gyroscopic term taken at ``Ω_{n−½}``):
+
+    Ω_{n+½} = [ (1 − α Δt/2) Ω_{n−½} + Δt J⁻¹ (R_nᵀ M_n − Ω_{n−½} × J Ω_{n−½}) ] / (1 + α Δt/2)
+    R_{n+1} = R_n exp(Δt Ω_{n+½})        (quaternion: q_{n+1} = q_n ⊗ exp_q(Δt Ω/2))
+
+The mass-proportional damping force is ``−α m v̄`` with ``v̄`` the mean of the two half-step
+velocities (so it never destabilises the step); its dissipation ``α m |v̄|² Δt`` goes to ALLVD.
+
+Energy bookkeeping (Abaqus names): ALLKE and ALLSE at t_n from ``v̄`` and the element strains;
+ALLWK = constant loads' work ``f_ext · (x_n − x_0)`` plus the reactions of prescribed motions
+(plates, drives, clamps) times their displacement increments; ALLPW = work of the plane penalties
+on the fibers minus the plates' prescribed work (plus whatever the contact hook adds); ALLFD from
+the contact hook only. Works over a step use ``f_n · v̄ Δt`` (trapezoid, second order).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._kernels_beam import beam_forces, quat_to_matrix
+from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
+
+# accumulator slots (float64 array ``acc``)
+ACC_WK = 0   # prescribed-motion work (plates, drives, clamps), J
+ACC_VD = 1   # damping dissipation, J
+ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook), J
+ACC_FD = 3   # friction dissipation (contact hook), J
+ACC_SIZE = 8
+
+# history columns
+H_TIME = 0
+H_PLATE_DISP = 1   # 2 columns: lower, upper
+H_PLATE_FORCE = 3  # 2 columns: lower, upper
+H_KE = 5
+H_SE = 6
+H_VD = 7
+H_WK = 8
+H_PW = 9
+H_FD = 10
+H_CONTACTS = 11
+H_WALL = 12        # W columns
+
+# node fixity bits
+FIX_X = 1
+FIX_Y = 2
+FIX_Z = 4
+FIX_ROT = 8
+DRIVEN = 16
+
+STATUS_OK = 0
+STATUS_NAN = 1
+STATUS_SPEED = 2
+STATUS_RUNAWAY = 3
+STATUS_ENERGY = 4
+
+
+@njit(cache=True)
+def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
+    """The default contact hook: does nothing, returns 0 active contacts."""
+    return 0
+
+
+@njit(cache=True, fastmath=True)
+def advance_kernel(
+    # model (static)
+    el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
+    mass, inv_mass, J, inv_J, radius_node, x0,
+    # state (in/out)
+    x, q, v, w, acc, t_start, step_start,
+    # work arrays
+    f, mom,
+    # step
+    dt, n_steps,
+    # damping
+    alpha, beta, strain_prev,
+    # constant external forces (gravity + loads), (N,3) or (0,3)
+    f_ext,
+    # fixity and drives
+    fix_mask, node_drive, drive_vec, drive_T, drive_ta, drive_mode, drive_v,
+    # planes
+    pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_hist_col, k_pen,
+    pl_pos, pl_force, pen_idx, pen_f,
+    # contact hook
+    contact_on, contact_fn, contact_data,
+    # history
+    hist, h_row, history_every,
+    # checks
+    v_limit, x_limit, e_ref,
+):
+    """Advance the state by up to ``n_steps`` steps of ``dt`` (s).
+
+    Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is STATUS_OK or the reason the
+    run stopped (then the state is the one at the check that failed).
+    """
+    N = x.shape[0]
+    P = pl_axis.shape[0]
+    ND = drive_vec.shape[0]
+    has_ext = f_ext.shape[0] == N
+    has_fix = fix_mask.shape[0] == N
+    use_damp = alpha > 0.0
+    a_half = 0.5 * alpha * dt
+    c_old = 1.0 - a_half
+    c_inv = 1.0 / (1.0 + a_half)
+    beta_over_dt = beta / dt if beta > 0.0 else 0.0
+    acc_before = np.zeros(ACC_SIZE)
+    status = STATUS_OK
+    bad = -1
+    done = 0
+    for it in range(n_steps):
+        step = step_start + it
+        t = t_start + it * dt
+        record = ((step + 1) % history_every == 0) and h_row < hist.shape[0]
+        if record:
+            for k in range(ACC_SIZE):
+                acc_before[k] = acc[k]
+        # ---- forces at t_n -------------------------------------------------------------
+        if has_ext:
+            for i in range(N):
+                f[i, 0] = f_ext[i, 0]
+                f[i, 1] = f_ext[i, 1]
+                f[i, 2] = f_ext[i, 2]
+        else:
+            f[:, :] = 0.0
+        mom[:, :] = 0.0
+        se, vd_beta = beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
+                                  f, mom, record, beta_over_dt, strain_prev)
+        acc[ACC_VD] += vd_beta
+        n_pen = 0
+        if P > 0:
+            for p in range(P):
+                pl_pos[p] = pl_pos0[p] + pl_sign[p] * pl_move[p] * ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
+            n_pen = plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f)
+            wk = 0.0
+            for p in range(P):
+                if pl_move[p] != 0.0:
+                    du = pl_move[p] * 0.5 * (ramp_fraction(t + dt, pl_T[p], pl_ta[p], pl_mode[p])
+                                             - ramp_fraction(t - dt, pl_T[p], pl_ta[p], pl_mode[p]))
+                    wk += pl_force[p] * du
+            acc[ACC_WK] += wk
+            acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen) - wk
+        n_contacts = 0
+        if contact_on:
+            # >>> CONTACT/FRICTION HOOK: adds fiber–fiber contact and friction forces (N) into f
+            # and moments (N·m) into mom at time t_n, from x_n, q_n and the half-step velocities
+            # v_{n−½}, w_{n−½}; adds its penalty work to acc[ACC_PW] and its friction dissipation
+            # to acc[ACC_FD]; returns the number of active contacts.
+            n_contacts = contact_fn(x, q, v, w, f, mom, acc, t, dt, contact_data)
+        for d in range(ND):
+            s1 = ramp_fraction(t + dt, drive_T[d], drive_ta[d], drive_mode[d])
+            s0 = ramp_fraction(t, drive_T[d], drive_ta[d], drive_mode[d])
+            for k in range(3):
+                drive_v[d, k] = drive_vec[d, k] * (s1 - s0) / dt
+        # ---- update ------------------------------------------------------------------
+        ke = 0.0
+        vd = 0.0
+        wk_fix = 0.0
+        vmax2 = 0.0
+        for i in range(N):
+            m = mass[i]
+            im = inv_mass[i]
+            mask = fix_mask[i] if has_fix else 0
+            v0x = v[i, 0]
+            v0y = v[i, 1]
+            v0z = v[i, 2]
+            if use_damp:
+                v1x = (c_old * v0x + dt * f[i, 0] * im) * c_inv
+                v1y = (c_old * v0y + dt * f[i, 1] * im) * c_inv
+                v1z = (c_old * v0z + dt * f[i, 2] * im) * c_inv
+            else:
+                v1x = v0x + dt * f[i, 0] * im
+                v1y = v0y + dt * f[i, 1] * im
+                v1z = v0z + dt * f[i, 2] * im
+            # rotations: body moment
+            w0x = w[i, 0]
+            w0y = w[i, 1]
+            w0z = w[i, 2]
+            qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(qw, qx, qy, qz)
+            mbx = r00 * mom[i, 0] + r10 * mom[i, 1] + r20 * mom[i, 2]
+            mby = r01 * mom[i, 0] + r11 * mom[i, 1] + r21 * mom[i, 2]
+            mbz = r02 * mom[i, 0] + r12 * mom[i, 1] + r22 * mom[i, 2]
+            jx = J[i, 0]
+            jy = J[i, 1]
+            jz = J[i, 2]
+            # gyroscopic Ω × JΩ
+            gx = w0y * jz * w0z - w0z * jy * w0y
+            gy = w0z * jx * w0x - w0x * jz * w0z
+            gz = w0x * jy * w0y - w0y * jx * w0x
+            if use_damp:
+                w1x = (c_old * w0x + dt * (mbx - gx) * inv_J[i, 0]) * c_inv
+                w1y = (c_old * w0y + dt * (mby - gy) * inv_J[i, 1]) * c_inv
+                w1z = (c_old * w0z + dt * (mbz - gz) * inv_J[i, 2]) * c_inv
+            else:
+                w1x = w0x + dt * (mbx - gx) * inv_J[i, 0]
+                w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
+                w1z = w0z + dt * (mbz - gz) * inv_J[i, 2]
+            if mask != 0:
+                # prescribed translations: velocity imposed, reaction work to ALLWK
+                if mask & DRIVEN:
+                    d = node_drive[i]
+                    px = drive_v[d, 0]
+                    py = drive_v[d, 1]
+                    pz = drive_v[d, 2]
+                    fx = 1
+                    fy = 1
+                    fz = 1
+                else:
+                    px = 0.0
+                    py = 0.0
+                    pz = 0.0
+                    fx = mask & FIX_X
+                    fy = mask & FIX_Y
+                    fz = mask & FIX_Z
+                if fx:
+                    v1x = px
+                    wk_fix += (m * (v1x - v0x) / dt - f[i, 0]) * 0.5 * (v1x + v0x) * dt
+                if fy:
+                    v1y = py
+                    wk_fix += (m * (v1y - v0y) / dt - f[i, 1]) * 0.5 * (v1y + v0y) * dt
+                if fz:
+                    v1z = pz
+                    wk_fix += (m * (v1z - v0z) / dt - f[i, 2]) * 0.5 * (v1z + v0z) * dt
+                if mask & (FIX_ROT | DRIVEN):
+                    w1x = 0.0
+                    w1y = 0.0
+                    w1z = 0.0
+            # averages at t_n
+            vax = 0.5 * (v0x + v1x)
+            vay = 0.5 * (v0y + v1y)
+            vaz = 0.5 * (v0z + v1z)
+            wax = 0.5 * (w0x + w1x)
+            way = 0.5 * (w0y + w1y)
+            waz = 0.5 * (w0z + w1z)
+            if use_damp:
+                vd += alpha * dt * (m * (vax * vax + vay * vay + vaz * vaz)
+                                    + jx * wax * wax + jy * way * way + jz * waz * waz)
+            if record:
+                v2 = v1x * v1x + v1y * v1y + v1z * v1z
+                ke += 0.5 * (m * (vax * vax + vay * vay + vaz * vaz)
+                             + jx * wax * wax + jy * way * way + jz * waz * waz)
+                if not (v2 <= vmax2):
+                    if not (v2 == v2) or v2 > vmax2:
+                        vmax2 = v2 if v2 == v2 else np.inf
+                        bad = i
+            v[i, 0] = v1x
+            v[i, 1] = v1y
+            v[i, 2] = v1z
+            w[i, 0] = w1x
+            w[i, 1] = w1y
+            w[i, 2] = w1z
+            x[i, 0] += dt * v1x
+            x[i, 1] += dt * v1y
+            x[i, 2] += dt * v1z
+            # q ⊗ exp(Ω dt / 2)
+            hx = 0.5 * dt * w1x
+            hy = 0.5 * dt * w1y
+            hz = 0.5 * dt * w1z
+            h2 = hx * hx + hy * hy + hz * hz
+            if h2 < 1e-8:
+                cw = 1.0 - 0.5 * h2
+                sf = 1.0 - h2 / 6.0
+            else:
+                hn = math.sqrt(h2)
+                cw = math.cos(hn)
+                sf = math.sin(hn) / hn
+            dx_ = sf * hx
+            dy_ = sf * hy
+            dz_ = sf * hz
+            nw = qw * cw - qx * dx_ - qy * dy_ - qz * dz_
+            nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
+            ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
+            nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
+            inv = 1.0 / math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+            q[i, 0] = nw * inv
+            q[i, 1] = nx * inv
+            q[i, 2] = ny * inv
+            q[i, 3] = nz * inv
+        acc[ACC_VD] += vd
+        acc[ACC_WK] += wk_fix
+        if n_pen > 0:
+            acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
+        done = it + 1
+        # ---- history and checks ---------------------------------------------------------
+        if record:
+            # works at t_n: mean of the accumulators before and after this step
+            wext = 0.0
+            if has_ext:
+                for i in range(N):
+                    xi0 = x[i, 0] - dt * v[i, 0]
+                    xi1 = x[i, 1] - dt * v[i, 1]
+                    xi2 = x[i, 2] - dt * v[i, 2]
+                    wext += (f_ext[i, 0] * (xi0 - x0[i, 0]) + f_ext[i, 1] * (xi1 - x0[i, 1])
+                             + f_ext[i, 2] * (xi2 - x0[i, 2]))
+            hist[h_row, H_TIME] = t
+            for p in range(P):
+                c = pl_hist_col[p]
+                if c >= 0:
+                    hist[h_row, c] = pl_force[p]
+                    if c < H_PLATE_FORCE + 2:
+                        hist[h_row, c - 2] = pl_move[p] * ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
+            hist[h_row, H_KE] = ke
+            hist[h_row, H_SE] = se
+            hist[h_row, H_VD] = 0.5 * (acc_before[ACC_VD] + acc[ACC_VD])
+            hist[h_row, H_WK] = 0.5 * (acc_before[ACC_WK] + acc[ACC_WK]) + wext
+            hist[h_row, H_PW] = 0.5 * (acc_before[ACC_PW] + acc[ACC_PW])
+            hist[h_row, H_FD] = 0.5 * (acc_before[ACC_FD] + acc[ACC_FD])
+            hist[h_row, H_CONTACTS] = n_contacts
+            h_row += 1
+            if not (ke == ke) or not (se == se) or vmax2 == np.inf:
+                status = STATUS_NAN
+                break
+            if vmax2 > v_limit * v_limit:
+                status = STATUS_SPEED
+                break
+            emax = e_ref
+            if abs(hist[h_row - 1, H_WK]) > emax:
+                emax = abs(hist[h_row - 1, H_WK])
+            if abs(hist[h_row - 1, H_PW]) > emax:
+                emax = abs(hist[h_row - 1, H_PW])
+            if ke > 1e3 * emax:
+                status = STATUS_ENERGY
+                break
+            for i in range(N):
+                ddx = x[i, 0] - x0[i, 0]
+                ddy = x[i, 1] - x0[i, 1]
+                ddz = x[i, 2] - x0[i, 2]
+                if ddx * ddx + ddy * ddy + ddz * ddz > x_limit * x_limit:
+                    status = STATUS_RUNAWAY
+                    bad = i
+                    break
+            if status != STATUS_OK:
+                break
+    return status, done, h_row, bad

@@ -1,0 +1,444 @@
+"""Effects a scene may list: one small class each, holding its parameters and their checks.
+
+An effect only fills the arrays the step kernel reads (``SceneArrays``); an effect that a scene does
+not list leaves its arrays empty (size 0), so its kernel is never called and costs nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..errors import FiberpipeError
+from ._kernels_boundary import RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
+from ._kernels_integrate import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_PLATE_FORCE, H_WALL, no_contact
+from .model import Model
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+_RAMPS = {"linear": RAMP_LINEAR, "smooth": RAMP_SMOOTH, "smoothstep": RAMP_SMOOTHSTEP}
+DEFAULT_PENALTY_FACTOR = 0.1
+
+
+def _vec3(v, what) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise FiberpipeError(f"{what} must be 3 finite numbers, got {v!r}")
+    return a
+
+
+def _ramp_code(ramp: str, what: str) -> int:
+    if ramp not in _RAMPS:
+        raise FiberpipeError(f"{what}: ramp must be one of {sorted(_RAMPS)}, got {ramp!r}")
+    return _RAMPS[ramp]
+
+
+class SceneArrays:
+    """The arrays the step kernel reads for the effects (sizes 0 when an effect is absent)."""
+
+    def __init__(self, model: Model, dt: float):
+        n = model.n_nodes
+        self.model = model
+        self.dt = dt
+        self.f_ext = np.zeros((0, 3))
+        self.alpha = 0.0
+        self.beta = 0.0
+        self.fix_mask = np.zeros(0, np.uint8)
+        self.node_drive = np.zeros(0, np.int64)
+        self.drive_vec = np.zeros((0, 3))
+        self.drive_T = np.zeros(0)
+        self.drive_ta = np.zeros(0)
+        self.drive_mode = np.zeros(0, np.int64)
+        self.pl_axis = np.zeros(0, np.int64)
+        self.pl_sign = np.zeros(0)
+        self.pl_pos0 = np.zeros(0)
+        self.pl_move = np.zeros(0)
+        self.pl_T = np.ones(0)
+        self.pl_ta = np.zeros(0)
+        self.pl_mode = np.zeros(0, np.int64)
+        self.pl_hist_col = np.zeros(0, np.int64)
+        self.penalty_factor = 0.0
+        self.n_walls = 0
+        self.wall_names: list[str] = []
+        self.plate_axis = None
+        self.contact_on = False
+        self.contact_fn = no_contact
+        self.contact_data = (np.zeros(0),)
+        self.end_time_hint = 0.0
+        self._n = n
+
+    # helpers used by the effects
+    def ext(self) -> np.ndarray:
+        if self.f_ext.shape[0] == 0:
+            self.f_ext = np.zeros((self._n, 3))
+        return self.f_ext
+
+    def mask(self) -> np.ndarray:
+        if self.fix_mask.shape[0] == 0:
+            self.fix_mask = np.zeros(self._n, np.uint8)
+            self.node_drive = np.full(self._n, -1, np.int64)
+        return self.fix_mask
+
+    def add_plane(self, axis, sign, pos, move, T, ta, mode, hist_col, penalty_factor):
+        self.pl_axis = np.append(self.pl_axis, axis).astype(np.int64)
+        self.pl_sign = np.append(self.pl_sign, sign)
+        self.pl_pos0 = np.append(self.pl_pos0, pos)
+        self.pl_move = np.append(self.pl_move, move)
+        self.pl_T = np.append(self.pl_T, T)
+        self.pl_ta = np.append(self.pl_ta, ta)
+        self.pl_mode = np.append(self.pl_mode, mode).astype(np.int64)
+        self.pl_hist_col = np.append(self.pl_hist_col, hist_col).astype(np.int64)
+        self.penalty_factor = max(self.penalty_factor, penalty_factor)
+
+    def k_pen(self) -> np.ndarray:
+        """Per-node plane penalty stiffness ``c_pen m_i (2/Δt)²`` (N/m)."""
+        if self.pl_axis.size == 0:
+            return np.zeros(0)
+        return self.penalty_factor * self.model.mass * (2.0 / self.dt) ** 2
+
+
+class Effect:
+    """Base class: ``name`` and ``setup(model, scene)`` filling the kernel arrays."""
+
+    name = "effect"
+
+    def setup(self, model: Model, scene: SceneArrays) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return repr(self)
+
+
+@dataclass
+class Gravity(Effect):
+    """Uniform gravity on the physical lumped mass: f_i = m_i g.
+
+    Parameters
+    ----------
+    acceleration_m_s2 : (3,) m/s², e.g. (0, 0, −9.81).
+    """
+
+    acceleration_m_s2: Sequence[float] = (0.0, 0.0, -9.81)
+    name = "gravity"
+
+    def __post_init__(self):
+        self.acceleration_m_s2 = _vec3(self.acceleration_m_s2, "gravity.acceleration")
+
+    def setup(self, model, scene):
+        scene.ext()[:] += model.mass[:, None] * self.acceleration_m_s2[None, :]
+
+
+@dataclass
+class Damping(Effect):
+    """Rayleigh material damping as Abaqus/Explicit applies it.
+
+    Mass-proportional: force ``−α m v`` and moment ``−α J Ω`` (``alpha_per_s``, 1/s; the study
+    uses 1e5). Stiffness-proportional: an extra stress ``β C Γ̇`` and moment ``β D κ̇``
+    (``beta_s``, s; lowers the stable step by (√(1+ξ²) − ξ), ξ = βω_max/2). The dissipated
+    energy is ALLVD.
+    """
+
+    alpha_per_s: float = 0.0
+    beta_s: float = 0.0
+    name = "damping"
+
+    def __post_init__(self):
+        for k in ("alpha_per_s", "beta_s"):
+            val = float(getattr(self, k))
+            if not (val >= 0.0 and math.isfinite(val)):
+                raise FiberpipeError(f"damping.{k.split('_')[0]} must be ≥ 0, got {val}")
+            setattr(self, k, val)
+
+    def setup(self, model, scene):
+        scene.alpha = self.alpha_per_s
+        scene.beta = self.beta_s
+
+
+@dataclass
+class Clamp:
+    """One clamped node: ``fiber`` index, ``at`` = "start" | "end" | local node index;
+    ``dofs`` = "all" (6 DOF fixed) or a subset of "xyz" (translations only, rotations free: a pin
+    along those axes)."""
+
+    fiber: int
+    at: object = "start"
+    dofs: str = "all"
+
+
+@dataclass
+class Clamps(Effect):
+    """Nodes with all (or chosen translational) DOF fixed at their initial values."""
+
+    clamps: Sequence[Clamp] = field(default_factory=list)
+    name = "clamps"
+
+    def __post_init__(self):
+        out = []
+        for c in self.clamps:
+            if isinstance(c, dict):
+                c = Clamp(**c)
+            if c.dofs != "all" and (not c.dofs or set(c.dofs) - set("xyz")):
+                raise FiberpipeError(f"clamp dofs must be 'all' or letters of 'xyz', got {c.dofs!r}")
+            out.append(c)
+        self.clamps = out
+
+    def setup(self, model, scene):
+        m = scene.mask()
+        for c in self.clamps:
+            i = model.fiber_node_index(int(c.fiber), c.at)
+            if c.dofs == "all":
+                m[i] |= FIX_X | FIX_Y | FIX_Z | FIX_ROT
+            else:
+                for ch in c.dofs:
+                    m[i] |= {"x": FIX_X, "y": FIX_Y, "z": FIX_Z}[ch]
+
+
+@dataclass
+class PointLoad:
+    """A constant force (N) on one node of a fiber (``at`` = start | end | node index)."""
+
+    fiber: int
+    force_n: Sequence[float]
+    at: object = "end"
+
+
+@dataclass
+class LineLoad:
+    """A constant force per unit length (N/m) along a whole fiber, lumped to its nodes
+    (each node gets half the rest length of each adjacent element)."""
+
+    fiber: int
+    force_n_per_m: Sequence[float]
+
+
+@dataclass
+class Loads(Effect):
+    """Constant point and line forces (applied from t = 0; quasi-static cases add damping)."""
+
+    loads: Sequence[object] = field(default_factory=list)
+    name = "loads"
+
+    def __post_init__(self):
+        out = []
+        for ld in self.loads:
+            if isinstance(ld, dict):
+                ld = dict(ld)
+                if "line_force" in ld:
+                    ld = LineLoad(ld["fiber"], ld["line_force"])
+                else:
+                    ld = PointLoad(ld["fiber"], ld["force"], ld.get("at", "end"))
+            if isinstance(ld, PointLoad):
+                ld.force_n = _vec3(ld.force_n, "loads.force")
+            elif isinstance(ld, LineLoad):
+                ld.force_n_per_m = _vec3(ld.force_n_per_m, "loads.line_force")
+            else:
+                raise FiberpipeError(f"unknown load {ld!r}")
+            out.append(ld)
+        self.loads = out
+
+    def setup(self, model, scene):
+        f = scene.ext()
+        for ld in self.loads:
+            if isinstance(ld, PointLoad):
+                f[model.fiber_node_index(int(ld.fiber), ld.at)] += ld.force_n
+            else:
+                if not 0 <= ld.fiber < model.n_fibers:
+                    raise FiberpipeError(f"line load on fiber {ld.fiber}: no such fiber")
+                sel = model.el_fiber == ld.fiber
+                n1 = model.el_n1[sel]
+                half = 0.5 * model.el_L0[sel]
+                for k in (0, 1):
+                    np.add.at(f, n1 + k, half[:, None] * ld.force_n_per_m[None, :])
+
+
+@dataclass
+class Plates(Effect):
+    """Two rigid planes normal to ``axis`` (lower at the low side, upper at the high side).
+
+    Parameters
+    ----------
+    axis : "x" | "y" | "z"
+    lower, upper : "moving" | "fixed" | "none"
+    displacement_m : float, m — travel of each moving plate towards the other (loading).
+    velocity_m_s : float, m/s — mean loading speed; the loading lasts ``displacement/velocity``
+        (plus the acceleration time for ``ramp = smooth``).
+    ramp : "smooth" (default: constant velocity with smoothstep accelerations over
+        ``ramp_fraction`` of the loading time at both ends, zero velocity at start and end) |
+        "smoothstep" (3τ² − 2τ³ in displacement) | "linear" (constant velocity from t = 0).
+    lower_position_m, upper_position_m : optional, m — plane positions; by default each plate
+        touches the bundle (min/max over nodes of the coordinate ∓ radius).
+    penalty_factor : float — plane penalty per node ``k_i = factor · m_i (2/Δt)²`` (default 0.1:
+        raises the touching node's ω² by 10 % of the stability bound).
+
+    Outputs: ``plate_force`` (T, 2) N, positive when the fibers press the plate;
+    ``plate_displacement`` (T, 2) m, travel of each plate towards the bundle.
+    """
+
+    axis: str = "z"
+    lower: str = "moving"
+    upper: str = "fixed"
+    displacement_m: float = 0.0
+    velocity_m_s: float = 0.0
+    ramp: str = "smooth"
+    ramp_fraction: float = 0.1
+    lower_position_m: float | None = None
+    upper_position_m: float | None = None
+    penalty_factor: float = DEFAULT_PENALTY_FACTOR
+    name = "plates"
+
+    def __post_init__(self):
+        if self.axis not in _AXES:
+            raise FiberpipeError(f"plates.axis must be x, y or z, got {self.axis!r}")
+        for k in ("lower", "upper"):
+            if getattr(self, k) not in ("moving", "fixed", "none"):
+                raise FiberpipeError(f"plates.{k} must be moving, fixed or none, got {getattr(self, k)!r}")
+        moving = "moving" in (self.lower, self.upper)
+        if moving and not (self.displacement_m > 0 and self.velocity_m_s > 0):
+            raise FiberpipeError("a moving plate needs loading.displacement > 0 and loading.velocity > 0")
+        _ramp_code(self.ramp, "loading")
+        if not 0.0 < self.ramp_fraction < 0.5:
+            raise FiberpipeError(f"loading ramp_fraction must be in (0, 0.5), got {self.ramp_fraction}")
+        if not 0 < self.penalty_factor <= 0.25:
+            raise FiberpipeError(f"plates penalty_factor must be in (0, 0.25], got {self.penalty_factor}")
+
+    @property
+    def loading_time_s(self) -> float:
+        if "moving" not in (self.lower, self.upper):
+            return 0.0
+        T = self.displacement_m / self.velocity_m_s
+        if self.ramp == "smooth":
+            T = T / (1.0 - self.ramp_fraction)  # so that the plateau speed is the given one
+        return T
+
+    def setup(self, model, scene):
+        ax = _AXES[self.axis]
+        c = model.nodes_m[:, ax]
+        lo = float(np.min(c - model.radius_node)) if self.lower_position_m is None else float(self.lower_position_m)
+        hi = float(np.max(c + model.radius_node)) if self.upper_position_m is None else float(self.upper_position_m)
+        T = max(self.loading_time_s, 1e-30)
+        ta = self.ramp_fraction * T
+        mode = _ramp_code(self.ramp, "loading")
+        for k, (kind, sign, pos) in enumerate((("lower", 1.0, lo), ("upper", -1.0, hi))):
+            state = getattr(self, kind)
+            if state == "none":
+                continue
+            move = self.displacement_m if state == "moving" else 0.0
+            scene.add_plane(ax, sign, pos, move, T, ta, mode, H_PLATE_FORCE + k, self.penalty_factor)
+        scene.plate_axis = ax
+        scene.end_time_hint = max(scene.end_time_hint, self.loading_time_s)
+
+
+@dataclass
+class Walls(Effect):
+    """Fixed rigid confining planes: ``planes`` maps an axis to the (low, high) plane positions (m);
+    nodes are pushed inside by a penalty (as :class:`Plates`). One reaction column per plane in the
+    order given (low then high for each axis), N, positive when pressed."""
+
+    planes: dict = field(default_factory=dict)
+    penalty_factor: float = DEFAULT_PENALTY_FACTOR
+    name = "walls"
+
+    def __post_init__(self):
+        out = {}
+        for ax, pair in dict(self.planes).items():
+            if ax not in _AXES:
+                raise FiberpipeError(f"walls: axis must be x, y or z, got {ax!r}")
+            lo, hi = (float(p) for p in pair)
+            if not lo < hi:
+                raise FiberpipeError(f"walls.{ax}: low plane {lo} must be below high plane {hi}")
+            out[ax] = (lo, hi)
+        self.planes = out
+
+    def setup(self, model, scene):
+        for ax, (lo, hi) in self.planes.items():
+            for sign, pos, tag in ((1.0, lo, "lo"), (-1.0, hi, "hi")):
+                scene.add_plane(_AXES[ax], sign, pos, 0.0, 1.0, 0.0, 0, H_WALL + scene.n_walls, self.penalty_factor)
+                scene.n_walls += 1
+                scene.wall_names.append(f"{ax}_{tag}")
+
+
+@dataclass
+class Drive:
+    """A fiber moved rigidly (all nodes' translations prescribed, rotations fixed) by
+    ``displacement_m`` (3,) at mean speed ``velocity_m_s`` with the given ramp."""
+
+    fiber: int
+    displacement_m: Sequence[float]
+    velocity_m_s: float
+    ramp: str = "smooth"
+    ramp_fraction: float = 0.1
+
+
+@dataclass
+class Drives(Effect):
+    """Prescribed rigid motions of whole fibers (the study's rearrangement case); the reactions'
+    work goes to ALLWK."""
+
+    drives: Sequence[Drive] = field(default_factory=list)
+    name = "drives"
+
+    def __post_init__(self):
+        out = []
+        for d in self.drives:
+            if isinstance(d, dict):
+                d = Drive(d["fiber"], d["displacement"], d["velocity"], d.get("ramp", "smooth"))
+            d.displacement_m = _vec3(d.displacement_m, "drives.displacement")
+            if not d.velocity_m_s > 0:
+                raise FiberpipeError(f"drives.velocity must be > 0, got {d.velocity_m_s}")
+            _ramp_code(d.ramp, "drives")
+            out.append(d)
+        self.drives = out
+
+    def duration_s(self, d: Drive) -> float:
+        T = float(np.linalg.norm(d.displacement_m)) / d.velocity_m_s
+        return T / (1.0 - d.ramp_fraction) if d.ramp == "smooth" else T
+
+    def setup(self, model, scene):
+        m = scene.mask()
+        vec, Ts, tas, modes = [], [], [], []
+        for k, d in enumerate(self.drives):
+            sl = model.fiber_nodes(int(d.fiber))
+            m[sl] |= DRIVEN
+            scene.node_drive[sl] = k
+            T = max(self.duration_s(d), 1e-30)
+            vec.append(d.displacement_m)
+            Ts.append(T)
+            tas.append(d.ramp_fraction * T)
+            modes.append(_ramp_code(d.ramp, "drives"))
+            scene.end_time_hint = max(scene.end_time_hint, T)
+        scene.drive_vec = np.array(vec, dtype=np.float64).reshape(-1, 3)
+        scene.drive_T = np.array(Ts, dtype=np.float64)
+        scene.drive_ta = np.array(tas, dtype=np.float64)
+        scene.drive_mode = np.array(modes, dtype=np.int64)
+
+
+@dataclass
+class ContactHook(Effect):
+    """Fiber–fiber contact/friction pass plugged into the step loop (see docs/solver.md).
+
+    Parameters
+    ----------
+    kernel : a numba ``@njit`` function
+        ``kernel(x, q, v, w, f, mom, acc, t, dt, data) -> int`` called once per step at t_n after
+        the beam forces: ``x`` (N,3) m, ``q`` (N,4), ``v`` (N,3) m/s and ``w`` (N,3) rad/s (body
+        frame) at t_n − Δt/2; it must ADD its forces (N) into ``f`` (N,3) and moments (N·m,
+        spatial) into ``mom`` (N,3), add its penalty work on the fibers (J) to
+        ``acc[ACC_PW]`` and its friction dissipation (J) to ``acc[ACC_FD]``, and return the
+        number of active contacts. ``data`` is any numba-compatible tuple of arrays (neighbour
+        lists, friction history...).
+    data : tuple — passed through unchanged.
+    prepare : optional callable ``prepare(model, scene) -> data`` run at setup (e.g. to build the
+        neighbour list against ``model`` and size buffers with ``scene.dt``).
+    """
+
+    kernel: Callable = no_contact
+    data: tuple = (np.zeros(0),)
+    prepare: Callable | None = None
+    name = "contact"
+
+    def setup(self, model, scene):
+        scene.contact_on = True
+        scene.contact_fn = self.kernel
+        scene.contact_data = self.prepare(model, scene) if self.prepare is not None else self.data

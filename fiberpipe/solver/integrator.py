@@ -1,0 +1,338 @@
+"""Run API: settings, the chunked driver around the jitted step loop, results and diagnosis.
+
+``simulate`` calls :func:`advance` once per output frame (or per ``max_chunk_steps``); each call
+runs many steps inside one jitted kernel (``_kernels_integrate.advance_kernel``), so Python only
+runs between frames: output, progress callback, divergence diagnosis.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..errors import FiberpipeError, SimulationDiverged
+from . import _kernels_integrate as K
+from ._kernels_beam import beam_forces
+from .effects import Effect, SceneArrays
+from .model import Model
+from .state import State
+from .timestep import TimeStepReport, stable_time_step
+
+ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "total", "residual")
+ABAQUS_NAMES = {"kinetic": "ALLKE", "strain": "ALLSE", "damping": "ALLVD", "external": "ALLWK",
+                "contact": "ALLPW", "friction": "ALLFD", "total": "ETOTAL"}
+
+
+@dataclass
+class SimulationSettings:
+    """Solver settings (SI).
+
+    Parameters
+    ----------
+    dt_safety : float — fraction of the stable step used (default 0.9).
+    dt_s : float, optional, s — a user time step; refused above the stable limit unless ``force_dt``.
+    force_dt : bool — run with ``dt_s`` above the limit anyway (stops at blow-up with a diagnosis).
+    end_time_s : float, optional, s — default: the loading time of plates/drives.
+    output_frames : int — frames of node positions, evenly spaced over [0, end_time] (≥ 2).
+    history_every : int, optional — steps between history rows (default: about 2000 rows).
+    max_chunk_steps : int — steps per jitted call at most (progress granularity).
+    speed_limit_m_s : float, optional — a node faster than this is a blow-up (default 0.2 c).
+    runaway_m : float, optional — a node farther than this from its rest position is a blow-up
+        (default 10 × the bounding-box diagonal + 1 mm).
+    """
+
+    dt_safety: float = 0.9
+    dt_s: float | None = None
+    force_dt: bool = False
+    end_time_s: float | None = None
+    output_frames: int = 11
+    history_every: int | None = None
+    max_chunk_steps: int = 200_000
+    speed_limit_m_s: float | None = None
+    runaway_m: float | None = None
+
+    def __post_init__(self):
+        if not 0.0 < self.dt_safety <= 1.0:
+            raise FiberpipeError(f"solver.dt_safety must be in (0, 1], got {self.dt_safety}")
+        if self.output_frames < 2:
+            raise FiberpipeError(f"solver.output_frames must be ≥ 2, got {self.output_frames}")
+        if self.end_time_s is not None and not self.end_time_s > 0:
+            raise FiberpipeError(f"solver.end_time must be > 0, got {self.end_time_s}")
+        if self.dt_s is not None and not self.dt_s > 0:
+            raise FiberpipeError(f"solver.dt must be > 0, got {self.dt_s}")
+
+
+@dataclass
+class SimulationResult:
+    """Outputs of :func:`simulate` (SI units).
+
+    frames_time : (K,) s.  frames_positions : (K, N, 3) m, mesh node order.
+    frames_rotations : (K, N, 4) node quaternions (w, x, y, z).
+    history : dict of arrays over T rows — ``time`` (T,) s, ``plate_displacement`` (T, 2) m,
+        ``plate_force`` (T, 2) N (lower, upper; positive when pressed), ``wall_force`` (T, W) N,
+        ``contacts`` (T,), ``energy/<kinetic|strain|damping|external|contact|friction|total|residual>``
+        (J; residual is (ETOTAL − ETOTAL₀)/max(|ALLWK|, ALLSE + ALLKE) so far, dimensionless).
+    dt_s, steps, elements, wall_time_s, effects (names), timestep (TimeStepReport),
+    final_state (State), completed (False for the partial result of a diverged run),
+    wall_names (labels of the wall columns).
+    """
+
+    frames_time: np.ndarray
+    frames_positions: np.ndarray
+    frames_rotations: np.ndarray
+    history: dict
+    dt_s: float
+    steps: int
+    elements: int
+    wall_time_s: float
+    effects: list
+    timestep: TimeStepReport
+    final_state: State
+    completed: bool = True
+    wall_names: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+
+
+def choose_time_step(model: Model, effects: Sequence[Effect], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
+    """The time step (s) the run will use and the stability report; refuses a user dt above the limit."""
+    beta = max([getattr(e, "beta_s", 0.0) for e in effects if e.name == "damping"] or [0.0])
+    rep = stable_time_step(model, beta_s=beta)
+    if settings.dt_s is None:
+        return settings.dt_safety * rep.dt_stable_s, rep
+    if settings.dt_s > rep.dt_stable_s and not settings.force_dt:
+        raise FiberpipeError(
+            f"solver dt {settings.dt_s:.4g} s is above the stable limit {rep.dt_stable_s:.4g} s "
+            f"({rep.governing_mode} mode of element {rep.governing_element}); the explicit scheme "
+            f"would blow up. Use dt ≤ {rep.dt_stable_s:.4g} s, leave dt unset to use dt_safety × limit, "
+            f"or set force_dt to run anyway")
+    return float(settings.dt_s), rep
+
+
+def _initial_energies(model: Model, state: State) -> tuple[float, float]:
+    f = np.zeros((model.n_nodes, 3))
+    mom = np.zeros((model.n_nodes, 3))
+    se, _ = beam_forces(state.x, state.q, model.el_n1, model.el_invL0, model.el_C, model.el_Dk,
+                        model.gamma_rest, model.theta_rest, f, mom, True, 0.0, np.zeros((0, 6)))
+    ke = 0.5 * float(np.sum(model.mass[:, None] * state.v**2) + np.sum(model.J * state.w**2))
+    return ke, float(se)
+
+
+class Integrator:
+    """Holds the model, the effects' kernel arrays and the work buffers for repeated :meth:`advance`."""
+
+    def __init__(self, model: Model, effects: Sequence[Effect], dt: float, *, history_rows: int = 1,
+                 history_every: int = 1, speed_limit_m_s: float | None = None,
+                 runaway_m: float | None = None, e_ref_J: float = 1e-12):
+        names = [e.name for e in effects]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise FiberpipeError(f"effect listed twice: {sorted(dup)}")
+        self.model = model
+        self.effects = list(effects)
+        self.dt = float(dt)
+        sc = SceneArrays(model, self.dt)
+        for e in self.effects:
+            e.setup(model, sc)
+        self.scene = sc
+        n = model.n_nodes
+        self.f = np.zeros((n, 3))
+        self.mom = np.zeros((n, 3))
+        self.strain_prev = np.zeros((model.n_elements, 6)) if sc.beta > 0 else np.zeros((0, 6))
+        self.k_pen = sc.k_pen()
+        P = sc.pl_axis.size
+        self.pl_pos = sc.pl_pos0.copy()
+        self.pl_force = np.zeros(P)
+        self.pen_idx = np.zeros(n * P, np.int64)
+        self.pen_f = np.zeros(n * P)
+        self.drive_v = np.zeros_like(sc.drive_vec)
+        self.history_every = int(history_every)
+        self.hist = np.zeros((history_rows, K.H_WALL + sc.n_walls))
+        self.h_row = 0
+        c = model.material.wave_speed_m_s
+        self.v_limit = 0.2 * c if speed_limit_m_s is None else float(speed_limit_m_s)
+        if runaway_m is None:
+            span = np.ptp(model.nodes_m, axis=0)
+            runaway_m = 10.0 * float(np.linalg.norm(span)) + 1e-3
+        self.x_limit = float(runaway_m)
+        self.e_ref = float(e_ref_J)
+
+    def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
+        """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
+        m, sc = self.model, self.scene
+        status, done, self.h_row, bad = K.advance_kernel(
+            m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
+            m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
+            state.x, state.q, state.v, state.w, state.acc, state.t, state.step,
+            self.f, self.mom, self.dt, int(n_steps),
+            sc.alpha, sc.beta, self.strain_prev, sc.f_ext,
+            sc.fix_mask, sc.node_drive, sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v,
+            sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode, sc.pl_hist_col,
+            self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f,
+            sc.contact_on, sc.contact_fn, sc.contact_data,
+            self.hist, self.h_row, self.history_every,
+            self.v_limit, self.x_limit, self.e_ref,
+        )
+        state.step += int(done)
+        state.t = state.step * self.dt
+        return int(status), int(done), int(bad)
+
+
+def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] = (), *, dt: float | None = None) -> State:
+    """Advance ``state`` in place by ``n_steps`` steps (one jitted call) and return it.
+
+    A convenience for scripts and tests; :func:`simulate` is the full run with output and checks.
+    Raises :class:`SimulationDiverged` on NaN/runaway.
+    """
+    if dt is None:
+        dt, _ = choose_time_step(model, effects, SimulationSettings())
+    integ = Integrator(model, effects, dt, history_every=max(1, n_steps))
+    status, done, bad = integ.advance(state, n_steps)
+    if status != K.STATUS_OK:
+        raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None))
+    return state
+
+
+_STATUS_TEXT = {
+    K.STATUS_NAN: "NaN or inf in the state",
+    K.STATUS_SPEED: "a node moved faster than the speed limit",
+    K.STATUS_RUNAWAY: "a node ran away from its rest position",
+    K.STATUS_ENERGY: "kinetic energy blew up (> 1000 × the energy put in)",
+}
+
+
+def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep: TimeStepReport | None) -> str:
+    x = state.x
+    finite = np.all(np.isfinite(x), axis=1) & np.all(np.isfinite(state.v), axis=1)
+    if bad < 0 or bad >= model.n_nodes:
+        if not np.all(finite):
+            bad = int(np.argmin(finite))
+        else:
+            bad = int(np.argmax(np.einsum("ij,ij->i", state.v, state.v)))
+    fiber = int(model.node_fiber[bad])
+    els = np.nonzero((model.el_n1 == bad) | (model.el_n1 + 1 == bad))[0]
+    el = int(els[0]) if els.size else -1
+    speed = float(np.linalg.norm(state.v[bad])) if finite[bad] else float("nan")
+    quantity = _STATUS_TEXT.get(status, f"status {status}")
+    hint = []
+    if rep is not None and dt > rep.dt_stable_s:
+        hint.append(f"dt {dt:.4g} s is above the stable limit {rep.dt_stable_s:.4g} s: leave solver.dt unset "
+                    f"or lower it")
+    else:
+        hint.append("lower solver.dt_safety, soften the penalty (plates/walls penalty_factor, contact "
+                    "stiffness), add damping, or check the input for overlapping fibers")
+    return (f"simulation diverged at t = {state.t:.6g} s (step {state.step}): {quantity}; node {bad} "
+            f"(fiber {fiber}, element {el}), speed {speed:.3g} m/s. Suggested fix: {'; '.join(hint)}")
+
+
+def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
+    h = hist[:n_rows]
+    KE, SE, VD, WK, PW, FD = (h[:, c] for c in (K.H_KE, K.H_SE, K.H_VD, K.H_WK, K.H_PW, K.H_FD))
+    total = KE + SE + VD + FD - WK - PW
+    scale = np.maximum.accumulate(np.maximum(np.abs(WK), SE + KE)) if n_rows else np.zeros(0)
+    scale = np.maximum(scale, 1e-300)
+    out = {
+        "time": h[:, K.H_TIME].copy(),
+        "plate_displacement": h[:, K.H_PLATE_DISP:K.H_PLATE_DISP + 2].copy(),
+        "plate_force": h[:, K.H_PLATE_FORCE:K.H_PLATE_FORCE + 2].copy(),
+        "wall_force": h[:, K.H_WALL:K.H_WALL + n_walls].copy(),
+        "contacts": h[:, K.H_CONTACTS].copy(),
+        "energy/kinetic": KE.copy(), "energy/strain": SE.copy(), "energy/damping": VD.copy(),
+        "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
+        "energy/total": total, "energy/residual": (total - e0) / scale,
+    }
+    return out
+
+
+def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettings | None = None, *,
+             state: State | None = None, progress: Callable | None = None,
+             on_frame: Callable | None = None) -> SimulationResult:
+    """Run the explicit dynamics of ``model`` under ``effects``.
+
+    Parameters
+    ----------
+    model : Model
+    effects : sequence of Effect — only these are computed.
+    settings : SimulationSettings
+    state : State, optional — initial state (default: at rest in the rest geometry).
+    progress : callable ``progress(t_s, end_time_s, steps)``, optional — called between jitted chunks.
+    on_frame : callable ``on_frame(k, t_s, positions (N,3))``, optional — called at each output frame.
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    FiberpipeError — a user dt above the stable limit (unless ``force_dt``), no end time.
+    SimulationDiverged — NaN, speed or runaway displacement, kinetic energy blow-up; the exception's
+        ``partial_result`` holds the frames and history up to the last good frame.
+    """
+    settings = settings or SimulationSettings()
+    t_wall = time.perf_counter()
+    dt, rep = choose_time_step(model, effects, settings)
+    state = State.at_rest(model) if state is None else state
+    # end time
+    probe = SceneArrays(model, dt)
+    for e in effects:
+        if e.name in ("plates", "drives"):
+            e.setup(model, probe)
+    end_time = settings.end_time_s if settings.end_time_s is not None else probe.end_time_hint
+    if not end_time or end_time <= 0:
+        raise FiberpipeError("no end time: set solver.end_time or a loading (moving plate) / drive")
+    total_steps = int(math.ceil(end_time / dt - 1e-9))
+    every = settings.history_every or max(1, total_steps // 2000)
+    rows = total_steps // every + 1
+    ke0, se0 = _initial_energies(model, state)
+    integ = Integrator(model, effects, dt, history_rows=rows, history_every=every,
+                       speed_limit_m_s=settings.speed_limit_m_s, runaway_m=settings.runaway_m,
+                       e_ref_J=max(ke0 + se0, 1e-12))
+    frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
+    ft, fx, fq = [], [], []
+
+    def take_frame():
+        ft.append(state.t)
+        fx.append(state.x.copy())
+        fq.append(state.q.copy())
+        if on_frame is not None:
+            on_frame(len(ft) - 1, state.t, fx[-1])
+
+    def result(completed: bool) -> SimulationResult:
+        return SimulationResult(
+            frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
+            frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
+            history=_history_dict(integ.hist, integ.h_row, integ.scene.n_walls, ke0 + se0),
+            dt_s=dt, steps=state.step, elements=model.n_elements, wall_time_s=time.perf_counter() - t_wall,
+            effects=[e.name for e in effects], timestep=rep, final_state=state, completed=completed,
+            wall_names=list(integ.scene.wall_names),
+            notes=[rep.summary(), f"dt = {dt:.4g} s ({dt / rep.dt_stable_s:.3g} × stable)"]
+            + ([f"rotary inertia scaled by {model.rotary_inertia_scale:g}: rotational dynamics are slowed "
+                f"(accuracy trade-off)"] if model.rotary_inertia_scale != 1.0 else []),
+        )
+
+    start_step = state.step
+    take_frame() if frame_steps[0] == 0 else None
+    for target in frame_steps[1:]:
+        target = int(target) + start_step
+        while state.step < target:
+            n = min(target - state.step, settings.max_chunk_steps)
+            last_good = state.copy()
+            status, done, bad = integ.advance(state, n)
+            if status != K.STATUS_OK:
+                msg = _diagnose(model, state, status, bad, dt, rep)
+                diag_state = state
+                # keep the last good state as the partial result's final state
+                state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
+                state.t, state.step = last_good.t, last_good.step
+                exc = SimulationDiverged(msg)
+                exc.partial_result = result(False)
+                exc.diagnosis = msg
+                exc.bad_node = bad
+                raise exc
+            if progress is not None:
+                progress(state.t, end_time, state.step)
+        take_frame()
+    return result(True)
