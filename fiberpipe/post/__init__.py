@@ -1,0 +1,1 @@
+"""Post-processing of a simulation: curves, energies, geometry, position error, plots, report."""

@@ -1,0 +1,66 @@
+"""PNG plots of a simulation (matplotlib, Agg backend: no screen needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from fiberpipe.post.energies import ABAQUS_NAMES  # noqa: E402
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_force_displacement(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], *, title: str = "") -> Path:
+    """One or several F(U) curves; ``curves`` maps a label to (U in m, F in N)."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, (U, F) in curves.items():
+        ax.plot(np.asarray(U) * 1e3, F, label=label)
+    ax.set_xlabel("plate displacement U [mm]")
+    ax.set_ylabel("compaction load F [N]")
+    ax.grid(alpha=0.3)
+    if len(curves) > 1:
+        ax.legend()
+    if title:
+        ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_energies(path: Path, x: np.ndarray, energy: dict[str, np.ndarray], *, xlabel: str, quasi_static_fail=None) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, series in energy.items():
+        if name == "residual":
+            continue
+        label = f"{name} ({ABAQUS_NAMES[name]})" if name in ABAQUS_NAMES else name
+        ax.plot(x, np.abs(series), label=label)
+    if quasi_static_fail is not None and np.any(quasi_static_fail):
+        ax.fill_between(x, 0, 1, where=quasi_static_fail, transform=ax.get_xaxis_transform(), color="red", alpha=0.08, label="K_e > 1e-2 S_e")
+    ax.set_yscale("symlog", linthresh=1e-9)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("energy [J]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_series(path: Path, x: np.ndarray, ys: dict[str, np.ndarray], *, xlabel: str, ylabel: str, logy: bool = False) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, y in ys.items():
+        ax.plot(x, y, label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if logy:
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    if len(ys) > 1:
+        ax.legend(fontsize=8)
+    return _save(fig, path)

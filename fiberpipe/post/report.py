@@ -1,0 +1,236 @@
+"""``post`` stage: tables (CSV), plots (PNG), ``summary.json`` and ``report.md`` of a simulation.
+
+Every column and axis is defined, with its unit, in ``docs/outputs.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fiberpipe.artifacts import read_fibers, write_text_atomic
+from fiberpipe.config import Config
+from fiberpipe.post import plots
+from fiberpipe.post.compaction import fit_van_wyk, mean_field_contacts
+from fiberpipe.post.curves import force_displacement
+from fiberpipe.post.energies import energy_balance, quasi_static_ratio
+from fiberpipe.post.geometry import fiber_volume_m3, projected_curvature, volume_fraction
+from fiberpipe.post.history import load_simulation
+from fiberpipe.post.positions import position_error
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
+    """Write equal-length columns to CSV atomically (header = column names with units)."""
+    names = list(columns)
+    rows = zip(*[np.asarray(columns[n]).tolist() for n in names])
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(names)
+    for r in rows:
+        w.writerow([f"{v:.9g}" if isinstance(v, float) else v for v in r])
+    write_text_atomic(path, buf.getvalue())
+    return path
+
+
+def _fmt(v, unit="", digits=4):
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    return f"{v:.{digits}g}{(' ' + unit) if unit else ''}"
+
+
+def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str = "") -> dict:
+    """Post-process ``simulation.h5`` into ``out_dir`` (CSV, PNG, summary.json, report.md)."""
+    sim = load_simulation(sim_path)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    h, energy = sim.history, sim.energy
+    t_hist = np.asarray(h.get("time", np.zeros(0)), float)
+    summary: dict = {
+        "name": cfg.name,
+        "effects": sim.effects,
+        "dt_s": float(sim.attrs.get("dt_s", float("nan"))),
+        "steps": int(sim.attrs.get("steps", 0)),
+        "elements": int(sim.attrs.get("elements", 0)),
+        "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
+    }
+    made: list[str] = []
+
+    # -- force-displacement -------------------------------------------------------------------
+    has_plates = "plate_force" in h and "plate_displacement" in h and np.size(h["plate_force"]) > 0
+    U = None
+    if has_plates:
+        U, F = force_displacement(sim)
+        force = np.atleast_2d(h["plate_force"])
+        write_csv(
+            out_dir / "force_displacement.csv",
+            {"time_s": t_hist, "U_m": U, "load_N": F, "lower_plate_force_N": force[:, 0], "upper_plate_force_N": force[:, -1]},
+        )
+        plots.plot_force_displacement(out_dir / "force_displacement.png", {cfg.name: (U, F)}, title="compaction load")
+        made += ["force_displacement.csv", "force_displacement.png"]
+        summary["final_U_m"] = float(U[-1])
+        summary["final_load_N"] = float(F[-1])
+        summary["max_load_N"] = float(np.max(F))
+
+    # -- energies -------------------------------------------------------------------------------
+    if energy:
+        residual = energy_balance(energy)
+        ratio = quasi_static_ratio(energy)
+        limit = cfg.post.quasi_static_ratio
+        # the check only means something once there is strain energy to compare with
+        se = np.asarray(energy.get("strain", np.zeros_like(residual)))
+        meaningful = se > 1e-6 * max(float(np.max(se)), 1e-300)
+        fails = meaningful & (ratio > limit)
+        cols = {"time_s": t_hist}
+        if U is not None:
+            cols["U_m"] = U
+        cols.update({f"{k}_J": np.asarray(v) for k, v in energy.items() if k != "residual"})
+        cols["balance_residual"] = residual
+        cols["ke_over_se"] = np.where(np.isfinite(ratio), ratio, np.nan)
+        cols["quasi_static"] = (~fails).astype(int)
+        write_csv(out_dir / "energies.csv", cols)
+        x, xl = (U * 1e3, "plate displacement U [mm]") if U is not None else (t_hist, "time [s]")
+        plots.plot_energies(out_dir / "energies.png", x, {k: v for k, v in energy.items()}, xlabel=xl, quasi_static_fail=fails)
+        made += ["energies.csv", "energies.png"]
+        summary["energy_balance_residual_max"] = float(np.max(residual))
+        summary["energy_balance_residual_final"] = float(residual[-1])
+        summary["peak_ke_over_se"] = float(np.max(ratio[meaningful])) if meaningful.any() else float("nan")
+        summary["quasi_static_fraction"] = float(1 - fails.mean()) if len(fails) else float("nan")
+        summary["final_energy_J"] = {k: float(np.asarray(v)[-1]) for k, v in energy.items()}
+
+    # -- geometry per frame: v_f, curvature, contacts, position error -------------------------
+    mesh = sim.mesh
+    frames = sim.frames_positions
+    ft = sim.frames_time
+    scene = cfg.scene
+    plate_axis = AXES[scene.plates.axis] if scene.plates is not None else 2
+    walls = {}
+    if scene.walls is not None:
+        for name, ax in AXES.items():
+            v = getattr(scene.walls, name)
+            if v is not None:
+                walls[ax] = (v[0], v[1])
+    vol = fiber_volume_m3(mesh)
+    gap = None
+    if "plate_position" in h:
+        pp = np.atleast_2d(h["plate_position"])
+        gap_hist = pp[:, -1] - pp[:, 0]
+        gap = np.interp(ft, t_hist, gap_hist)
+    geo = {"time_s": ft}
+    if U is not None:
+        geo["U_m"] = np.interp(ft, t_hist, U)
+    geo["volume_fraction"] = np.array(
+        [volume_fraction(vol, frames[k], mesh.radius_m, plate_axis=plate_axis, plate_gap_m=None if gap is None else gap[k], walls=walls) for k in range(len(ft))]
+    )
+    geo["curvature_xz_per_m"] = np.array([projected_curvature(frames[k], mesh.node_offsets, "xz") for k in range(len(ft))])
+    geo["curvature_yz_per_m"] = np.array([projected_curvature(frames[k], mesh.node_offsets, "yz") for k in range(len(ft))])
+    if "contacts" in h and len(h["contacts"]) == len(t_hist):
+        geo["contacts_per_fiber"] = np.interp(ft, t_hist, 2.0 * np.asarray(h["contacts"], float) / mesh.n_fibers)
+    ref = None
+    if cfg.post.reference_fibers:
+        ref = read_fibers(cfg.post.reference_fibers)
+        geo["position_error_m"] = np.array(
+            [position_error(frames[k], mesh.node_offsets, ref.points_m, ref.offsets)["mean_m"] for k in range(len(ft))]
+        )
+    write_csv(out_dir / "geometry.csv", geo)
+    made.append("geometry.csv")
+    xg, xgl = (geo["U_m"] * 1e3, "plate displacement U [mm]") if "U_m" in geo else (ft, "time [s]")
+    plots.plot_series(out_dir / "volume_fraction.png", xg, {"v_f": geo["volume_fraction"]}, xlabel=xgl, ylabel="fiber volume fraction v_f [-]")
+    made.append("volume_fraction.png")
+    summary["vf_initial"] = float(geo["volume_fraction"][0])
+    summary["vf_final"] = float(geo["volume_fraction"][-1])
+    summary["curvature_per_m"] = {
+        "initial": {"xz": float(geo["curvature_xz_per_m"][0]), "yz": float(geo["curvature_yz_per_m"][0])},
+        "final": {"xz": float(geo["curvature_xz_per_m"][-1]), "yz": float(geo["curvature_yz_per_m"][-1])},
+    }
+    if "contacts_per_fiber" in geo:
+        L = float(np.mean(np.diff(mesh.node_offsets) - 1) * np.mean(mesh.element_lengths_m()))
+        D = 2 * float(np.mean(mesh.radius_m))
+        plots.plot_series(
+            out_dir / "contacts.png",
+            geo["volume_fraction"],
+            {"simulated": geo["contacts_per_fiber"], "mean field 2(L/D)v_f (random fibers)": mean_field_contacts(geo["volume_fraction"], L, D)},
+            xlabel="fiber volume fraction v_f [-]",
+            ylabel="contacts per fiber [-]",
+        )
+        made.append("contacts.png")
+        summary["contacts_per_fiber_final"] = float(geo["contacts_per_fiber"][-1])
+    if ref is not None:
+        summary["position_error_mean_m"] = float(np.nanmean(geo["position_error_m"]))
+        summary["position_error_final_m"] = float(geo["position_error_m"][-1])
+        plots.plot_series(out_dir / "position_error.png", xg, {"mean": geo["position_error_m"] * 1e3}, xlabel=xgl, ylabel="fiber-position error [mm]")
+        made.append("position_error.png")
+
+    # -- compaction law fit -------------------------------------------------------------------
+    if has_plates and len(ft) >= 5:
+        vf_hist = np.interp(t_hist, ft, geo["volume_fraction"])
+        sizes = [
+            (walls[ax][1] - walls[ax][0]) if ax in walls else float(np.ptp(mesh.nodes_m[:, ax]) + 2 * mesh.radius_m.max())
+            for ax in range(3)
+            if ax != plate_axis
+        ]
+        area = float(np.prod(sizes))
+        pressure = F / area
+        loaded = pressure > 0.01 * max(float(np.max(pressure)), 1e-300)
+        fit = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus) if loaded.sum() >= 5 else {}
+        fit3 = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus, n=3.0) if loaded.sum() >= 5 else {}
+        summary["van_wyk_fit"] = {"free_n": fit, "n3": fit3, "plate_area_m2": area}
+        plots.plot_series(out_dir / "pressure_vf.png", vf_hist, {"simulated": pressure}, xlabel="fiber volume fraction v_f [-]", ylabel="pressure P [Pa]")
+        made.append("pressure_vf.png")
+
+    # -- wall times of the run's stages ------------------------------------------------------
+    run_summary = Path(sim_path).parent / "summary.json"
+    if run_summary.exists():
+        stages = json.loads(run_summary.read_text()).get("stages", {})
+        summary["wall_time_s_per_stage"] = {k: v.get("wall_time_s") for k, v in stages.items() if isinstance(v, dict)}
+
+    summary["outputs"] = made
+    write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2, default=float))
+    write_text_atomic(out_dir / "report.md", _report(cfg, summary, made))
+    return {k: summary[k] for k in ("final_load_N", "energy_balance_residual_max", "peak_ke_over_se", "vf_final", "position_error_mean_m") if k in summary}
+
+
+def _report(cfg: Config, s: dict, made: list[str]) -> str:
+    lines = [f"# fiberpipe report: {cfg.name}", "", "## Key figures", "", "| figure | value |", "| --- | --- |"]
+    rows = [
+        ("effects", ", ".join(s.get("effects", []))),
+        ("elements", s.get("elements")),
+        ("time step dt", _fmt(s.get("dt_s"), "s")),
+        ("steps", s.get("steps")),
+        ("solver wall time", _fmt(s.get("solver_wall_time_s"), "s")),
+        ("final plate displacement U", _fmt(s.get("final_U_m", float("nan")) * 1e3, "mm") if "final_U_m" in s else "n/a"),
+        ("final load", _fmt(s.get("final_load_N"), "N")),
+        ("peak K_e/S_e (quasi-static if < 1e-2)", _fmt(s.get("peak_ke_over_se"))),
+        ("energy balance residual (max)", _fmt(s.get("energy_balance_residual_max"))),
+        ("v_f initial → final", f"{_fmt(s.get('vf_initial'))} → {_fmt(s.get('vf_final'))}"),
+        ("mean fiber-position error", _fmt(s.get("position_error_mean_m", float("nan")) * 1e3, "mm") if "position_error_mean_m" in s else "n/a"),
+    ]
+    lines += [f"| {a} | {b} |" for a, b in rows]
+    c = s.get("curvature_per_m", {})
+    if c:
+        lines += ["", "## Projected average curvature (the study's Table 4), 1/m", "", "| state | XZ plane | YZ plane |", "| --- | --- | --- |"]
+        for state in ("initial", "final"):
+            lines.append(f"| {state} | {_fmt(c[state]['xz'])} | {_fmt(c[state]['yz'])} |")
+    fit = s.get("van_wyk_fit")
+    if fit:
+        lines += ["", "## Compaction law fit P = k E (v_f^n − v_f0^n)", "", "| fit | k | n | v_f0 | R² |", "| --- | --- | --- | --- | --- |"]
+        for label, f in (("n free", fit.get("free_n", {})), ("n = 3 (van Wyk)", fit.get("n3", {}))):
+            if f:
+                lines.append(f"| {label} | {_fmt(f.get('k'))} | {_fmt(f.get('n'))} | {_fmt(f.get('vf0'))} | {_fmt(f.get('r2'))} |")
+    walls = s.get("wall_time_s_per_stage")
+    if walls:
+        lines += ["", "## Wall time per stage", "", "| stage | s |", "| --- | --- |"]
+        lines += [f"| {k} | {_fmt(v)} |" for k, v in walls.items()]
+    lines += ["", "## Plots", ""]
+    for name in made:
+        if name.endswith(".png"):
+            lines += [f"![{name}]({name})", ""]
+    lines += ["Columns and axes are defined in docs/outputs.md.", ""]
+    return "\n".join(lines)

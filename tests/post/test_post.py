@@ -1,0 +1,111 @@
+"""Post-processing against closed-form references, and the post stage on a synthetic run."""
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fiberpipe.config import validate_config
+from fiberpipe.model.mesh import mesh_polylines
+from fiberpipe.polylines import Polylines
+from fiberpipe.post.compaction import fit_van_wyk
+from fiberpipe.post.curves import curve_error
+from fiberpipe.post.energies import energy_balance, quasi_static_ratio
+from fiberpipe.post.geometry import projected_curvature, volume_fraction
+from fiberpipe.post.positions import position_error
+from fiberpipe.post.report import run_post
+from fiberpipe.stages.simulate import write_simulation
+
+
+def _arc(radius, n=200, angle=1.0):
+    th = np.linspace(0, angle, n)
+    return np.c_[radius * np.sin(th), np.zeros(n), radius * (1 - np.cos(th))]
+
+
+def test_projected_curvature_of_an_arc_is_one_over_radius():
+    pts = _arc(0.02)
+    off = np.array([0, len(pts)])
+    assert projected_curvature(pts, off, "xz") == pytest.approx(50.0, rel=1e-3)
+    assert projected_curvature(pts, off, "yz") == pytest.approx(0.0, abs=1e-9)  # a line in YZ
+
+
+def test_volume_fraction_of_a_known_box():
+    pts = np.array([[0, 0, 0], [0, 0, 10e-3]], float)
+    vf = volume_fraction(1e-9, pts, np.array([0.25e-3]), plate_axis=1, plate_gap_m=1e-3, walls={0: (-1e-3, 1e-3)})
+    assert vf == pytest.approx(1e-9 / (2e-3 * 1e-3 * 10.5e-3))
+
+
+def test_position_error_recovers_a_known_shift_and_matches_shuffled_fibers():
+    fibers = [np.c_[np.full(30, i * 1e-3), np.zeros(30), np.linspace(0, 15e-3, 30)] for i in range(4)]
+    ref = Polylines.from_list(fibers, 0.25e-3)
+    sim = Polylines.from_list([f + [0, 40e-6, 0] for f in fibers[::-1]], 0.25e-3)
+    err = position_error(sim.points_m, sim.offsets, ref.points_m, ref.offsets)
+    assert err["mean_m"] == pytest.approx(40e-6, rel=1e-3)
+    assert sorted(err["matched"]) == [(0, 3), (1, 2), (2, 1), (3, 0)]
+
+
+def test_van_wyk_fit_recovers_its_parameters():
+    vf = np.linspace(0.377, 0.6, 40)
+    E = 15e9
+    p = 2e-4 * E * (vf**3 - 0.377**3)
+    fit = fit_van_wyk(vf, p, E)
+    assert fit["k"] == pytest.approx(2e-4, rel=1e-3) and fit["n"] == pytest.approx(3.0, rel=1e-3)
+    assert fit["r2"] > 0.9999
+
+
+def test_energy_balance_and_quasi_static_ratio():
+    t = np.linspace(0, 1, 11)
+    e = {"kinetic": 0.1 * t, "strain": t, "external": 1.1 * t, "damping": 0 * t}
+    assert np.max(energy_balance(e)) == pytest.approx(0.0, abs=1e-15)
+    assert quasi_static_ratio(e)[5] == pytest.approx(0.1)
+    e["external"] = 1.2 * t  # 0.1 J of work missing out of 1.2
+    assert energy_balance(e)[-1] == pytest.approx(0.1 / 1.2)
+
+
+def test_curve_error():
+    U = np.linspace(0, 1e-3, 50)
+    assert curve_error(U, U * 10, U, U * 10) == pytest.approx(0)
+    assert curve_error(U, U * 10, U, U * 10.2) == pytest.approx(0.02)
+
+
+def test_post_stage_on_a_synthetic_compaction(tmp_path):
+    lines = [np.c_[np.full(20, x), np.zeros(20), np.linspace(0, 6e-3, 20)] for x in (-0.3e-3, 0.3e-3)]
+    mesh = mesh_polylines(Polylines.from_list(lines, 0.25e-3), 0.3e-3)
+    K, T = 6, 50
+    t = np.linspace(0, 1e-2, T)
+    U = 0.2e-3 * t / t[-1]
+    frames = np.repeat(mesh.nodes_m[None], K, axis=0)
+    result = SimpleNamespace(
+        frames_time=np.linspace(0, 1e-2, K),
+        frames_positions=frames,
+        history={
+            "time": t,
+            "plate_displacement": np.c_[U, 0 * U],
+            "plate_force": np.c_[1e3 * U, 1e3 * U],
+            "plate_position": np.c_[-0.25e-3 + U, 0.25e-3 + 0 * U],
+            "contacts": np.full(T, 3.0),
+            "energy": {"kinetic": 1e-9 * t, "strain": 5e3 * U**2, "external": 5e3 * U**2 + 1e-9 * t, "damping": 0 * t},
+        },
+        dt_s=1e-7,
+        steps=1000,
+        wall_time_s=1.0,
+        effects=["plates", "contact"],
+    )
+    sim_path = write_simulation(tmp_path / "simulation.h5", mesh, result)
+    cfg = validate_config(
+        {"name": "synthetic", "input": {"fibers": "x.h5"}, "scene": {"effects": ["plates"], "plates": {"axis": "y"}, "walls": {"x": [-0.6e-3, 0.6e-3]}}}
+    )
+    figures = run_post(cfg, sim_path, tmp_path / "post")
+    s = json.loads((tmp_path / "post" / "summary.json").read_text())
+    assert s["final_load_N"] == pytest.approx(0.2)
+    assert s["energy_balance_residual_max"] < 1e-9
+    assert s["contacts_per_fiber_final"] == pytest.approx(3.0)
+    # v_f = fiber volume / (1.2 mm walls × plate gap × fiber length + 2r)
+    vol = np.pi * (0.25e-3) ** 2 * 6e-3 * 2
+    assert s["vf_initial"] == pytest.approx(vol / (1.2e-3 * 0.5e-3 * 6.5e-3), rel=1e-6)
+    for name in ("force_displacement.png", "energies.png", "force_displacement.csv", "report.md", "geometry.csv"):
+        assert (tmp_path / "post" / name).exists(), name
+    assert "final_load_N" in figures
+    header = (tmp_path / "post" / "force_displacement.csv").read_text().splitlines()[0]
+    assert header == "time_s,U_m,load_N,lower_plate_force_N,upper_plate_force_N"
