@@ -6,7 +6,8 @@ Model (static) / State (dynamic) / Integrator (step loop) split; see docs/solver
 from .effects import (Clamp, Clamps, ContactHook, Damping, Drive, Drives, Gravity, LineLoad, Loads,
                       Plates, PointLoad, Walls)
 from .integrator import (ENERGY_NAMES, Integrator, SimulationResult, SimulationSettings, advance,
-                         choose_time_step, simulate)
+                         choose_time_step)
+from .simulate import simulate  # the module fiberpipe.solver.simulate re-exports the run API
 from .model import Material, Model, build_model, model_from_mesh
 from .state import State
 from .timestep import TimeStepReport, stable_time_step

@@ -127,7 +127,7 @@ class Gravity(Effect):
         self.acceleration_m_s2 = _vec3(self.acceleration_m_s2, "gravity.acceleration")
 
     def setup(self, model, scene):
-        scene.ext()[:] += model.mass[:, None] * self.acceleration_m_s2[None, :]
+        scene.ext()[:] += (model.mass / model.mass_scale)[:, None] * self.acceleration_m_s2[None, :]
 
 
 @dataclass

@@ -188,6 +188,7 @@ class Model:
     radius_node: np.ndarray
     material: Material
     rotary_inertia_scale: float = 1.0
+    mass_scale: float = 1.0
     inv_mass: np.ndarray = field(init=False, repr=False)
     inv_J: np.ndarray = field(init=False, repr=False)
 
@@ -232,7 +233,7 @@ class Model:
 
 
 def build_model(nodes_m, node_offsets, radius_m, material: Material, *,
-                rotary_inertia_scale: float = 1.0) -> Model:
+                rotary_inertia_scale: float = 1.0, mass_scale: float = 1.0) -> Model:
     """Build a :class:`Model` from plain arrays; the given geometry is the stress-free rest state.
 
     Parameters
@@ -244,6 +245,8 @@ def build_model(nodes_m, node_offsets, radius_m, material: Material, *,
     rotary_inertia_scale : float — multiplies the lumped rotary inertia (1 = physical; > 1 is the
         LS-DYNA/Abaqus rotary-inertia scaling: it lowers the rotation-dominated frequencies at the
         cost of wrong high-frequency rotational dynamics).
+    mass_scale : float — multiplies all inertia (mass scaling: Δt grows as √mass_scale; gravity
+        still acts on the physical mass).
     """
     x = np.ascontiguousarray(nodes_m, dtype=np.float64)
     off = np.ascontiguousarray(node_offsets, dtype=np.int64)
@@ -257,6 +260,8 @@ def build_model(nodes_m, node_offsets, radius_m, material: Material, *,
     r = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), (F,)).copy()
     if np.any(~(r > 0)):
         raise FiberpipeError("fiber radius must be > 0")
+    if not mass_scale > 0:
+        raise FiberpipeError(f"mass_scale must be > 0, got {mass_scale}")
     if not rotary_inertia_scale > 0:
         raise FiberpipeError(f"rotary_inertia_scale must be > 0, got {rotary_inertia_scale}")
     counts = np.diff(off)
@@ -286,10 +291,10 @@ def build_model(nodes_m, node_offsets, radius_m, material: Material, *,
     element_rest_strains(x, q0, el_n1, 1.0 / L0, gamma_rest, theta_rest)
     mass = np.zeros(x.shape[0])
     Jn = np.zeros((x.shape[0], 3))
-    me = rho * A * L0 / 2.0
+    me = mass_scale * rho * A * L0 / 2.0
     for k in (0, 1):
         np.add.at(mass, el_n1 + k, me)
-        np.add.at(Jn, el_n1 + k, rotary_inertia_scale * rho * L0[:, None] / 2.0 * np.column_stack([I, I, Jp]))
+        np.add.at(Jn, el_n1 + k, mass_scale * rotary_inertia_scale * rho * L0[:, None] / 2.0 * np.column_stack([I, I, Jp]))
     rn = np.zeros(x.shape[0])
     cnt = np.zeros(x.shape[0])
     for k in (0, 1):
@@ -300,12 +305,12 @@ def build_model(nodes_m, node_offsets, radius_m, material: Material, *,
         el_L0=L0, el_invL0=1.0 / L0, el_radius=re, el_C=np.ascontiguousarray(el_C),
         el_D=np.ascontiguousarray(el_D), el_Dk=np.ascontiguousarray(el_Dk),
         gamma_rest=gamma_rest, theta_rest=theta_rest, mass=mass, J=Jn, radius_node=rn / cnt,
-        material=material, rotary_inertia_scale=float(rotary_inertia_scale),
+        material=material, rotary_inertia_scale=float(rotary_inertia_scale), mass_scale=float(mass_scale),
     )
 
 
-def model_from_mesh(mesh, material: Material, *, rotary_inertia_scale: float = 1.0) -> Model:
+def model_from_mesh(mesh, material: Material, *, rotary_inertia_scale: float = 1.0, mass_scale: float = 1.0) -> Model:
     """Build a :class:`Model` from a ``fiberpipe.model.mesh.Mesh`` (fields ``nodes_m``,
     ``node_offsets``, ``radius_m``)."""
     return build_model(mesh.nodes_m, mesh.node_offsets, mesh.radius_m, material,
-                       rotary_inertia_scale=rotary_inertia_scale)
+                       rotary_inertia_scale=rotary_inertia_scale, mass_scale=mass_scale)

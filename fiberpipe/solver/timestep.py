@@ -56,6 +56,7 @@ def stable_time_step(model: Model, *, beta_s: float = 0.0) -> TimeStepReport:
     mat = model.material
     E, G, rho = mat.youngs_modulus_pa, mat.G, mat.density_kg_m3
     s = model.rotary_inertia_scale
+    rho = rho * model.mass_scale
     L = model.el_L0
     r = model.el_radius
     ks = mat.shear_factor

@@ -1,0 +1,97 @@
+"""Map a validated config (``fiberpipe.config.Config``, SI floats) and a mesh to (model, effects, settings).
+
+Config sections used (SPEC 3, 3.1): ``material`` (youngs_modulus, poisson_ratio | shear_modulus,
+density), ``fiber.radius`` (overrides the mesh's per-fiber radius), ``scene`` (effects + blocks),
+``solver`` (dt_safety, dt, end_time, output_frames, history_every, rotational_inertia_scaling,
+mass_scaling). Only the effects listed in ``scene.effects`` are built.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import FiberpipeError
+from .effects import (SceneArrays, Clamp, Clamps, Damping, Drive, Drives, Effect, Gravity, LineLoad, Loads, Plates,
+                      PointLoad, Walls)
+from .integrator import SimulationSettings
+from .model import Material, Model, build_model
+
+
+def material_from_config(cfg) -> Material:
+    m = cfg.material
+    if m.shear_modulus is not None:
+        return Material(float(m.youngs_modulus), float(m.density), None, float(m.shear_modulus))
+    nu = 0.3 if m.poisson_ratio is None else float(m.poisson_ratio)
+    return Material(float(m.youngs_modulus), float(m.density), nu)
+
+
+def _contact_effects(model: Model, cfg) -> list[Effect]:
+    """Fiber–fiber contact (and friction) from the contact module, if it provides a factory
+    ``contact_effect(model, scene_cfg, material) -> ContactHook``."""
+    try:
+        from . import contact as _contact  # written in parallel by the contact engineer
+        factory = getattr(_contact, "contact_effect")
+    except (ImportError, AttributeError):
+        raise FiberpipeError("scene.effects lists contact, but fiber–fiber contact is not available in "
+                             "this version of the solver", where="scene.effects") from None
+    return [factory(model, cfg.scene, material_from_config(cfg))]
+
+
+def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings]:
+    """Build the beam model, the scene's effects and the solver settings.
+
+    Parameters
+    ----------
+    mesh : object with ``nodes_m`` (N,3) m, ``node_offsets`` (F+1,), ``radius_m`` (F,) m
+        (``fiberpipe.model.mesh.Mesh``).
+    cfg : fiberpipe.config.Config (validated, SI).
+
+    Returns
+    -------
+    (Model, list of Effect, SimulationSettings)
+    """
+    mat = material_from_config(cfg)
+    radius = cfg.fiber.radius if getattr(cfg.fiber, "radius", None) is not None else mesh.radius_m
+    s = cfg.solver
+    model = build_model(mesh.nodes_m, mesh.node_offsets, radius, mat,
+                        rotary_inertia_scale=float(getattr(s, "rotational_inertia_scaling", 1.0) or 1.0),
+                        mass_scale=float(getattr(s, "mass_scaling", 1.0) or 1.0))
+    sc = cfg.scene
+    effects: list[Effect] = []
+    names = list(sc.effects)
+    for name in names:
+        if name == "gravity":
+            effects.append(Gravity(list(sc.gravity.acceleration)))
+        elif name == "damping":
+            effects.append(Damping(float(sc.damping.alpha), float(sc.damping.beta)))
+        elif name == "clamps":
+            effects.append(Clamps([Clamp(c.fiber, c.at) for c in sc.clamps]))
+        elif name == "loads":
+            lds = []
+            for ld in sc.loads:
+                if ld.line_force is not None:
+                    lds.append(LineLoad(ld.fiber, list(ld.line_force)))
+                else:
+                    lds.append(PointLoad(ld.fiber, list(ld.force), ld.at))
+            effects.append(Loads(lds))
+        elif name == "plates":
+            p, ld = sc.plates, sc.loading
+            effects.append(Plates(axis=p.axis, lower=p.lower, upper=p.upper,
+                                  displacement_m=float(ld.displacement), velocity_m_s=float(ld.velocity),
+                                  ramp=ld.ramp, lower_position_m=p.lower_position,
+                                  upper_position_m=p.upper_position))
+        elif name == "walls":
+            w = sc.walls
+            effects.append(Walls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None}))
+        elif name == "drives":
+            effects.append(Drives([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in sc.drives]))
+    if "contact" in names or "friction" in names:
+        effects.extend(_contact_effects(model, cfg))
+    for e in effects:
+        if isinstance(e, (Clamps, Loads, Drives)):
+            e.setup(model, SceneArrays(model, 1.0))  # checks fiber/node indices now, with a clear error
+    settings = SimulationSettings(
+        dt_safety=float(s.dt_safety), dt_s=getattr(s, "dt", None), end_time_s=s.end_time,
+        output_frames=int(s.output_frames), history_every=getattr(s, "history_every", None),
+    )
+    return model, effects, settings
