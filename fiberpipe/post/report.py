@@ -64,7 +64,7 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
     made: list[str] = []
 
     # -- force-displacement -------------------------------------------------------------------
-    has_plates = "plate_force" in h and "plate_displacement" in h and np.size(h["plate_force"]) > 0
+    has_plates = "plates" in sim.effects and "plate_force" in h and np.size(h["plate_force"]) > 0
     U = None
     if has_plates:
         U, F = force_displacement(sim)
@@ -139,18 +139,22 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
         geo["position_error_m"] = np.array(
             [position_error(frames[k], mesh.node_offsets, ref.points_m, ref.offsets)["mean_m"] for k in range(len(ft))]
         )
+    confined = has_plates or bool(walls)
+    if not confined:  # without plates or walls there is no box, hence no volume fraction
+        del geo["volume_fraction"]
     write_csv(out_dir / "geometry.csv", geo)
     made.append("geometry.csv")
     xg, xgl = (geo["U_m"] * 1e3, "plate displacement U [mm]") if "U_m" in geo else (ft, "time [s]")
-    plots.plot_series(out_dir / "volume_fraction.png", xg, {"v_f": geo["volume_fraction"]}, xlabel=xgl, ylabel="fiber volume fraction v_f [-]")
-    made.append("volume_fraction.png")
-    summary["vf_initial"] = float(geo["volume_fraction"][0])
-    summary["vf_final"] = float(geo["volume_fraction"][-1])
+    if confined:
+        plots.plot_series(out_dir / "volume_fraction.png", xg, {"v_f": geo["volume_fraction"]}, xlabel=xgl, ylabel="fiber volume fraction v_f [-]")
+        made.append("volume_fraction.png")
+        summary["vf_initial"] = float(geo["volume_fraction"][0])
+        summary["vf_final"] = float(geo["volume_fraction"][-1])
     summary["curvature_per_m"] = {
         "initial": {"xz": float(geo["curvature_xz_per_m"][0]), "yz": float(geo["curvature_yz_per_m"][0])},
         "final": {"xz": float(geo["curvature_xz_per_m"][-1]), "yz": float(geo["curvature_yz_per_m"][-1])},
     }
-    if "contacts_per_fiber" in geo:
+    if "contacts_per_fiber" in geo and confined and "contact" in sim.effects:
         L = float(np.mean(np.diff(mesh.node_offsets) - 1) * np.mean(mesh.element_lengths_m()))
         D = 2 * float(np.mean(mesh.radius_m))
         plots.plot_series(
