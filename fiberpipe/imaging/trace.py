@@ -1,0 +1,540 @@
+"""Tracing: fiber mask (and optionally its skeleton) -> one mid-line polyline per fiber.
+
+Two methods (SPEC section 5):
+
+- ``slices`` (default): fiber centres found slice by slice across the dominant fiber axis and linked
+  between slices. Works for quasi-parallel fibers that touch along their length, which a 3D
+  skeleton merges into one line (see docs/imaging.md).
+- ``skeleton``: a graph of the 3D skeleton, spurs pruned, junctions resolved by direction
+  continuity. Right for crossing, non-aligned fibers; wrong for long parallel contacts.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy import ndimage as ndi
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
+from skimage.feature import peak_local_max
+
+from ..errors import InputError
+from ..polylines import Polylines
+from ._util import resample_polyline, smooth_polyline, voxel_size_zyx, voxel_to_xyz_m
+
+_BIG = 1e9
+
+
+# ----------------------------------------------------------------------------------------------
+# dominant axis and radius estimate
+# ----------------------------------------------------------------------------------------------
+def dominant_axis(mask: np.ndarray, voxel_size_m=1.0, *, max_voxels: int = 2_000_000):
+    """Mean fiber direction of a mask from its structure tensor.
+
+    Parameters
+    ----------
+    mask : (Z, Y, X) bool ndarray
+    voxel_size_m : float or (dz, dy, dx), m
+    max_voxels : int
+        The tensor is computed on a strided subsample of about this many voxels (a view, no copy
+        of the full volume).
+
+    Returns
+    -------
+    axis : int
+        Volume axis (0, 1 or 2) closest to the mean fiber direction.
+    direction_zyx : (3,) float64 ndarray
+        Unit mean fiber direction, ordered z y x.
+    """
+    # Strategy: the gradient of a bundle of cylinders is perpendicular to their axes, so the
+    # eigenvector of the summed gradient outer product (the structure tensor) with the smallest
+    # eigenvalue is the mean fiber direction.
+    v = voxel_size_zyx(voxel_size_m)
+    step = max(1, int(np.ceil((mask.size / max_voxels) ** (1.0 / 3.0))))
+    sub = ndi.gaussian_filter(mask[::step, ::step, ::step].astype(np.float32), 1.0)
+    g = np.gradient(sub, *(v * step / v.min()))
+    J = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            J[i, j] = J[j, i] = float(np.sum(g[i] * g[j], dtype=np.float64))
+    w, vecs = np.linalg.eigh(J)
+    d = vecs[:, 0]
+    return int(np.argmax(np.abs(d))), d / np.linalg.norm(d)
+
+
+def _slice(mask_t: np.ndarray, k: int) -> np.ndarray:
+    return mask_t[k]
+
+
+def estimate_radius_vox(mask_t: np.ndarray, samp: np.ndarray, *, n_slices: int = 16) -> float:
+    """Typical fiber radius (voxels) from 2D EDT maxima in a few slices of the (reoriented) mask.
+
+    Returns the median ridge value of the in-plane distance transform minus half a voxel (a binary
+    disc of radius r has an EDT maximum of about r + 0.5).
+    """
+    ks = np.unique(np.linspace(0, mask_t.shape[0] - 1, n_slices).round().astype(int))
+    vals = []
+    for k in ks:
+        sl = _slice(mask_t, k)
+        if not sl.any():
+            continue
+        edt = ndi.distance_transform_edt(sl, sampling=samp)
+        pk = peak_local_max(edt, min_distance=2, threshold_abs=1.0, exclude_border=False)
+        if len(pk):
+            vals.append(edt[pk[:, 0], pk[:, 1]])
+    if not vals:
+        raise InputError("trace: no fiber cross-sections found in the mask")
+    v = np.concatenate(vals)
+    top = np.percentile(v, 90)
+    return float(max(0.5, np.median(v[v >= 0.5 * top])))
+
+
+# ----------------------------------------------------------------------------------------------
+# per-slice detection
+# ----------------------------------------------------------------------------------------------
+def _refine_centroids(sl: np.ndarray, peaks: np.ndarray, R: float, samp: np.ndarray, n_iter: int = 2):
+    """Sub-voxel centres: centroid of the mask pixels within ``R`` of a peak and nearer to it than
+    to any other peak (a local Voronoi cell), iterated with the refined sites.
+
+    Parameters
+    ----------
+    sl : (H, W) bool ndarray
+    peaks : (n, 2) int ndarray, pixel indices
+    R : float
+        Window radius in units of the smallest in-plane pixel size (a bit more than the fiber
+        radius, so a whole cross-section is inside).
+    samp : (2,) float ndarray
+        Pixel size along rows and columns, relative to the smallest one.
+
+    Returns
+    -------
+    (n, 2) float64 ndarray, pixel index coordinates.
+    """
+    # Strategy: the EDT maximum of a fiber that touches a neighbour is pulled toward the contact
+    # (the blurred neck adds material there) and is quantised to whole pixels. The centroid of the
+    # fiber's own pixels, cut from its neighbours by the bisector between centres, uses the whole
+    # boundary (~2 pi r pixels), so it is sub-voxel and nearly unbiased for touching pairs.
+    H, W = sl.shape
+    n = len(peaks)
+    sites = peaks.astype(np.float64)
+    hw = int(np.ceil(R / samp.min())) + 1
+    o = np.arange(-hw, hw + 1)
+    oy, ox = np.meshgrid(o, o, indexing="ij")
+    k_nb = min(7, n)
+    for _ in range(n_iter):
+        c = np.rint(sites).astype(np.int64)
+        yy = c[:, 0, None, None] + oy[None]
+        xx = c[:, 1, None, None] + ox[None]
+        inb = (yy >= 0) & (yy < H) & (xx >= 0) & (xx < W)
+        vals = sl[np.clip(yy, 0, H - 1), np.clip(xx, 0, W - 1)] & inb
+        fy = (yy - sites[:, 0, None, None]) * samp[0]
+        fx = (xx - sites[:, 1, None, None]) * samp[1]
+        d0 = fy * fy + fx * fx
+        w = vals & (d0 <= R * R)
+        if k_nb > 1:
+            _, nb = cKDTree(sites * samp).query(sites * samp, k=k_nb)
+            for j in range(1, k_nb):
+                s = sites[nb[:, j]]
+                gy = (yy - s[:, 0, None, None]) * samp[0]
+                gx = (xx - s[:, 1, None, None]) * samp[1]
+                w &= (gy * gy + gx * gx) >= d0
+        wsum = w.sum(axis=(1, 2))
+        good = wsum > 0
+        new = sites.copy()
+        new[good, 0] = (w * yy).sum(axis=(1, 2))[good] / wsum[good]
+        new[good, 1] = (w * xx).sum(axis=(1, 2))[good] / wsum[good]
+        sites = new
+    return sites
+
+
+def _nms(points: np.ndarray, radius: np.ndarray, samp: np.ndarray) -> np.ndarray:
+    """Greedy non-maximum suppression in priority order (row order of ``points``).
+
+    A point is dropped if it lies within ``radius[j]`` of an earlier kept point ``j``. Returns the
+    boolean keep mask.
+    """
+    n = len(points)
+    keep = np.ones(n, dtype=bool)
+    if n < 2:
+        return keep
+    tree = cKDTree(points * samp)
+    rmax = float(radius.max())
+    for i, nb in enumerate(tree.query_ball_point(points * samp, rmax)):
+        if not keep[i]:
+            continue
+        for j in nb:
+            if j > i and keep[j]:
+                d = np.linalg.norm((points[j] - points[i]) * samp)
+                if d < radius[i]:
+                    keep[j] = False
+    return keep
+
+
+def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
+                 peak_threshold: float, seeds: np.ndarray | None = None, refine: bool = True,
+                 smooth_edt: bool = True, seed_nms: float = 1.2, peak_nms: float = 1.0):
+    """Fiber centres in one 2D mask slice.
+
+    Parameters
+    ----------
+    sl : (H, W) bool ndarray
+        Mask slice.
+    r_vox : float
+        Expected fiber radius, pixels (smallest in-plane pixel size).
+    samp : (2,) float ndarray
+        Relative pixel sizes along rows and columns.
+    min_distance : int
+        ``peak_local_max`` spacing, pixels.
+    peak_threshold : float
+        Smallest EDT value at a centre, in units of ``r_vox``.
+    seeds : (m, 2) float ndarray, optional
+        Predicted centres (pixel indices) of fibers already tracked, in priority order. They are
+        refined like peaks and win over EDT peaks within ``seed_nms * r_vox``.
+    refine : bool
+        Sub-voxel centroid refinement.
+    smooth_edt : bool
+        Blur the EDT (sigma 1 pixel) before looking for maxima.
+    seed_nms, peak_nms : float
+        Suppression radii (units of ``r_vox``) around a seed and around a higher EDT peak.
+
+    Returns
+    -------
+    centres : (n, 2) float64 ndarray, pixel indices (row, col)
+    ridge : (n,) float64 ndarray
+        EDT value at each centre (units of the smallest in-plane pixel size).
+    source : (n,) int64 ndarray
+        Index of the seed a centre came from, -1 for a new EDT peak.
+    """
+    # Strategy: candidates are the tracks' predicted positions (seeds) and the maxima of the 2D
+    # EDT. EDT maxima alone miss fibers in tight clusters: the filled concave corner between three
+    # touching fibers holds the highest EDT value and the ridge of a neighbour climbs into it, so
+    # that neighbour has no maximum of its own. Seeds are kept first, EDT maxima only where no
+    # seed is near; every survivor is moved to the centroid of its own pixels (local Voronoi cell),
+    # which converges to the cross-section's centre; centres that converge onto each other or
+    # leave the fiber (EDT below threshold) are dropped.
+    empty = (np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64))
+    if not sl.any():
+        return empty
+    H, W = sl.shape
+    edt = ndi.distance_transform_edt(sl, sampling=samp)
+    # A light blur of the EDT breaks the ties of its discrete ridge (flat tops, a ridge along the
+    # contact of two touching fibers), which otherwise give several maxima per fiber.
+    sm = ndi.gaussian_filter(edt, 1.0, mode="constant") if smooth_edt else edt
+    pk = peak_local_max(sm, min_distance=min_distance, threshold_abs=peak_threshold * r_vox,
+                        exclude_border=False)
+    pk = pk[np.argsort(-sm[pk[:, 0], pk[:, 1]], kind="stable")] if len(pk) else pk.reshape(0, 2)
+    if seeds is None:
+        seeds = np.zeros((0, 2))
+    seeds = np.asarray(seeds, dtype=np.float64).reshape(-1, 2)
+    # seeds outside the slice or off the mask are not candidates
+    sr = np.clip(np.rint(seeds).astype(np.int64), [0, 0], [H - 1, W - 1])
+    seed_ok = ((seeds[:, 0] > -0.5) & (seeds[:, 0] < H - 0.5) & (seeds[:, 1] > -0.5)
+               & (seeds[:, 1] < W - 0.5) & sl[sr[:, 0], sr[:, 1]])
+    seed_idx = np.flatnonzero(seed_ok)
+    cand = np.concatenate([seeds[seed_idx], pk.astype(np.float64)])
+    source = np.concatenate([seed_idx, -np.ones(len(pk), dtype=np.int64)])
+    if len(cand) == 0:
+        return empty
+    rad = np.where(source >= 0, seed_nms * r_vox, peak_nms * r_vox)
+    keep = _nms(cand, rad, samp)
+    cand, source = cand[keep], source[keep]
+    if refine:
+        c = _refine_centroids(sl, cand, r_vox + 2.0, samp)
+        # candidates that converged onto an earlier (higher-priority) one are duplicates
+        keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
+        c, source = c[keep], source[keep]
+    else:
+        c = cand
+    ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
+    ridge = edt[ci[:, 0], ci[:, 1]]
+    ok = ridge >= peak_threshold * r_vox
+    return c[ok], ridge[ok], source[ok]
+
+
+# ----------------------------------------------------------------------------------------------
+# linking
+# ----------------------------------------------------------------------------------------------
+class _Track:
+    __slots__ = ("k", "p", "r", "v", "last_k", "last_p")
+
+    def __init__(self, k, p, r):
+        self.k = [k]
+        self.p = [p]
+        self.r = [r]
+        self.v = np.zeros(2)
+        self.last_k = k
+        self.last_p = p
+
+    def predict(self, k):
+        return self.last_p + self.v * (k - self.last_k)
+
+
+def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
+                 peak_threshold: float, max_jump: float, max_skip: int, momentum: float,
+                 refine: bool = True, progress=None):
+    """Detect centres slice by slice and link them into tracks.
+
+    Parameters
+    ----------
+    mask_t : (N, H, W) bool ndarray
+        Mask with the slicing axis first (a transposed view is fine: slices are read one at a time).
+    r_vox : float
+        Expected fiber radius, pixels.
+    samp : (2,) float ndarray
+        Relative in-plane pixel sizes.
+    min_distance, peak_threshold, refine
+        See :func:`detect_slice`.
+    max_jump : float
+        Largest distance between a track's predicted position and a detection, pixels (grows with
+        the square root of the number of slices since the track's last detection).
+    max_skip : int
+        Slices a track may miss before it ends.
+    momentum : float in [0, 1)
+        Weight of the previous velocity in the velocity update.
+    progress : callable(done, total), optional
+
+    Returns
+    -------
+    tracks : list of _Track
+    n_detections : int
+    """
+    # Strategy: a track predicts its position in slice k from its last position and a smoothed
+    # velocity (momentum). Predictions seed the detection (see detect_slice), then predictions and
+    # detections are matched by the Hungarian algorithm on distance, pairs farther than max_jump
+    # being forbidden. Unmatched detections start tracks; tracks unmatched for more than max_skip
+    # slices end.
+    tracks: list[_Track] = []
+    active: list[_Track] = []
+    n_det = 0
+    n = mask_t.shape[0]
+    for k in range(n):
+        active = [t for t in active if k - t.last_k - 1 <= max_skip]
+        # older (longer) tracks first: they win a contested position
+        active.sort(key=lambda t: -len(t.k))
+        pred = np.array([t.predict(k) for t in active]).reshape(-1, 2)
+        P, Rr, _src = detect_slice(mask_t[k], r_vox, samp, min_distance=min_distance,
+                                   peak_threshold=peak_threshold, seeds=pred, refine=refine)
+        n_det += len(P)
+        used = np.zeros(len(P), dtype=bool)
+        if active and len(P):
+            gap = np.array([k - t.last_k for t in active], dtype=np.float64)
+            diff = (pred[:, None, :] - P[None, :, :]) * samp
+            C = np.sqrt((diff * diff).sum(-1))
+            lim = max_jump * np.sqrt(gap)
+            C[C > lim[:, None]] = _BIG
+            rows, cols = linear_sum_assignment(C)
+            for i, j in zip(rows, cols):
+                if C[i, j] >= _BIG:
+                    continue
+                t = active[i]
+                g = k - t.last_k
+                step = (P[j] - t.last_p) / g
+                t.v = momentum * t.v + (1.0 - momentum) * step if len(t.k) > 1 else step
+                t.k.append(k)
+                t.p.append(P[j])
+                t.r.append(Rr[j])
+                t.last_k, t.last_p = k, P[j]
+                used[j] = True
+        for j in np.flatnonzero(~used):
+            t = _Track(k, P[j], Rr[j])
+            tracks.append(t)
+            active.append(t)
+        if progress is not None:
+            progress(k + 1, n)
+    return tracks, n_det
+
+
+def _end_fit(k: np.ndarray, p: np.ndarray, at_end: bool, n: int):
+    """Position and slope (per slice) at one end of a track from a line fit to its last n points."""
+    sel = slice(-n, None) if at_end else slice(0, n)
+    kk, pp = k[sel].astype(np.float64), p[sel]
+    if len(kk) < 2:
+        return pp[-1 if at_end else 0], np.zeros(2)
+    A = np.column_stack([kk - kk.mean(), np.ones_like(kk)])
+    coef, *_ = np.linalg.lstsq(A, pp, rcond=None)
+    slope = coef[0]
+    k0 = kk[-1] if at_end else kk[0]
+    return coef[1] + slope * (k0 - kk.mean()), slope
+
+
+def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int):
+    """Join track pieces whose end and start continue each other (after a detection gap).
+
+    Returns a list of (k (m,), p (m, 2), r (m,)) arrays, one per merged track.
+    """
+    # Strategy: for every end of a track and start of a later track within max_gap slices, both
+    # pieces are extrapolated linearly (fit over fit_n slices) to the other's end; the mean miss
+    # distance is the cost. Pairs are accepted greedily by increasing cost under max_dist, each end
+    # and start at most once, then chained.
+    arr = [(np.asarray(t.k), np.asarray(t.p), np.asarray(t.r)) for t in tracks]
+    n = len(arr)
+    if n == 0:
+        return []
+    k0 = np.array([a[0][0] for a in arr])
+    k1 = np.array([a[0][-1] for a in arr])
+    ends = [_end_fit(a[0], a[1], True, fit_n) for a in arr]
+    starts = [_end_fit(a[0], a[1], False, fit_n) for a in arr]
+    cand = []
+    order = np.argsort(k0)
+    for i in range(n):
+        # starts strictly after the end of i, within the gap
+        lo = np.searchsorted(k0[order], k1[i] + 1)
+        hi = np.searchsorted(k0[order], k1[i] + max_gap + 1)
+        pe, se = ends[i]
+        for j in order[lo:hi]:
+            g = k0[j] - k1[i]
+            ps, ss = starts[j]
+            d1 = np.linalg.norm((pe + se * g - ps) * samp)
+            d2 = np.linalg.norm((ps - ss * g - pe) * samp)
+            c = 0.5 * (d1 + d2)
+            if c < max_dist * (1.0 + 0.1 * g):
+                cand.append((c, i, j))
+    cand.sort()
+    nxt = -np.ones(n, dtype=np.int64)
+    has_prev = np.zeros(n, dtype=bool)
+    for c, i, j in cand:
+        if nxt[i] < 0 and not has_prev[j]:
+            nxt[i] = j
+            has_prev[j] = True
+    out = []
+    for i in range(n):
+        if has_prev[i]:
+            continue
+        chain = [i]
+        while nxt[chain[-1]] >= 0:
+            chain.append(int(nxt[chain[-1]]))
+        out.append(tuple(np.concatenate([arr[c][q] for c in chain]) for q in range(3)))
+    return out
+
+
+def _remove_duplicates(tracks, samp, dist: float):
+    """Drop a track that runs within ``dist`` of a longer one over most of its overlap."""
+    order = sorted(range(len(tracks)), key=lambda i: -len(tracks[i][0]))
+    kept = []
+    for i in order:
+        k, p, _ = tracks[i]
+        dup = False
+        for j in kept:
+            kj, pj, _ = tracks[j]
+            common, ia, ib = np.intersect1d(k, kj, assume_unique=True, return_indices=True)
+            if len(common) < 0.5 * len(k):
+                continue
+            d = np.linalg.norm((p[ia] - pj[ib]) * samp, axis=1)
+            if np.median(d) < dist:
+                dup = True
+                break
+        if not dup:
+            kept.append(i)
+    return [tracks[i] for i in sorted(kept)]
+
+
+def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | None = None,
+                 axis: int | str = "auto", max_jump_vox: float | None = None, max_skip: int = 3,
+                 momentum: float = 0.5, min_length_vox: float | None = None,
+                 merge_gap_vox: int | None = None, smooth_sigma_vox: float | None = None,
+                 spacing_vox: float = 1.0, peak_threshold: float = 0.5, refine: bool = True,
+                 progress=None) -> Polylines:
+    """Slice-wise tracer; see :func:`trace` (``method="slices"``) for the parameters."""
+    t0 = time.perf_counter()
+    v = voxel_size_zyx(voxel_size_m)
+    if axis == "auto":
+        ax, direction = dominant_axis(mask, v)
+    else:
+        ax, direction = int(axis), None
+    perm = (ax,) + tuple(i for i in range(3) if i != ax)
+    mask_t = mask.transpose(perm)  # a view: slices across the fibers
+    vt = v[list(perm)]
+    samp = vt[1:] / vt[1:].min()
+    if expected_radius_m is not None:
+        r = float(expected_radius_m) / vt[1:].min()
+    else:
+        r = estimate_radius_vox(mask_t, samp)
+    min_distance = max(1, int(round(0.5 * r)))
+    max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
+    if min_length_vox is None:
+        min_length_vox = max(10.0, 3.0 * r)
+    if merge_gap_vox is None:
+        merge_gap_vox = int(max(6, 3 * r))
+    if smooth_sigma_vox is None:
+        smooth_sigma_vox = max(1.0, 0.5 * r)
+
+    raw, n_det = track_slices(mask_t, r, samp, min_distance=min_distance,
+                              peak_threshold=peak_threshold, max_jump=max_jump, max_skip=max_skip,
+                              momentum=momentum, refine=refine, progress=progress)
+    t_det = time.perf_counter() - t0
+    merged = merge_pieces(raw, samp, max_gap=merge_gap_vox, max_dist=max_jump,
+                          fit_n=int(max(5, 2 * r)))
+    long_ = [t for t in merged if t[0][-1] - t[0][0] + 1 >= min_length_vox]
+    long_ = _remove_duplicates(long_, samp, dist=0.5 * r)
+
+    fibers, radii = [], []
+    for k, p, rr in long_:
+        # fill skipped slices linearly, then smooth along the track and resample by arc length
+        kk = np.arange(k[0], k[-1] + 1)
+        pts = np.column_stack([kk, np.interp(kk, k, p[:, 0]), np.interp(kk, k, p[:, 1])])
+        pts[:, 1:] = smooth_polyline(pts[:, 1:], smooth_sigma_vox)
+        zyx = np.empty_like(pts)
+        zyx[:, list(perm)] = pts  # back to the volume's axis order
+        xyz = voxel_to_xyz_m(zyx, v)
+        fibers.append(resample_polyline(xyz, spacing_vox * v.min()))
+        radii.append(max(0.5, float(np.median(rr))) * vt[1:].min())
+    out = Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0)
+    out.meta.update(method="slices", axis=ax, direction_zyx=direction, radius_vox_estimate=r,
+                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=len(merged),
+                    n_fibers=len(fibers), time_detect_s=t_det,
+                    time_total_s=time.perf_counter() - t0,
+                    params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
+                                min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
+                                smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
+                                peak_threshold=peak_threshold, min_distance_vox=min_distance))
+    return out
+
+
+def trace(mask: np.ndarray, *, voxel_size_m, method: str = "slices", skeleton: np.ndarray | None = None,
+          radius_vox: np.ndarray | None = None, expected_radius_m: float | None = None,
+          **options) -> Polylines:
+    """Trace one mid-line per fiber.
+
+    Parameters
+    ----------
+    mask : (Z, Y, X) bool ndarray
+        Fiber mask (from :func:`fiberpipe.imaging.segment.segment`).
+    voxel_size_m : float or (dz, dy, dx)
+        Voxel size, m.
+    method : {"slices", "skeleton"}
+        ``slices``: per-slice centres across the dominant axis, linked between slices (for
+        quasi-parallel, touching fibers). ``skeleton``: graph of the 3D skeleton (crossing fibers).
+    skeleton, radius_vox : (Z, Y, X) ndarrays, optional
+        Output of :func:`fiberpipe.imaging.skeleton.skeletonize`, for ``method="skeleton"``
+        (computed from ``mask`` if not given).
+    expected_radius_m : float, optional
+        Nominal fiber radius, m; estimated from the mask when not given.
+    **options
+        Method options. ``slices``: ``axis`` ("auto" or 0/1/2), ``max_jump_vox`` (default
+        max(2, 0.6 r)), ``max_skip`` (3 slices), ``momentum`` (0.5), ``min_length_vox``
+        (max(10, 3 r)), ``merge_gap_vox`` (max(6, 3 r)), ``smooth_sigma_vox`` (max(1, r/2)),
+        ``spacing_vox`` (1), ``peak_threshold`` (0.5, in units of r), ``refine`` (True),
+        ``progress`` (callable(done, total)). ``skeleton``: see
+        :func:`fiberpipe.imaging.skeleton_trace.trace_skeleton`.
+
+    Returns
+    -------
+    Polylines
+        Mid-lines (x y z, m), resampled at ``spacing_vox`` voxels, and one radius per fiber (m);
+        ``.meta`` holds the method, the parameters used and counts.
+    """
+    if mask.ndim != 3:
+        raise InputError(f"trace: expected a 3D mask, got shape {mask.shape}")
+    if mask.dtype != bool:
+        mask = mask.astype(bool)
+    if not mask.any():
+        raise InputError("trace: the mask is empty")
+    if method == "slices":
+        return trace_slices(mask, voxel_size_m, expected_radius_m=expected_radius_m, **options)
+    if method == "skeleton":
+        from .skeleton_trace import trace_skeleton
+
+        return trace_skeleton(mask, voxel_size_m, skeleton=skeleton, radius_vox=radius_vox,
+                              expected_radius_m=expected_radius_m, **options)
+    raise InputError(f"trace: unknown method {method!r} (use 'slices' or 'skeleton')")
