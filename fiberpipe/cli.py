@@ -172,10 +172,17 @@ def inspect(artifact, check):
 
 
 @main.command()
-@click.argument("config", type=click.Path(dir_okay=False))
-def study(config):
-    """Parameter sweeps: accuracy versus wall time (SPEC section 9). Arrives with issue 6."""
-    raise FiberpipeError("fiberpipe study is not implemented in this version yet (issue 6)")
+@click.argument("study_file", type=click.Path(dir_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Study folder (default: runs/studies/<name>).")
+@click.option("--workers", type=int, help="Points run in parallel (local processes, or Dask workers).")
+@click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
+def study(study_file, out, workers, scheduler):
+    """Sweep config keys; table and Pareto plot of error against wall time (SPEC section 9)."""
+    from fiberpipe.studies.sweep import run_study
+
+    out = Path(out) if out else Path("runs") / "studies" / Path(study_file).stem
+    run_study(study_file, out, workers=workers, scheduler=scheduler, echo=click.echo)
+    click.echo(f"study folder: {out} (study.csv, study.md, pareto.png)")
 
 
 @main.command()

@@ -1,0 +1,1 @@
+"""Parameter sweeps: what accuracy costs in wall time (SPEC section 9)."""

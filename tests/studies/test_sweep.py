@@ -1,0 +1,61 @@
+"""A small study end to end: points run (cached), errors against the reference, table and plot."""
+
+import csv
+
+import pytest
+
+from fiberpipe.errors import ConfigError
+from fiberpipe.studies.sweep import load_study, run_study
+
+BASE = """
+name: tiny-cantilever
+input:
+  polylines:
+    - [[0, 0, 0], ["6 mm", 0, 0]]
+mesh: {element_length: "0.5 mm"}
+fiber: {radius: "0.25 mm"}
+scene:
+  effects: [clamps, loads, damping]
+  clamps: [{fiber: 0, at: start}]
+  loads: [{fiber: 0, at: end, force: [0, 0, "-1 mN"]}]
+  damping: {alpha: "2e4 1/s"}
+solver: {end_time: "0.5 ms", output_frames: 3}
+"""
+
+STUDY = """
+name: dt-safety
+base: base.yaml
+sweep:
+  solver.dt_safety: [0.5, 0.9]
+reference:
+  overrides: {solver.dt_safety: 0.25}
+measures: [positions]
+"""
+
+
+def test_study_runs_points_and_writes_table(tmp_path):
+    (tmp_path / "base.yaml").write_text(BASE)
+    (tmp_path / "study.yaml").write_text(STUDY)
+    out = run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
+    rows = list(csv.DictReader((out / "study.csv").open()))
+    assert [r["solver.dt_safety"] for r in rows] == ["0.5", "0.9"]
+    for r in rows:
+        err = float(r["position_error"])
+        assert 0 <= err < 1e-2  # the same physics at another stable step: tiny differences
+        assert int(r["steps"]) > 0 and float(r["wall_time_s"]) > 0
+    assert int(rows[0]["steps"]) > int(rows[1]["steps"])  # the smaller step takes more steps
+    assert (out / "pareto.png").exists() and (out / "study.md").exists()
+
+
+def test_study_with_a_bad_key_fails_before_running(tmp_path):
+    (tmp_path / "base.yaml").write_text(BASE)
+    (tmp_path / "study.yaml").write_text(STUDY.replace("solver.dt_safety: [0.5, 0.9]", "solver.dt_safty: [0.5]"))
+    with pytest.raises(ConfigError, match="dt_safty"):
+        run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
+    assert not (tmp_path / "out" / "points").exists() or not any((tmp_path / "out" / "points").iterdir())
+
+
+def test_unknown_study_key(tmp_path):
+    (tmp_path / "study.yaml").write_text(STUDY + "colour: red\n")
+    with pytest.raises(ConfigError, match="colour"):
+        load_study(tmp_path / "study.yaml")
