@@ -166,11 +166,13 @@ class SkeletonizeConfig(Section):
 
 
 class TraceConfig(Section):
+    """Tracing options; ``None`` means the tracer's own default, scaled by the fiber radius."""
+
     method: Literal["slices", "skeleton"] = "slices"
-    max_jump_vox: float = Field(3.0, gt=0)
-    max_skip: int = Field(3, ge=0)
-    min_length_vox: float = Field(20.0, ge=0)
-    smooth_sigma_vox: float = Field(2.0, ge=0)
+    max_jump_vox: Optional[float] = Field(None, gt=0, description="slices: default max(2, 0.6 r)")
+    max_skip: Optional[int] = Field(None, ge=0, description="slices: slices a track may miss (3)")
+    min_length_vox: Optional[float] = Field(None, ge=0, description="default max(10, 3 r)")
+    smooth_sigma_vox: Optional[float] = Field(None, ge=0, description="default max(1, r/2)")
     expected_radius: Optional[Length] = None
 
 

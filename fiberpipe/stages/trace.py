@@ -32,11 +32,9 @@ def run_trace(
         voxel_size_m=voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
         method=t.method,
         expected_radius_m=t.expected_radius or cfg.fiber.radius,
-        max_jump_vox=t.max_jump_vox,
-        max_skip=t.max_skip,
-        min_length_vox=t.min_length_vox,
-        smooth_sigma_vox=t.smooth_sigma_vox,
     )
+    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if t.method == "slices" else ("min_length_vox", "smooth_sigma_vox")
+    kwargs.update({k: getattr(t, k) for k in options if getattr(t, k) is not None})
     inputs = {"mask": Path(mask_path)}
     if t.method == "skeleton":
         sk = read_artifact(skeleton_path, "skeleton")
