@@ -8,7 +8,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from fiberpipe.artifacts import SCHEMA_VERSIONS, open_checked
+from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, open_checked
 from fiberpipe.errors import ArtifactError
 
 
@@ -43,6 +43,18 @@ def inspect_artifact(path: Path, *, check: bool = False, echo=print) -> bool:
                 echo(line)
 
         f.visititems(show)
+        inputs = f.attrs.get("inputs", "{}")
+        inputs = json.loads(inputs.decode() if isinstance(inputs, bytes) else inputs)
     if check:
+        # Provenance: an input artifact that sits beside this one must still have the recorded hash.
+        for name, digest in inputs.items():
+            sibling = path.parent / f"{name}.h5"
+            if sibling.exists():
+                now = file_sha256(sibling)
+                same = now == digest
+                ok &= same
+                echo(f"  input {name}: {sibling.name} " + ("matches its recorded sha256" if same else "CHANGED since this artifact was made (stale)"))
+            else:
+                echo(f"  input {name}: not beside this artifact, hash not checked")
         echo("  check: " + ("ok" if ok else "FAILED"))
     return ok
