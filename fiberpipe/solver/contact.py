@@ -1,0 +1,426 @@
+"""Fiber–fiber contact kinematics: line-to-line (Gauss point) plus closest-point contact, blended in Φ.
+
+Penetration ``δ = r_i + r_j − d``, ``d`` the centre-line distance. For each candidate segment pair
+(A = segment i, B = segment j, straight 2-node segments):
+
+1. **Reject** if the segments' closest distance (Ericson, *Real-Time Collision Detection* §5.1.9)
+   is ≥ r_i + r_j: no part can touch. This is the common path of a Verlet candidate.
+2. **Orientation** ``Φ = acos(|t_A·t_B|)`` in [0, π/2]; the law's point share ``w(δ_c, Φ)``
+   (:func:`fiberpipe.solver.laws.law_weight`).
+3. **Point part** (weight w; crossing fibres): closest points of the two infinite lines,
+   parameters (s*, t*); it belongs to this pair with weight win(s*)·win(t*), win = 1 on
+   (ε, 1 − ε) and linear ramps over [−ε, ε] at both ends (ε = 1e-6), a partition of unity over
+   collinear neighbours, so a contact crossing an element joint is counted exactly once whatever the
+   rounding, and moves continuously from one pair to the next. Force ``F = law_point(δ_c, Φ)``
+   along the line joining the points.
+4. **Line part** (weight 1 − w; near-parallel fibres; Meier, Popp & Wall, CMAME 308, 2016,
+   Gauss-point-to-segment with integration-interval segmentation): Gauss points on A projected
+   orthogonally onto the *line* of B. The projection ``t(s) = t0 + s t1`` is affine, so the
+   sub-interval of A that projects into B's [0, 1] and whose distance to B's line is below
+   r_i + r_j (a quadratic in s) is found exactly and the Gauss points are placed in it only
+   (no integration error from the contact ends, none from element joints). Each Gauss point
+   carries the line load ``p(δ(s))`` [N/m] × its weight × L_A. Done both ways (A onto B and B onto
+   A) with half weight each, so the formulation is symmetric.
+
+Every force is applied as +f on one segment and −f on the other, both linearly interpolated to the
+segment's two nodes by the contact point's parameter, so Σf = 0 exactly (linear momentum conserved).
+
+Per-pair records (for friction and output): total normal force ``c_fn`` [N], unit normal ``c_n``
+(direction of the resultant, from B to A), force-weighted contact parameters ``c_s``, ``c_t``,
+orientation ``c_phi`` [rad] and the largest penetration ``c_delta`` [m]. Pairs not in contact get
+``c_fn = 0``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from fiberpipe.solver.laws import law_line, law_point, law_weight
+
+# Gauss–Legendre nodes on [0, 1] and weights (sum 1), orders 1…6
+_GL = {
+    n: ((np.polynomial.legendre.leggauss(n)[0] + 1.0) / 2.0, np.polynomial.legendre.leggauss(n)[1] / 2.0)
+    for n in range(1, 7)
+}
+
+
+def gauss_points(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre nodes ξ ∈ (0, 1) and weights (summing to 1) of order ``n`` (1…6)."""
+    if n not in _GL:
+        raise ValueError(f"Gauss order must be 1…6, got {n}")
+    xi, w = _GL[n]
+    return xi.copy(), w.copy()
+
+
+JOINT_EPS = 1e-6
+
+
+@njit(cache=True, fastmath=True)
+def _window(s):
+    """1 inside (ε, 1 − ε), linear ramps to 0 at −ε and 1 + ε; win(s) + win(s − 1) = 1 near s = 1."""
+    if s <= -JOINT_EPS or s >= 1.0 + JOINT_EPS:
+        return 0.0
+    lo = (s + JOINT_EPS) / (2.0 * JOINT_EPS)
+    hi = (1.0 + JOINT_EPS - s) / (2.0 * JOINT_EPS)
+    return min(lo, hi, 1.0)
+
+
+@njit(cache=True, fastmath=True)
+def segment_distance2(a0, a1, b0, b1, ta, tb):
+    """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
+    r0 = a0[0] - b0[0]
+    r1 = a0[1] - b0[1]
+    r2 = a0[2] - b0[2]
+    aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+    bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+    ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+    den = aa * bb - ab * ab
+    if den > 1e-12 * aa * bb:
+        s = (ab * br - ar * bb) / den
+        s = min(max(s, 0.0), 1.0)
+    else:
+        s = 0.0
+    t = (ab * s + br) / bb
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-ar / aa, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((ab - ar) / aa, 0.0), 1.0)
+    d0 = r0 + s * ta[0] - t * tb[0]
+    d1 = r1 + s * ta[1] - t * tb[1]
+    d2 = r2 + s * ta[2] - t * tb[2]
+    return d0 * d0 + d1 * d1 + d2 * d2, s, t
+
+
+@njit(cache=True, fastmath=True)
+def _line_half(
+    x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign
+):
+    """Gauss points on segment A projected on segment B's line, weight ``scale``; accumulates forces.
+
+    rec[0..6] accumulates (Σ|f|, Σf_vec(3) B→A, Σ|f|·s_A, Σ|f|·t_B, max δ); ``sign`` = +1 if A is the
+    pair's first segment, −1 if swapped (so the record stays oriented first→second).
+    Returns the stored energy.
+    """
+    ta0 = x[na1, 0] - x[na0, 0]
+    ta1 = x[na1, 1] - x[na0, 1]
+    ta2 = x[na1, 2] - x[na0, 2]
+    tb0 = x[nb1, 0] - x[nb0, 0]
+    tb1 = x[nb1, 1] - x[nb0, 1]
+    tb2 = x[nb1, 2] - x[nb0, 2]
+    la2 = ta0 * ta0 + ta1 * ta1 + ta2 * ta2
+    lb2 = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
+    la = math.sqrt(la2)
+    r0 = x[na0, 0] - x[nb0, 0]
+    r1 = x[na0, 1] - x[nb0, 1]
+    r2 = x[na0, 2] - x[nb0, 2]
+    # t(s) = t0 + s t1
+    t0 = (r0 * tb0 + r1 * tb1 + r2 * tb2) / lb2
+    t1 = (ta0 * tb0 + ta1 * tb1 + ta2 * tb2) / lb2
+    # s-interval where 0 <= t <= 1
+    s_lo = 0.0
+    s_hi = 1.0
+    if abs(t1) < 1e-14:
+        if t0 < 0.0 or t0 >= 1.0:
+            return 0.0
+    else:
+        u0 = -t0 / t1
+        u1 = (1.0 - t0) / t1
+        if u0 > u1:
+            u0, u1 = u1, u0
+        s_lo = max(s_lo, u0)
+        s_hi = min(s_hi, u1)
+        if s_hi <= s_lo:
+            return 0.0
+    # distance vector to B's line: c0 + s c1; restrict to |c| < ra + rb
+    c00 = r0 - t0 * tb0
+    c01 = r1 - t0 * tb1
+    c02 = r2 - t0 * tb2
+    c10 = ta0 - t1 * tb0
+    c11 = ta1 - t1 * tb1
+    c12 = ta2 - t1 * tb2
+    rr = ra + rb
+    qa = c10 * c10 + c11 * c11 + c12 * c12
+    qb = c00 * c10 + c01 * c11 + c02 * c12
+    qc = c00 * c00 + c01 * c01 + c02 * c02 - rr * rr
+    if qa > 1e-14 * la2:
+        disc = qb * qb - qa * qc
+        if disc <= 0.0:
+            return 0.0
+        sq = math.sqrt(disc)
+        v0 = (-qb - sq) / qa
+        v1 = (-qb + sq) / qa
+        s_lo = max(s_lo, v0)
+        s_hi = min(s_hi, v1)
+        if s_hi <= s_lo:
+            return 0.0
+    elif qc >= 0.0:
+        return 0.0
+    span = s_hi - s_lo
+    energy = 0.0
+    for g in range(gxi.shape[0]):
+        s = s_lo + span * gxi[g]
+        t = t0 + s * t1
+        d0 = c00 + s * c10
+        d1 = c01 + s * c11
+        d2 = c02 + s * c12
+        d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        delta = rr - d
+        if delta <= 0.0 or d <= 0.0:
+            continue
+        p, e = law_line(law_id, law_params, delta, ra, rb)
+        wl = scale * gw[g] * span * la
+        fm = p * wl
+        energy += e * wl
+        inv = fm / d
+        f0 = d0 * inv
+        f1 = d1 * inv
+        f2 = d2 * inv
+        ws = 1.0 - s
+        wt = 1.0 - t
+        f_out[na0, 0] += ws * f0
+        f_out[na0, 1] += ws * f1
+        f_out[na0, 2] += ws * f2
+        f_out[na1, 0] += s * f0
+        f_out[na1, 1] += s * f1
+        f_out[na1, 2] += s * f2
+        f_out[nb0, 0] -= wt * f0
+        f_out[nb0, 1] -= wt * f1
+        f_out[nb0, 2] -= wt * f2
+        f_out[nb1, 0] -= t * f0
+        f_out[nb1, 1] -= t * f1
+        f_out[nb1, 2] -= t * f2
+        rec[0] += fm
+        rec[1] += sign * f0
+        rec[2] += sign * f1
+        rec[3] += sign * f2
+        if sign > 0.0:
+            rec[4] += fm * s
+            rec[5] += fm * t
+        else:
+            rec[4] += fm * t
+            rec[5] += fm * s
+        if delta > rec[6]:
+            rec[6] = delta
+    return energy
+
+
+@njit(cache=True, fastmath=True)
+def contact_forces(
+    x,
+    seg_nodes,
+    seg_radius,
+    pairs,
+    n_pairs,
+    law_id,
+    law_params,
+    gxi,
+    gw,
+    f_out,
+    c_fn,
+    c_n,
+    c_s,
+    c_t,
+    c_phi,
+    c_delta,
+):
+    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    seg_nodes : (E, 2) int64 — node indices of each segment.
+    seg_radius : (E,) float64, m.
+    pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
+    law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
+    gxi, gw : Gauss nodes on (0, 1) and weights summing to 1 (:func:`gauss_points`).
+    f_out : (N, 3) float64, N — accumulated into (not zeroed).
+    c_fn, c_s, c_t, c_phi, c_delta : (P,) float64 — out, per pair; c_n : (P, 3) float64 — out.
+
+    Returns
+    -------
+    (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
+    constant blend weight), number of pairs in contact.
+    """
+    energy = 0.0
+    n_active = 0
+    rec = np.zeros(7)
+    a0 = np.empty(3)
+    a1 = np.empty(3)
+    b0 = np.empty(3)
+    b1 = np.empty(3)
+    ta = np.empty(3)
+    tb = np.empty(3)
+    for k in range(n_pairs):
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        na0 = seg_nodes[i, 0]
+        na1 = seg_nodes[i, 1]
+        nb0 = seg_nodes[j, 0]
+        nb1 = seg_nodes[j, 1]
+        ra = seg_radius[i]
+        rb = seg_radius[j]
+        rr = ra + rb
+        for c in range(3):
+            a0[c] = x[na0, c]
+            a1[c] = x[na1, c]
+            b0[c] = x[nb0, c]
+            b1[c] = x[nb1, c]
+            ta[c] = a1[c] - a0[c]
+            tb[c] = b1[c] - b0[c]
+        c_fn[k] = 0.0
+        dist2, sc, tc = segment_distance2(a0, a1, b0, b1, ta, tb)
+        if dist2 >= rr * rr:
+            continue
+        for c in range(7):
+            rec[c] = 0.0
+        aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+        bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+        ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+        cphi = abs(ab) / math.sqrt(aa * bb)
+        if cphi > 1.0:
+            cphi = 1.0
+        phi = math.acos(cphi)
+        delta_c = rr - math.sqrt(dist2)
+        w = law_weight(law_id, law_params, delta_c, ra, rb, phi)
+        den = aa * bb - ab * ab
+        if w > 0.0 and den > 1e-10 * aa * bb:
+            # closest points of the infinite lines
+            r0 = a0[0] - b0[0]
+            r1 = a0[1] - b0[1]
+            r2 = a0[2] - b0[2]
+            ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+            br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+            s = (ab * br - ar * bb) / den
+            t = (aa * br - ab * ar) / den
+            # partition of unity across element joints: the closest point belongs to this pair
+            # with weight win(s)·win(t), win ramping 0→1 over ±JOINT_EPS (relative) around each
+            # end, so adjacent collinear pairs share a contact at a joint with weights summing to
+            # 1 whatever the rounding of s and t (a sharp [0, 1) claim drops or doubles it).
+            ws_ = _window(s)
+            wt_ = _window(t)
+            wst = ws_ * wt_
+            if wst > 0.0:
+                s = min(max(s, 0.0), 1.0)
+                t = min(max(t, 0.0), 1.0)
+                d0 = r0 + s * ta[0] - t * tb[0]
+                d1 = r1 + s * ta[1] - t * tb[1]
+                d2 = r2 + s * ta[2] - t * tb[2]
+                d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                delta = rr - d
+                if delta > 0.0:
+                    if d > 1e-14 * rr:
+                        inv = 1.0 / d
+                        n0 = d0 * inv
+                        n1 = d1 * inv
+                        n2 = d2 * inv
+                    else:  # axes intersect: normal to both tangents, oriented arbitrarily but consistently
+                        n0 = ta[1] * tb[2] - ta[2] * tb[1]
+                        n1 = ta[2] * tb[0] - ta[0] * tb[2]
+                        n2 = ta[0] * tb[1] - ta[1] * tb[0]
+                        inv = 1.0 / math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+                        n0 *= inv
+                        n1 *= inv
+                        n2 *= inv
+                    fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+                    fm = w * wst * fp
+                    energy += w * wst * ep
+                    f0 = fm * n0
+                    f1 = fm * n1
+                    f2 = fm * n2
+                    f_out[na0, 0] += (1.0 - s) * f0
+                    f_out[na0, 1] += (1.0 - s) * f1
+                    f_out[na0, 2] += (1.0 - s) * f2
+                    f_out[na1, 0] += s * f0
+                    f_out[na1, 1] += s * f1
+                    f_out[na1, 2] += s * f2
+                    f_out[nb0, 0] -= (1.0 - t) * f0
+                    f_out[nb0, 1] -= (1.0 - t) * f1
+                    f_out[nb0, 2] -= (1.0 - t) * f2
+                    f_out[nb1, 0] -= t * f0
+                    f_out[nb1, 1] -= t * f1
+                    f_out[nb1, 2] -= t * f2
+                    rec[0] += fm
+                    rec[1] += f0
+                    rec[2] += f1
+                    rec[3] += f2
+                    rec[4] += fm * s
+                    rec[5] += fm * t
+                    rec[6] = max(rec[6], delta)
+        elif w > 0.0:
+            w = 0.0
+        if w < 1.0:
+            half = 0.5 * (1.0 - w)
+            energy += _line_half(x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, half, f_out, rec, 1.0)
+            energy += _line_half(x, nb0, nb1, na0, na1, rb, ra, law_id, law_params, gxi, gw, half, f_out, rec, -1.0)
+        fsum = rec[0]
+        if fsum > 0.0:
+            n_active += 1
+            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+            c_fn[k] = fv
+            if fv > 0.0:
+                c_n[k, 0] = rec[1] / fv
+                c_n[k, 1] = rec[2] / fv
+                c_n[k, 2] = rec[3] / fv
+            c_s[k] = rec[4] / fsum
+            c_t[k] = rec[5] / fsum
+            c_phi[k] = phi
+            c_delta[k] = rec[6]
+    return energy, n_active
+
+
+class ContactBuffers:
+    """Per-pair output arrays for :func:`contact_forces`, grown with the neighbour list capacity."""
+
+    def __init__(self, capacity: int):
+        self.resize(capacity)
+
+    def resize(self, capacity: int):
+        capacity = max(int(capacity), 1)
+        self.capacity = capacity
+        self.fn = np.zeros(capacity)
+        self.n = np.zeros((capacity, 3))
+        self.s = np.zeros(capacity)
+        self.t = np.zeros(capacity)
+        self.phi = np.zeros(capacity)
+        self.delta = np.zeros(capacity)
+
+    def ensure(self, capacity: int):
+        if capacity > self.capacity:
+            self.resize(int(capacity * 1.5) + 16)
+
+
+def compute_contact(x, seg_nodes, seg_radius, pairs, n_pairs, law, f_out, buffers=None, n_gauss=4):
+    """Python convenience wrapper: evaluate :func:`contact_forces` with a law object.
+
+    Returns ``(energy, n_active, buffers)``; ``f_out`` is accumulated into.
+    """
+    gxi, gw = gauss_points(n_gauss)
+    if buffers is None:
+        buffers = ContactBuffers(max(n_pairs, 1))
+    buffers.ensure(n_pairs)
+    e, na = contact_forces(
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(seg_nodes, dtype=np.int64),
+        np.ascontiguousarray(seg_radius, dtype=np.float64),
+        np.ascontiguousarray(pairs, dtype=np.int64),
+        int(n_pairs),
+        law.law_id,
+        law.params(),
+        gxi,
+        gw,
+        f_out,
+        buffers.fn,
+        buffers.n,
+        buffers.s,
+        buffers.t,
+        buffers.phi,
+        buffers.delta,
+    )
+    return e, na, buffers

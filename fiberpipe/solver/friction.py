@@ -1,0 +1,195 @@
+"""Regularised Coulomb friction with per-contact history (fiber–fiber and fiber–plane).
+
+Model (Wriggers, *Computational Contact Mechanics*, 2006, §5.2; Abaqus/Explicit penalty friction):
+a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto the Coulomb cone
+``|f_t| ≤ μ f_n``:
+
+1. history ``f_t`` (the elastic tangential force of the contact) is rotated into the current
+   tangent plane: ``f_t ← f_t − (f_t·n)n``, rescaled to its old magnitude;
+2. trial ``f_t* = f_t − k_t Δu_t``, with ``Δu_t`` the tangential part of the relative displacement
+   increment of the contact points over the step, ``Δu = (v_A(s) − v_B(t)) Δt``;
+3. stick if ``|f_t*| ≤ μ f_n``; else slip: ``f_t = μ f_n f_t*/|f_t*|``, slip increment
+   ``(|f_t*| − μ f_n)/k_t``, dissipation ``μ f_n × slip`` (ALLFD);
+4. an open contact (``f_n = 0``) forgets its history.
+
+Fiber–fiber: one history per segment pair, keyed ``i·E + j`` (the Verlet list's sorted keys), applied
+at the pair's force-weighted contact point (``c_s``, ``c_t`` from the contact kernel) along its
+resultant normal ``c_n``; :func:`remap_history` carries it across neighbour-list rebuilds by
+``searchsorted`` on the sorted keys. Fiber–plane: one history per (node, plane), so it needs no remap.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=True)
+def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
+    """Update history row h[k] in place; returns (f_t vector (3), dissipation)."""
+    # rotate history into the current tangent plane, keep its magnitude
+    h0 = h[k, 0]
+    h1 = h[k, 1]
+    h2 = h[k, 2]
+    old = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    hn = h0 * n0 + h1 * n1 + h2 * n2
+    h0 -= hn * n0
+    h1 -= hn * n1
+    h2 -= hn * n2
+    new = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    if new > 0.0:
+        sc = old / new
+        h0 *= sc
+        h1 *= sc
+        h2 *= sc
+    un = du0 * n0 + du1 * n1 + du2 * n2
+    t0 = h0 - kt * (du0 - un * n0)
+    t1 = h1 - kt * (du1 - un * n1)
+    t2 = h2 - kt * (du2 - un * n2)
+    tm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    lim = mu * fn
+    diss = 0.0
+    if tm > lim:
+        sc = lim / tm
+        diss = lim * (tm - lim) / kt
+        t0 *= sc
+        t1 *= sc
+        t2 *= sc
+    h[k, 0] = t0
+    h[k, 1] = t1
+    h[k, 2] = t2
+    return t0, t1, t2, diss
+
+
+@njit(cache=True, fastmath=True)
+def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out):
+    """Fiber–fiber friction forces, accumulated into ``f_out``; returns the dissipated energy [J].
+
+    Parameters
+    ----------
+    v : (N, 3) float64, m/s — node velocities (half step). seg_nodes : (E, 2) int64.
+    pairs, n_pairs : the Verlet list (as passed to the contact kernel in the same step).
+    c_fn, c_n, c_s, c_t : per-pair records of :func:`fiberpipe.solver.contact.contact_forces` from
+        this step (normal force N, unit normal from the second segment to the first, contact
+        parameters on the two segments).
+    mu : Coulomb coefficient. k_t : N/m, tangential penalty stiffness. dt : s.
+    hist : (C, 3) float64, N — elastic tangential force per pair (in/out), aligned with ``pairs``.
+    f_out : (N, 3) float64 — accumulated into; +f_t on the first segment, −f_t on the second.
+    """
+    diss = 0.0
+    for k in range(n_pairs):
+        fn = c_fn[k]
+        if fn <= 0.0:
+            hist[k, 0] = 0.0
+            hist[k, 1] = 0.0
+            hist[k, 2] = 0.0
+            continue
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        a0 = seg_nodes[i, 0]
+        a1 = seg_nodes[i, 1]
+        b0 = seg_nodes[j, 0]
+        b1 = seg_nodes[j, 1]
+        s = c_s[k]
+        t = c_t[k]
+        du0 = ((1.0 - s) * v[a0, 0] + s * v[a1, 0] - (1.0 - t) * v[b0, 0] - t * v[b1, 0]) * dt
+        du1 = ((1.0 - s) * v[a0, 1] + s * v[a1, 1] - (1.0 - t) * v[b0, 1] - t * v[b1, 1]) * dt
+        du2 = ((1.0 - s) * v[a0, 2] + s * v[a1, 2] - (1.0 - t) * v[b0, 2] - t * v[b1, 2]) * dt
+        f0, f1, f2, d = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, k_t)
+        diss += d
+        f_out[a0, 0] += (1.0 - s) * f0
+        f_out[a0, 1] += (1.0 - s) * f1
+        f_out[a0, 2] += (1.0 - s) * f2
+        f_out[a1, 0] += s * f0
+        f_out[a1, 1] += s * f1
+        f_out[a1, 2] += s * f2
+        f_out[b0, 0] -= (1.0 - t) * f0
+        f_out[b0, 1] -= (1.0 - t) * f1
+        f_out[b0, 2] -= (1.0 - t) * f2
+        f_out[b1, 0] -= t * f0
+        f_out[b1, 1] -= t * f1
+        f_out[b1, 2] -= t * f2
+    return diss
+
+
+@njit(cache=True)
+def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
+    """Carry friction history across a neighbour-list rebuild by matching sorted pair keys.
+
+    ``new_hist[k] = old_hist[m]`` where ``old_keys[m] == new_keys[k]``, else 0. Both key arrays
+    sorted ascending (as :func:`fiberpipe.solver.neighbours.build_pairs` writes them). Returns the
+    number of histories carried over.
+    """
+    kept = 0
+    ok = old_keys[:old_n]
+    for k in range(new_n):
+        m = np.searchsorted(ok, new_keys[k])
+        if m < old_n and ok[m] == new_keys[k]:
+            new_hist[k, 0] = old_hist[m, 0]
+            new_hist[k, 1] = old_hist[m, 1]
+            new_hist[k, 2] = old_hist[m, 2]
+            kept += 1
+        else:
+            new_hist[k, 0] = 0.0
+            new_hist[k, 1] = 0.0
+            new_hist[k, 2] = 0.0
+    return kept
+
+
+@njit(cache=True, fastmath=True)
+def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, k_t, dt, hist, f_out, pl_tforce):
+    """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
+
+    Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
+    ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·δ`` (added by the plate kernel
+    ``_kernels_boundary.plane_contacts``, not here). Here only the tangential force, from the
+    node's velocity relative to the plane (``pl_vel`` (P, 3) m/s), with history ``hist`` (N, P, 3)
+    [N]. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane. Returns the
+    dissipated energy [J].
+    """
+    diss = 0.0
+    npl = pl_axis.shape[0]
+    for p in range(npl):
+        pl_tforce[p, 0] = 0.0
+        pl_tforce[p, 1] = 0.0
+        pl_tforce[p, 2] = 0.0
+    for i in range(x.shape[0]):
+        for p in range(npl):
+            ax = pl_axis[p]
+            sg = pl_sign[p]
+            d = radius_node[i] - sg * (x[i, ax] - pl_pos[p])
+            h = hist[i, p]
+            if d <= 0.0:
+                h[0] = 0.0
+                h[1] = 0.0
+                h[2] = 0.0
+                continue
+            fn = k_pen[i] * d
+            n0 = 0.0
+            n1 = 0.0
+            n2 = 0.0
+            if ax == 0:
+                n0 = sg
+            elif ax == 1:
+                n1 = sg
+            else:
+                n2 = sg
+            du0 = (v[i, 0] - pl_vel[p, 0]) * dt
+            du1 = (v[i, 1] - pl_vel[p, 1]) * dt
+            du2 = (v[i, 2] - pl_vel[p, 2]) * dt
+            f0, f1, f2, dd = _return_map(hist[i], p, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
+            diss += dd
+            f_out[i, 0] += f0
+            f_out[i, 1] += f1
+            f_out[i, 2] += f2
+            pl_tforce[p, 0] -= f0
+            pl_tforce[p, 1] -= f1
+            pl_tforce[p, 2] -= f2
+    return diss
+
+
+def tangential_stiffness(k_normal_per_contact: float, ratio: float = 1.0) -> float:
+    """A default k_t [N/m]: ``ratio`` × the normal contact stiffness of one contact (Abaqus-like)."""
+    return float(ratio * k_normal_per_contact)

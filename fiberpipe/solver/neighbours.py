@@ -1,0 +1,246 @@
+"""O(N) neighbour search for segment–segment contact: cell list → Verlet list with a skin.
+
+Rule (``docs/contact.md``):
+
+* Broad phase: uniform cubic cells over segment midpoints, cell edge ``h ≥ L_max + 2 r_max + skin``
+  (two segments whose closest distance is < r_i + r_j + skin have midpoints closer than that), the
+  27 neighbouring cells are scanned; the cell grid is capped at ``4 E`` cells (h grows if needed).
+  Counting sort into cells, no all-pairs loop: O(E) for bounded density.
+* Narrow filter (a "tight" Verlet list): keep a pair if the segments' closest distance is
+  ``< r_i + r_j + skin`` at build time.
+* Exclusions: pairs sharing a node, and pairs of the same fiber whose curvilinear gap (reference
+  arclength between their nearest ends) is ``< s_excl`` (default ``2 r``; a fibre folding back on
+  itself needs at least ``π r`` of arc to touch, so nothing physical is lost). Far-apart parts of
+  the same fibre may contact.
+* Rebuild when the largest nodal displacement since the last build exceeds ``skin/2`` (every point
+  of a segment moves at most as far as its farthest node, so no pair can come from beyond the skin
+  into contact before that).
+
+Output: ``pairs (P, 2) int64`` with ``i < j``, sorted by the key ``i·E + j`` (so friction history can
+be carried across rebuilds by ``searchsorted``, see :mod:`fiberpipe.solver.friction`). The kernel
+writes into a preallocated buffer and returns ``−needed`` when it is too small; :class:`VerletList`
+grows it and retries.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from fiberpipe.solver.contact import segment_distance2
+
+
+@njit(cache=True, fastmath=True)
+def max_displacement_exceeds(x, x_ref, limit):
+    """True if any node moved more than ``limit`` [m] from ``x_ref`` (the positions at the last build)."""
+    l2 = limit * limit
+    for i in range(x.shape[0]):
+        d0 = x[i, 0] - x_ref[i, 0]
+        d1 = x[i, 1] - x_ref[i, 1]
+        d2 = x[i, 2] - x_ref[i, 2]
+        if d0 * d0 + d1 * d1 + d2 * d2 > l2:
+            return True
+    return False
+
+
+@njit(cache=True)
+def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
+    """Build the Verlet list of candidate segment pairs.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m. seg_nodes : (E, 2) int64. seg_radius : (E,) float64, m.
+    seg_fiber : (E,) int64 — fibre id of each segment.
+    seg_arc : (E, 2) float64, m — reference arclength of each segment's two ends along its fibre.
+    skin : float, m. s_excl : float, m — same-fibre curvilinear exclusion gap.
+    pairs_out : (C, 2) int64, keys_out : (C,) int64 — out (capacity C).
+
+    Returns
+    -------
+    n : int — number of pairs written (sorted by key ``i·E + j``), or ``−needed`` if C < needed.
+    """
+    ne = seg_nodes.shape[0]
+    if ne == 0:
+        return 0
+    mid = np.empty((ne, 3))
+    lmax = 0.0
+    rmax = 0.0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for e in range(ne):
+        a = seg_nodes[e, 0]
+        b = seg_nodes[e, 1]
+        l2 = 0.0
+        for c in range(3):
+            m = 0.5 * (x[a, c] + x[b, c])
+            mid[e, c] = m
+            l2 += (x[b, c] - x[a, c]) ** 2
+            lo[c] = min(lo[c], m)
+            hi[c] = max(hi[c], m)
+        lmax = max(lmax, math.sqrt(l2))
+        rmax = max(rmax, seg_radius[e])
+    h = lmax + 2.0 * rmax + skin
+    nc = np.empty(3, np.int64)
+    while True:
+        tot = 1
+        for c in range(3):
+            nc[c] = max(1, int((hi[c] - lo[c]) / h) + 1)
+            tot *= nc[c]
+        if tot <= 4 * ne + 64:
+            break
+        h *= 1.26
+    # counting sort of segments into cells
+    cell_of = np.empty(ne, np.int64)
+    start = np.zeros(tot + 1, np.int64)
+    for e in range(ne):
+        ix = min(int((mid[e, 0] - lo[0]) / h), nc[0] - 1)
+        iy = min(int((mid[e, 1] - lo[1]) / h), nc[1] - 1)
+        iz = min(int((mid[e, 2] - lo[2]) / h), nc[2] - 1)
+        cid = (ix * nc[1] + iy) * nc[2] + iz
+        cell_of[e] = cid
+        start[cid + 1] += 1
+    for c in range(tot):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(ne, np.int64)
+    for e in range(ne):
+        cid = cell_of[e]
+        items[fill[cid]] = e
+        fill[cid] += 1
+    cap = pairs_out.shape[0]
+    n = 0
+    ta = np.empty(3)
+    tb = np.empty(3)
+    a0 = np.empty(3)
+    a1 = np.empty(3)
+    b0 = np.empty(3)
+    b1 = np.empty(3)
+    h2 = h * h
+    for i in range(ne):
+        cid = cell_of[i]
+        iz = cid % nc[2]
+        iy = (cid // nc[2]) % nc[1]
+        ix = cid // (nc[1] * nc[2])
+        ia0 = seg_nodes[i, 0]
+        ia1 = seg_nodes[i, 1]
+        for c in range(3):
+            a0[c] = x[ia0, c]
+            a1[c] = x[ia1, c]
+            ta[c] = a1[c] - a0[c]
+        for dx in range(-1, 2):
+            jx = ix + dx
+            if jx < 0 or jx >= nc[0]:
+                continue
+            for dy in range(-1, 2):
+                jy = iy + dy
+                if jy < 0 or jy >= nc[1]:
+                    continue
+                for dz in range(-1, 2):
+                    jz = iz + dz
+                    if jz < 0 or jz >= nc[2]:
+                        continue
+                    cj = (jx * nc[1] + jy) * nc[2] + jz
+                    for q in range(start[cj], start[cj + 1]):
+                        j = items[q]
+                        if j <= i:
+                            continue
+                        jb0 = seg_nodes[j, 0]
+                        jb1 = seg_nodes[j, 1]
+                        if jb0 == ia0 or jb0 == ia1 or jb1 == ia0 or jb1 == ia1:
+                            continue
+                        if seg_fiber[j] == seg_fiber[i]:
+                            gap = max(seg_arc[i, 0], seg_arc[j, 0]) - min(seg_arc[i, 1], seg_arc[j, 1])
+                            if gap < s_excl:
+                                continue
+                        dm = 0.0
+                        for c in range(3):
+                            dm += (mid[j, c] - mid[i, c]) ** 2
+                        if dm > h2:
+                            continue
+                        for c in range(3):
+                            b0[c] = x[jb0, c]
+                            b1[c] = x[jb1, c]
+                            tb[c] = b1[c] - b0[c]
+                        cut = seg_radius[i] + seg_radius[j] + skin
+                        d2, s, t = segment_distance2(a0, a1, b0, b1, ta, tb)
+                        if d2 < cut * cut:
+                            if n < cap:
+                                pairs_out[n, 0] = i
+                                pairs_out[n, 1] = j
+                                keys_out[n] = i * ne + j
+                            n += 1
+    if n > cap:
+        return -n
+    order = np.argsort(keys_out[:n])
+    tmp = pairs_out[:n].copy()
+    tk = keys_out[:n].copy()
+    for k in range(n):
+        pairs_out[k, 0] = tmp[order[k], 0]
+        pairs_out[k, 1] = tmp[order[k], 1]
+        keys_out[k] = tk[order[k]]
+    return n
+
+
+def segment_arclength(seg_nodes: np.ndarray, seg_fiber: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
+    """Reference arclength (E, 2) of each segment's ends along its fibre (segments in fibre order)."""
+    seg_nodes = np.asarray(seg_nodes)
+    L = np.linalg.norm(x_ref[seg_nodes[:, 1]] - x_ref[seg_nodes[:, 0]], axis=1)
+    arc = np.empty((len(seg_nodes), 2))
+    acc = 0.0
+    for e in range(len(seg_nodes)):
+        if e == 0 or seg_fiber[e] != seg_fiber[e - 1]:
+            acc = 0.0
+        arc[e, 0] = acc
+        acc += L[e]
+        arc[e, 1] = acc
+    return arc
+
+
+class VerletList:
+    """Verlet list of candidate segment pairs with skin, rebuilt on demand (skin/2 rule).
+
+    Keeps, between steps: ``pairs`` (C, 2), ``keys`` (C,), ``n_pairs``, ``x_ref`` (positions at
+    the last build). ``update(x)`` rebuilds if needed and returns True when it did.
+    """
+
+    def __init__(self, seg_nodes, seg_radius, seg_fiber, seg_arc, skin_m: float, s_excl_m: float | None = None,
+                 capacity: int | None = None):
+        self.seg_nodes = np.ascontiguousarray(seg_nodes, dtype=np.int64)
+        self.seg_radius = np.ascontiguousarray(seg_radius, dtype=np.float64)
+        self.seg_fiber = np.ascontiguousarray(seg_fiber, dtype=np.int64)
+        self.seg_arc = np.ascontiguousarray(seg_arc, dtype=np.float64)
+        if not skin_m > 0:
+            raise ValueError(f"skin must be > 0 m, got {skin_m}")
+        self.skin_m = float(skin_m)
+        self.s_excl_m = float(2.0 * self.seg_radius.max() if s_excl_m is None else s_excl_m)
+        cap = capacity if capacity is not None else 16 * max(len(self.seg_nodes), 1)
+        self.pairs = np.zeros((cap, 2), np.int64)
+        self.keys = np.zeros(cap, np.int64)
+        self.n_pairs = 0
+        self.x_ref = None
+        self.n_builds = 0
+
+    def build(self, x):
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        while True:
+            n = build_pairs(x, self.seg_nodes, self.seg_radius, self.seg_fiber, self.seg_arc, self.skin_m,
+                            self.s_excl_m, self.pairs, self.keys)
+            if n >= 0:
+                break
+            cap = int(-n * 1.5) + 16
+            self.pairs = np.zeros((cap, 2), np.int64)
+            self.keys = np.zeros(cap, np.int64)
+        self.n_pairs = n
+        self.x_ref = x.copy()
+        self.n_builds += 1
+
+    def needs_rebuild(self, x) -> bool:
+        return self.x_ref is None or bool(max_displacement_exceeds(x, self.x_ref, 0.5 * self.skin_m))
+
+    def update(self, x) -> bool:
+        if self.needs_rebuild(x):
+            self.build(x)
+            return True
+        return False
