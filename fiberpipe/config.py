@@ -41,6 +41,7 @@ def _quantity(dimension: str):
             return None
         return to_si(value, dimension)
 
+    convert.dimension = dimension
     return BeforeValidator(convert)
 
 
@@ -52,6 +53,7 @@ def _vector(dimension: str, size: int = 3):
             raise ValueError(f"expected a list of {size} {dimension} values, got {value!r}")
         return [to_si(v, dimension) for v in value]
 
+    convert.dimension = f"[3 × {dimension}]"
     return BeforeValidator(convert)
 
 
@@ -626,3 +628,54 @@ def set_dotted(data: dict, dotted: str, value) -> None:
             cur[p] = {}
         cur = cur[p]
     cur[parts[-1]] = value
+
+
+def _type_name(ann) -> str:
+    import typing
+
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    if origin is typing.Annotated:
+        for meta in args[1:]:
+            dim = getattr(getattr(meta, "func", None), "dimension", None)
+            if dim:
+                from fiberpipe.units import SI_UNITS
+
+                unit = SI_UNITS.get(dim.strip("[]3 × "), "")
+                return f"{dim} ({unit})" if unit else dim
+        return _type_name(args[0])
+    if origin is typing.Union:
+        names = [_type_name(a) for a in args if a is not type(None)]
+        return " or ".join(names)
+    if origin is typing.Literal:
+        return " ∣ ".join(str(a) for a in args)
+    if origin in (list, tuple):
+        return f"list of {_type_name(args[0])}" if args else "list"
+    return getattr(ann, "__name__", str(ann))
+
+
+def reference_markdown() -> str:
+    """A Markdown table of every config key, its type, default and description (docs/config.md)."""
+    lines = ["| key | type (SI unit) | default | notes |", "| --- | --- | --- | --- |"]
+
+    def walk(model: type[BaseModel], prefix: str):
+        for name, f in model.model_fields.items():
+            if name == "source_path":
+                continue
+            key = f"{prefix}{name}"
+            sub = _unwrap_model(f.annotation)
+            default = f.default if f.default_factory is None else f.default_factory()
+            if isinstance(default, BaseModel):
+                default = "(section)"
+            if str(default) == "PydanticUndefined":
+                default = "required"
+            tname = _type_name(f.annotation)
+            if f.metadata:  # pydantic moves Annotated metadata of plain fields here
+                import typing
+
+                tname = _type_name(typing.Annotated[(f.annotation, *f.metadata)])
+            lines.append(f"| `{key}` | {tname} | {default} | {f.description or ''} |")
+            if sub is not None and sub is not model:
+                walk(sub, key + ".")
+
+    walk(Config, "")
+    return "\n".join(lines)
