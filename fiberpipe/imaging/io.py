@@ -88,11 +88,35 @@ def _tiff_voxel_size(tif) -> np.ndarray | None:
     return None
 
 
+def _check_tiff_complete(tif, path: Path) -> None:
+    """Raise InputError if the TIFF's image data extend past the end of the file (truncated)."""
+    # tifffile reads a truncated stack without error (it returns the pages it finds), so the data
+    # offsets are checked against the file size, and ImageJ's declared image count against the
+    # pages present.
+    size = path.stat().st_size
+    series = tif.series[0] if tif.series else None
+    if series is not None and getattr(series, "dataoffset", None) is not None:
+        if series.dataoffset + series.nbytes > size:
+            raise InputError("TIFF image data run past the end of the file; truncated", where=str(path))
+    for page in tif.pages:
+        offs = getattr(page, "dataoffsets", ())
+        counts = getattr(page, "databytecounts", ())
+        if any(o + c > size for o, c in zip(offs, counts)):
+            raise InputError("TIFF image data run past the end of the file; truncated", where=str(path))
+    ij = tif.imagej_metadata
+    if ij and "images" in ij and series is not None:
+        n_img = int(np.prod(series.shape[:-2])) if len(series.shape) > 2 else 1
+        if int(ij["images"]) > n_img:
+            raise InputError(f"ImageJ TIFF declares {ij['images']} images, holds {n_img}; truncated",
+                             where=str(path))
+
+
 def _read_tiff(path: Path):
     import tifffile
 
     try:
         with tifffile.TiffFile(path) as tif:
+            _check_tiff_complete(tif, path)
             vs = _tiff_voxel_size(tif)
             vol = tif.asarray()
     except InputError:

@@ -1,0 +1,118 @@
+"""load_volume / save_volume_tif: round trips and every bad input (InputError with the path)."""
+
+import numpy as np
+import pytest
+import tifffile
+
+from fiberpipe.errors import InputError
+from fiberpipe.imaging.io import load_volume, save_volume_tif
+
+VS = (20e-6, 15e-6, 15e-6)
+
+
+@pytest.fixture
+def vol():
+    rng = np.random.default_rng(0)
+    return rng.integers(0, 60000, size=(6, 7, 8)).astype(np.uint16)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_tif_round_trip_with_metadata(tmp_path, vol, dtype):
+    v = vol.astype(dtype)
+    save_volume_tif(tmp_path / "v.tif", v, VS)
+    w, vs, src = load_volume(tmp_path / "v.tif")
+    assert w.dtype == dtype and np.array_equal(w, v)
+    assert np.allclose(vs, VS, rtol=1e-6) and src.startswith("tiff:")
+
+
+def test_config_voxel_size_overrides_metadata(tmp_path, vol):
+    save_volume_tif(tmp_path / "v.tif", vol, VS)
+    _, vs, _ = load_volume(tmp_path / "v.tif", voxel_size_m=1e-6)
+    assert np.allclose(vs, 1e-6)
+
+
+def test_folder_of_slices_natural_order(tmp_path, vol):
+    for k in range(vol.shape[0]):  # names whose plain sort order is wrong (s10 < s2)
+        tifffile.imwrite(tmp_path / f"s{k * 5}.tif", vol[k])
+    w, vs, src = load_volume(tmp_path, voxel_size_m=VS)
+    assert np.array_equal(w, vol) and src.startswith("tiff-folder:")
+
+
+def test_npy_h5_raw(tmp_path, vol):
+    import h5py
+
+    np.save(tmp_path / "v.npy", vol)
+    w, vs, _ = load_volume(tmp_path / "v.npy", voxel_size_m=1e-5)
+    assert np.array_equal(w, vol) and np.allclose(vs, 1e-5)
+    with h5py.File(tmp_path / "v.h5", "w") as f:
+        d = f.create_dataset("ct/volume", data=vol)
+        d.attrs["element_size_um"] = [20.0, 15.0, 15.0]
+        f.create_dataset("other", data=np.zeros(3))
+    w, vs, src = load_volume(tmp_path / "v.h5")
+    assert np.array_equal(w, vol) and np.allclose(vs, VS) and src.endswith("ct/volume")
+    with h5py.File(tmp_path / "w.h5", "w") as f:
+        f.create_dataset("a", data=vol).attrs["voxel_size_m"] = 1e-5
+        f.create_dataset("b", data=vol)
+    with pytest.raises(InputError, match="several 3D datasets"):
+        load_volume(tmp_path / "w.h5")
+    w, vs, _ = load_volume(tmp_path / "w.h5", dataset="a")
+    assert np.allclose(vs, 1e-5)
+    vol.tofile(tmp_path / "v.raw")
+    w, _, _ = load_volume(tmp_path / "v.raw", shape=vol.shape, dtype="uint16", voxel_size_m=1e-5)
+    assert np.array_equal(w, vol)
+    with pytest.raises(InputError, match="bytes"):
+        load_volume(tmp_path / "v.raw", shape=(6, 7, 9), dtype="uint16", voxel_size_m=1e-5)
+    with pytest.raises(InputError, match="shape"):
+        load_volume(tmp_path / "v.raw", voxel_size_m=1e-5)
+
+
+def _err(path, match, **kw):
+    with pytest.raises(InputError, match=match) as e:
+        load_volume(path, **kw)
+    assert str(path) in str(e.value)  # the message names the file
+    assert "\n" not in str(e.value)
+
+
+def test_bad_inputs(tmp_path, vol):
+    _err(tmp_path / "missing.tif", "not found")
+    (tmp_path / "text.tif").write_text("this is not an image")
+    _err(tmp_path / "text.tif", "not a TIFF or truncated")
+    save_volume_tif(tmp_path / "full.tif", vol, VS)
+    data = (tmp_path / "full.tif").read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[: len(data) // 2])
+    _err(tmp_path / "cut.tif", "not a TIFF or truncated|truncated")
+    tifffile.imwrite(tmp_path / "flat.tif", vol[0])
+    _err(tmp_path / "flat.tif", "2D image", voxel_size_m=1e-5)
+    np.save(tmp_path / "empty.npy", np.zeros((0, 4, 4), np.uint8))
+    _err(tmp_path / "empty.npy", "empty", voxel_size_m=1e-5)
+    np.save(tmp_path / "nan.npy", np.full((3, 4, 4), np.nan, np.float32))
+    _err(tmp_path / "nan.npy", "all NaN", voxel_size_m=1e-5)
+    some = vol.astype(np.float32)
+    some[2, 3, 4] = np.nan
+    np.save(tmp_path / "somenan.npy", some)
+    _err(tmp_path / "somenan.npy", "1 NaN", voxel_size_m=1e-5)
+    np.save(tmp_path / "const.npy", np.full((3, 4, 4), 7, np.uint8))
+    _err(tmp_path / "const.npy", "constant", voxel_size_m=1e-5)
+    (tmp_path / "bad.npy").write_bytes(b"garbage")
+    _err(tmp_path / "bad.npy", "npy", voxel_size_m=1e-5)
+    (tmp_path / "bad.h5").write_bytes(b"garbage")
+    _err(tmp_path / "bad.h5", "HDF5")
+    (tmp_path / "emptydir").mkdir()
+    _err(tmp_path / "emptydir", "no .tif")
+
+
+def test_no_voxel_size(tmp_path, vol):
+    np.save(tmp_path / "v.npy", vol)
+    _err(tmp_path / "v.npy", "no voxel size")
+    # a 72 dpi (inch) resolution is an image-writer default, not a voxel size
+    tifffile.imwrite(tmp_path / "dpi.tif", vol, resolution=(72, 72), resolutionunit="INCH")
+    _err(tmp_path / "dpi.tif", "no voxel size")
+    # an ImageJ file without a unit
+    tifffile.imwrite(tmp_path / "ij.tif", vol, imagej=True)
+    _err(tmp_path / "ij.tif", "no voxel size")
+    # OME metadata is read
+    tifffile.imwrite(tmp_path / "v.ome.tif", vol,
+                     metadata={"axes": "ZYX", "PhysicalSizeX": 15.0, "PhysicalSizeY": 15.0,
+                               "PhysicalSizeZ": 20.0})
+    _, vs, _ = load_volume(tmp_path / "v.ome.tif")
+    assert np.allclose(vs, VS)
