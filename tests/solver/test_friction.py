@@ -1,0 +1,111 @@
+"""Regularised Coulomb friction kernels: stick, slip, dissipation, history across rebuilds, plane variant."""
+
+import numpy as np
+import pytest
+
+from fiberpipe.solver import laws as L
+from fiberpipe.solver._contact_geometry import LE, R, all_pairs_between, assemble, fiber
+from fiberpipe.solver.contact import compute_contact
+from fiberpipe.solver.friction import friction_forces, plane_friction, remap_history
+
+MU, KT, DT = 0.2, 1e5, 1e-7
+
+
+def _pressed_pair(delta=1e-6):
+    xa = fiber([0, 0, 2 * R - delta], [1, 0, 0], 1)
+    xb = fiber([-0.1e-3, 0.05e-3, 0], [0, 1, 0], 1)  # crossing at 90°
+    xb = fiber([0.15e-3, -0.15e-3, 0], [0, 1, 0], 1)
+    x, seg, rad, fib, rng = assemble(xa, xb)
+    pairs = all_pairs_between(fib, 0, 1)
+    f = np.zeros_like(x)
+    _, nact, buf = compute_contact(x, seg, rad, pairs, len(pairs), L.HertzCrossedLaw(90.0), f)
+    assert nact == 1
+    return x, seg, pairs, buf, rng
+
+
+def _slide(v_rel, n_steps, hist=None):
+    x, seg, pairs, buf, rng = _pressed_pair()
+    fn = buf.fn[0]
+    v = np.zeros_like(x)
+    v[rng[0][0]:rng[0][1], 0] = v_rel  # fibre A slides along x
+    hist = np.zeros((1, 3)) if hist is None else hist
+    diss = 0.0
+    for _ in range(n_steps):
+        f = np.zeros_like(x)
+        diss += friction_forces(v, seg, pairs, 1, buf.fn, buf.n, buf.s, buf.t, MU, KT, DT, hist, f)
+    return f, hist, diss, fn, rng
+
+
+def test_stick_below_coulomb_limit():
+    """Total tangential displacement u < μF_n/k_t: elastic stick force −k_t·u exactly, no dissipation."""
+    x, seg, pairs, buf, rng = _pressed_pair()
+    fn = buf.fn[0]
+    u = 0.5 * MU * fn / KT
+    f, hist, diss, _, _ = _slide(u / (100 * DT), 100)
+    assert f[rng[0][0]:rng[0][1], 0].sum() == pytest.approx(-KT * u, rel=1e-9)
+    assert diss == 0.0
+    assert np.abs(f.sum(axis=0)).max() < 1e-12 * fn
+
+
+def test_slip_at_coulomb_limit_and_dissipation():
+    """Sliding far beyond the stick range: |f_t| = μF_n, dissipation = μF_n × slip distance (< 1e-9)."""
+    x, seg, pairs, buf, rng = _pressed_pair()
+    fn = buf.fn[0]
+    v = 1e-2
+    n = 400
+    f, hist, diss, _, _ = _slide(v, n)
+    ft = f[rng[0][0]:rng[0][1]].sum(axis=0)
+    assert np.linalg.norm(ft) == pytest.approx(MU * fn, rel=1e-12)
+    assert ft[0] < 0  # opposes the motion
+    slip = v * DT * n - MU * fn / KT  # total motion minus the elastic stick displacement
+    assert diss == pytest.approx(MU * fn * slip, rel=1e-9)
+
+
+def test_history_survives_rebuild():
+    old_keys = np.array([3, 10, 42, 77], np.int64)
+    old_hist = np.arange(12, dtype=float).reshape(4, 3)
+    new_keys = np.array([1, 10, 42, 50, 77, 90], np.int64)
+    new_hist = np.full((6, 3), -1.0)
+    kept = remap_history(old_keys, 4, old_hist, new_keys, 6, new_hist)
+    assert kept == 3
+    assert np.array_equal(new_hist[[1, 2, 4]], old_hist[[1, 2, 3]])
+    assert np.all(new_hist[[0, 3, 5]] == 0.0)
+    # a stuck contact keeps its force across a "rebuild" that reorders the list
+    x, seg, pairs, buf, rng = _pressed_pair()
+    u = 0.3 * MU * buf.fn[0] / KT
+    f1, hist, _, _, _ = _slide(u / (10 * DT), 10)
+    moved = np.zeros((2, 3))
+    remap_history(np.array([1], np.int64), 1, hist, np.array([0, 1], np.int64), 2, moved)
+    assert np.array_equal(moved[1], hist[0]) and np.all(moved[0] == 0)
+    f2, hist2, _, _, _ = _slide(0.0, 1, hist=moved[1:].copy())
+    assert np.allclose(f2, f1, rtol=1e-12, atol=0)
+
+
+def test_history_rotated_into_tangent_plane():
+    x, seg, pairs, buf, rng = _pressed_pair()
+    hist = np.array([[0.3, 0.0, 0.4]])  # has a normal (z) component
+    f = np.zeros_like(x)
+    friction_forces(np.zeros_like(x), seg, pairs, 1, buf.fn, buf.n, buf.s, buf.t, 10.0, KT, DT, hist, f)
+    assert abs(hist[0] @ buf.n[0]) < 1e-12 and np.linalg.norm(hist[0]) == pytest.approx(0.5)
+
+
+def test_plane_friction_stick_and_slip():
+    """Node on a plane z = 0 pressed by k_pen δ; sticks below μF_n, slides at μF_n with dissipation μF_n·slip."""
+    x = np.array([[0.0, 0.0, R - 1e-6]])
+    v = np.array([[1.0, 0.0, 0.0]])
+    kpen = np.array([1e6])
+    fn = 1e6 * 1e-6
+    args = (np.array([R]), kpen, np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
+    hist = np.zeros((1, 1, 3))
+    diss = 0.0
+    n = 300
+    for _ in range(n):
+        f = np.zeros((1, 3))
+        tf = np.zeros((1, 3))
+        diss += plane_friction(x, v, *args, MU, KT, DT, hist, f, tf)
+    assert f[0, 0] == pytest.approx(-MU * fn, rel=1e-12) and tf[0, 0] == pytest.approx(MU * fn)
+    assert diss == pytest.approx(MU * fn * (1.0 * DT * n - MU * fn / KT), rel=1e-9)
+    # off the plane: history reset
+    f = np.zeros((1, 3))
+    plane_friction(x + [0, 0, 1e-5], v, *args, MU, KT, DT, hist, f, np.zeros((1, 3)))
+    assert np.all(hist == 0) and np.all(f == 0)
