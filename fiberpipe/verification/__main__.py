@@ -1,0 +1,34 @@
+"""``python -m fiberpipe.verification [--quick] [CASE ...]``: print the verification table."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from .cases import CASES, run_all
+
+
+def format_table(rows) -> str:
+    lines = ["| case | reference | measured | error | tolerance | result |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        unit = f" {r.unit}" if r.unit else ""
+        lines.append(f"| {r.case} | {r.reference:.6g}{unit} | {r.measured:.6g}{unit} | {100 * r.error:.3f} % | "
+                     f"{100 * r.tolerance:.3g} % | {'PASS' if r.passed else 'FAIL'} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fiberpipe.verification")
+    ap.add_argument("--quick", action="store_true", help="shorter variants of each case")
+    ap.add_argument("cases", nargs="*", choices=[[]] + list(CASES), help="subset of cases")
+    a = ap.parse_args(argv)
+    t = time.perf_counter()
+    rows = run_all(quick=a.quick, only=a.cases or None)
+    print(format_table(rows))
+    print(f"\n{sum(r.passed for r in rows)}/{len(rows)} passed in {time.perf_counter() - t:.1f} s")
+    return 0 if all(r.passed for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

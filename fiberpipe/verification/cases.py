@@ -1,0 +1,242 @@
+"""Verification cases of SPEC section 8 (beams), each returning one table row.
+
+Every case runs the real solver (``simulate``) on the study's fiber: r = 0.25 mm, E = 15 GPa,
+ν = 0.3, ρ = 1380 kg/m³, L = 15 mm, 0.3 mm elements (50), at the stable time step × 0.9.
+``quick=True`` runs a shorter variant of the same case (fewer periods / faster loading) for the
+default test suite.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..solver import (Clamp, Clamps, Damping, Loads, Material, Plates, PointLoad, SimulationSettings,
+                      State, build_model, simulate)
+
+E_PA = 15e9
+NU = 0.3
+RHO = 1380.0
+R_M = 0.25e-3
+L_M = 15e-3
+N_EL = 50
+MATERIAL = Material(E_PA, RHO, NU)
+I_M4 = math.pi * R_M**4 / 4
+A_M2 = math.pi * R_M**2
+EI = E_PA * I_M4
+OMEGA1 = 1.8751**2 * math.sqrt(EI / (RHO * A_M2 * L_M**4))  # rad/s, clamped-free first mode
+
+
+@dataclass
+class Row:
+    """One verification result."""
+
+    case: str
+    reference: float
+    measured: float
+    error: float        # relative, |measured − reference| / |reference| (or absolute drift)
+    tolerance: float
+    unit: str = ""
+    note: str = ""
+
+    @property
+    def passed(self) -> bool:
+        return bool(np.isfinite(self.error) and self.error < self.tolerance)
+
+
+def straight_fiber(n_el: int = N_EL, length_m: float = L_M, axis: int = 0):
+    x = np.zeros((n_el + 1, 3))
+    x[:, axis] = np.linspace(0.0, length_m, n_el + 1)
+    return build_model(x, [0, n_el + 1], R_M, MATERIAL)
+
+
+def cantilever_small(quick: bool = False) -> Row:
+    """Tip deflection of a clamped fiber under a small tip load vs P L³/(3 E I) (< 1 %)."""
+    m = straight_fiber()
+    P = 1e-3
+    eff = [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]), Damping(1.4 * OMEGA1)]
+    res = simulate(m, eff, SimulationSettings(end_time_s=4e-3, output_frames=2))
+    ref = P * L_M**3 / (3 * EI)
+    meas = -res.frames_positions[-1, -1, 2]
+    return Row("cantilever small tip load: deflection", ref, meas, abs(meas - ref) / ref, 0.01, "m")
+
+
+def elastica_tip(lam: float) -> tuple[float, float]:
+    """Tip displacement (u_axial/L, w/L) of the inextensible elastica, clamped at s = 0, under a
+    tip force of fixed direction perpendicular to the undeformed axis, λ = P L²/(E I).
+    Solves θ'' = −λ cos θ, θ(0) = 0, θ'(1) = 0 (scipy solve_bvp); x' = cos θ, w' = sin θ."""
+    from scipy.integrate import solve_bvp, cumulative_trapezoid
+
+    s = np.linspace(0, 1, 401)
+
+    def f(s, y):
+        return np.vstack([y[1], -lam * np.cos(y[0])])
+
+    def bc(ya, yb):
+        return np.array([ya[0], yb[1]])
+
+    y0 = np.vstack([lam * (s - s**2 / 2), lam * (1 - s)])
+    sol = solve_bvp(f, bc, s, y0, tol=1e-10, max_nodes=100000)
+    th = sol.sol(s)[0]
+    x = cumulative_trapezoid(np.cos(th), s, initial=0)[-1]
+    w = cumulative_trapezoid(np.sin(th), s, initial=0)[-1]
+    return 1.0 - x, w
+
+
+def cantilever_large(quick: bool = False, lam: float = 2.0) -> Row:
+    """Large tip deflection vs the elastica (λ = P L²/EI = 2), vertical tip deflection (< 2 %)."""
+    m = straight_fiber()
+    P = lam * EI / L_M**2
+    eff = [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]), Damping(1.4 * OMEGA1)]
+    res = simulate(m, eff, SimulationSettings(end_time_s=5e-3, output_frames=2))
+    _, w_ref = elastica_tip(lam)
+    meas = -res.frames_positions[-1, -1, 2] / L_M
+    return Row(f"cantilever large deflection (PL²/EI = {lam:g}): w/L vs elastica", w_ref, meas,
+               abs(meas - w_ref) / w_ref, 0.02)
+
+
+def _mode1_state(model, amplitude_m: float) -> State:
+    """State with the clamped-free first Euler–Bernoulli mode shape (transverse z) imposed, at rest."""
+    b = 1.8751040687 / L_M
+    sig = (math.cosh(b * L_M) + math.cos(b * L_M)) / (math.sinh(b * L_M) + math.sin(b * L_M))
+    xs = model.nodes_m[:, 0]
+    w = np.cosh(b * xs) - np.cos(b * xs) - sig * (np.sinh(b * xs) - np.sin(b * xs))
+    dw = b * (np.sinh(b * xs) + np.sin(b * xs) - sig * (np.cosh(b * xs) - np.cos(b * xs)))
+    scale = amplitude_m / w[-1]
+    st = State.at_rest(model)
+    st.x[:, 2] += scale * w
+    phi = -np.arctan(scale * dw)  # rotation about y taking e_x to the tangent (1, 0, w')
+    qr = np.column_stack([np.cos(phi / 2), np.zeros_like(phi), np.sin(phi / 2), np.zeros_like(phi)])
+    st.q[:] = _qmul(qr, st.q)
+    return st
+
+
+def _qmul(a, b):
+    w1, x1, y1, z1 = a.T
+    w2, x2, y2, z2 = b.T
+    return np.column_stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _period_from_zero_crossings(t, y):
+    y = y - np.mean(y)
+    s = np.sign(y)
+    idx = np.nonzero((s[:-1] < 0) & (s[1:] >= 0))[0]
+    tc = t[idx] - y[idx] * (t[idx + 1] - t[idx]) / (y[idx + 1] - y[idx])
+    if tc.size < 2:
+        return float("nan")
+    return float((tc[-1] - tc[0]) / (tc.size - 1))
+
+
+def cantilever_frequency(quick: bool = False) -> Row:
+    """First natural frequency of the cantilever vs 1.8751² √(EI/ρAL⁴) (< 1 %), free vibration
+    from the first mode shape, period by upward zero crossings of the tip deflection."""
+    m = straight_fiber()
+    periods = 3 if quick else 10
+    T1 = 2 * math.pi / OMEGA1
+    st = _mode1_state(m, 1e-5)
+    frames = 60 * periods + 1
+    res = simulate(m, [Clamps([Clamp(0, "start")])], SimulationSettings(end_time_s=(periods + 0.3) * T1,
+                   output_frames=frames), state=st)
+    T = _period_from_zero_crossings(res.frames_time, res.frames_positions[:, -1, 2])
+    f_ref = OMEGA1 / (2 * math.pi)
+    f = 1.0 / T
+    return Row("cantilever first natural frequency", f_ref, f, abs(f - f_ref) / f_ref, 0.01, "Hz")
+
+
+def axial_wave_speed(quick: bool = False) -> Row:
+    """Bar wave speed √(E/ρ) (< 2 %) from the fundamental axial mode of a free–free fiber,
+    c = 2 L f, started with the velocity field v = v₀ cos(π x/L)."""
+    m = straight_fiber()
+    c = MATERIAL.wave_speed_m_s
+    T = 2 * L_M / c
+    periods = 5 if quick else 20
+    st = State.at_rest(m)
+    st.v[:, 0] = 1e-3 * np.cos(math.pi * m.nodes_m[:, 0] / L_M)
+    res = simulate(m, [], SimulationSettings(end_time_s=(periods + 0.3) * T, output_frames=40 * periods + 1), state=st)
+    u = res.frames_positions[:, -1, 0] - L_M
+    Tm = _period_from_zero_crossings(res.frames_time, u)
+    cm = 2 * L_M / Tm
+    return Row("axial wave speed", c, cm, abs(cm - c) / c, 0.02, "m/s")
+
+
+def energy_drift(quick: bool = False) -> Row:
+    """Undamped free vibration: max |ETOTAL − ETOTAL₀| / ETOTAL₀ over 1e5 steps (< 0.5 %).
+
+    The cantilever is first deflected statically (damped) by a tip load with P L²/EI = 0.5
+    (tip deflection ≈ 16 % of L: geometrically nonlinear), then the load and damping are removed
+    and it vibrates freely; ETOTAL is then KE + SE (clamp reactions do no work)."""
+    from ..solver import choose_time_step
+
+    m = straight_fiber()
+    P = 0.5 * EI / L_M**2
+    pre = simulate(m, [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]),
+                       Damping(1.4 * OMEGA1)], SimulationSettings(end_time_s=4e-3, output_frames=2))
+    st = pre.final_state.copy()
+    st.v[:] = 0.0
+    st.w[:] = 0.0
+    st.t, st.step, st.acc[:] = 0.0, 0, 0.0
+    n_steps = 20_000 if quick else 100_000
+    dt, _ = choose_time_step(m, [], SimulationSettings())
+    res = simulate(m, [Clamps([Clamp(0, "start")])],
+                   SimulationSettings(end_time_s=n_steps * dt * (1 - 1e-12), output_frames=2, history_every=50),
+                   state=st)
+    h = res.history
+    tot = h["energy/total"]
+    e0 = h["energy/strain"][0] + h["energy/kinetic"][0]
+    drift = float(np.max(np.abs(tot - tot[0])) / e0)
+    return Row(f"energy drift, undamped free vibration ({res.steps} steps)", 0.0, drift, drift, 0.005)
+
+
+def euler_buckling(quick: bool = False) -> Row:
+    """Critical load of a pinned–pinned fiber compressed between plates vs π² E I / L² (< 2 %).
+
+    The fiber stands along z with a stress-free half-sine imperfection e₀ = L/2000; both end nodes
+    are pinned laterally (x, y fixed, rotations free), the lower plate is fixed and the upper one
+    closes slowly (damped). Pcr from a Southwell fit δ/P = δ/Pcr + e₀/Pcr of the mid-span
+    additional deflection δ against the upper plate force P."""
+    n = N_EL
+    z = np.linspace(0, L_M, n + 1)
+    e0 = L_M / 2000
+    x = np.column_stack([e0 * np.sin(math.pi * z / L_M), np.zeros_like(z), z])
+    m = build_model(x, [0, n + 1], R_M, MATERIAL)
+    Pcr = math.pi**2 * EI / L_M**2
+    T_load = 0.02 if quick else 0.04
+    U = 25e-6
+    om_pp = math.pi**2 / L_M**2 * math.sqrt(EI / (RHO * A_M2))
+    eff = [Clamps([Clamp(0, "start", "xy"), Clamp(0, "end", "xy")]),
+           Plates(axis="z", lower="fixed", upper="moving", displacement_m=U, velocity_m_s=U / T_load,
+                  ramp="smoothstep"),
+           Damping(1.0 * om_pp)]
+    res = simulate(m, eff, SimulationSettings(output_frames=401))
+    tf = res.frames_time
+    a = res.frames_positions[:, n // 2, 0]
+    h = res.history
+    P = np.interp(tf, h["time"], h["plate_force"][:, 1])
+    d = a - e0
+    sel = (d > 2 * e0) & (d < 20 * e0) & (P > 0)
+    if np.count_nonzero(sel) < 5:
+        return Row("Euler buckling load (Southwell)", Pcr, float("nan"), float("nan"), 0.02, "N",
+                   "not enough points")
+    slope, _ = np.polyfit(d[sel], d[sel] / P[sel], 1)
+    meas = 1.0 / slope
+    return Row("Euler buckling load pinned-pinned (Southwell)", Pcr, meas, abs(meas - Pcr) / Pcr, 0.02, "N",
+               f"plateau {P[-1]:.4g} N")
+
+
+CASES = {
+    "cantilever_small": cantilever_small,
+    "cantilever_large": cantilever_large,
+    "cantilever_frequency": cantilever_frequency,
+    "euler_buckling": euler_buckling,
+    "axial_wave_speed": axial_wave_speed,
+    "energy_drift": energy_drift,
+}
+
+
+def run_all(quick: bool = False, only: list[str] | None = None) -> list[Row]:
+    return [fn(quick=quick) for name, fn in CASES.items() if not only or name in only]

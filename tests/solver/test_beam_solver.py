@@ -1,0 +1,246 @@
+"""Unit tests of the beam solver core: model, stable step, invariances, effects, energies, API."""
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+
+from fiberpipe.errors import FiberpipeError, SimulationDiverged
+from fiberpipe.solver import (Clamp, Clamps, ContactHook, Damping, Drive, Drives, Gravity, LineLoad, Loads,
+                              Material, Plates, PointLoad, SimulationSettings, State, Walls, build_model,
+                              simulate, stable_time_step)
+from fiberpipe.solver._kernels_beam import beam_forces
+from fiberpipe.solver._kernels_integrate import ACC_PW
+from fiberpipe.solver.integrator import Integrator
+
+MAT = Material(15e9, 1380.0, 0.3)
+R = 0.25e-3
+
+
+def straight(n_el=50, L=15e-3):
+    x = np.zeros((n_el + 1, 3))
+    x[:, 0] = np.linspace(0, L, n_el + 1)
+    return x
+
+
+def helix(n=41, radius=2e-3, pitch=6e-3, turns=1.2):
+    s = np.linspace(0, turns * 2 * np.pi, n)
+    return np.column_stack([radius * np.cos(s), radius * np.sin(s), pitch * s / (2 * np.pi)])
+
+
+def internal_forces(model, x, q):
+    f = np.zeros((model.n_nodes, 3))
+    m = np.zeros((model.n_nodes, 3))
+    se, _ = beam_forces(x, q, model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest,
+                        model.theta_rest, f, m, True, 0.0, np.zeros((0, 6)))
+    return f, m, se
+
+
+def rot_z(a):
+    return np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+
+
+def test_model_masses_and_offsets():
+    x = np.vstack([straight(10), straight(20) + [0, 1e-3, 0]])
+    m = build_model(x, [0, 11, 32], [R, 2 * R], MAT)
+    assert m.n_elements == 30 and m.n_fibers == 2
+    A = np.pi * R**2
+    assert m.mass[:11].sum() == pytest.approx(1380 * A * 15e-3)
+    assert m.mass[11:].sum() == pytest.approx(1380 * 4 * A * 15e-3)
+    assert np.all(m.el_fiber[:10] == 0) and np.all(m.el_fiber[10:] == 1)
+    assert m.fiber_node_index(1, "end") == 31 and m.fiber_node_index(1, -2) == 30
+
+
+def test_bad_inputs_rejected():
+    with pytest.raises(FiberpipeError):
+        build_model(np.zeros((3, 3)), [0, 3], R, MAT)  # zero-length elements
+    with pytest.raises(FiberpipeError):
+        build_model(straight(4), [0, 2, 5], -1.0, MAT)
+    with pytest.raises(FiberpipeError):
+        Material(-1.0, 1000.0)
+
+
+def test_stable_time_step_matches_notes_table():
+    # notes/physics.md A3: Timoshenko B31-like, 0.3 mm elements, physical rotary inertia → 9.10e-8 s (axial)
+    rep = stable_time_step(build_model(straight(), [0, 51], R, MAT))
+    assert rep.dt_stable_s == pytest.approx(9.10e-8, rel=0.01)
+    assert rep.governing_mode == "axial"
+    assert rep.per_mode_s["torsion"] == pytest.approx(1.47e-7, rel=0.01)
+    small = stable_time_step(build_model(straight(), [0, 51], R, MAT, rotary_inertia_scale=0.01))
+    assert small.dt_stable_s == pytest.approx(9.1e-9, rel=0.02)
+
+
+def test_curved_fiber_is_stress_free_and_objective():
+    x = helix()
+    m = build_model(x, [0, len(x)], R, MAT)
+    f, mom, se = internal_forces(m, m.nodes_m.copy(), m.quats0.copy())
+    assert se == pytest.approx(0.0, abs=1e-25)
+    assert np.abs(f).max() < 1e-9 and np.abs(mom).max() < 1e-12
+    # rigid rotation + translation of the rest configuration: still no forces
+    Q = rot_z(0.7) @ np.array([[1, 0, 0], [0, math.cos(0.4), -math.sin(0.4)], [0, math.sin(0.4), math.cos(0.4)]])
+    from fiberpipe.solver.model import matrices_to_quats, quats_to_matrices
+
+    x2 = m.nodes_m @ Q.T + [1e-3, -2e-3, 5e-3]
+    q2 = matrices_to_quats(Q[None] @ quats_to_matrices(m.quats0))
+    f, mom, se = internal_forces(m, x2, q2)
+    assert se < 1e-20 and np.abs(f).max() < 1e-8 and np.abs(mom).max() < 1e-11
+
+
+def test_forces_are_balanced():
+    x = helix()
+    m = build_model(x, [0, len(x)], R, MAT)
+    rng = np.random.default_rng(0)
+    x2 = m.nodes_m + 2e-6 * rng.standard_normal(m.nodes_m.shape)
+    f, mom, _ = internal_forces(m, x2, m.quats0.copy())
+    assert np.allclose(f.sum(0), 0, atol=1e-12)
+    # total moment about the origin vanishes: Σ (x × f + m) = 0
+    assert np.allclose((np.cross(x2, f) + mom).sum(0), 0, atol=1e-12)
+
+
+def test_free_curved_fiber_conserves_energy_3d():
+    # bending, torsion, shear and gyroscopic coupling at once, no damping. The imposed nodal spins
+    # excite the shear mode near 2/Δt, whose leapfrog energy measure oscillates by O((ωΔt)²):
+    # check that the energy error converges at second order in Δt, and the momentum.
+    x = helix()
+    m = build_model(x, [0, len(x)], R, MAT)
+    dts = stable_time_step(m).dt_stable_s
+    s = np.linspace(0, 1, m.n_nodes)[:, None]
+    errs = []
+    for frac in (0.2, 0.1):
+        st = State.at_rest(m)
+        st.v[:] = 0.05 * np.hstack([np.sin(np.pi * s), np.cos(2 * np.pi * s), np.sin(3 * np.pi * s)])
+        st.w[:] = 300.0 * np.hstack([np.cos(np.pi * s), np.sin(2 * np.pi * s), np.cos(np.pi * s)])
+        res = simulate(m, [], SimulationSettings(dt_s=frac * dts, end_time_s=1.5e-4, output_frames=2,
+                                                 history_every=10), state=st)
+        tot = res.history["energy/total"]
+        e0 = res.history["energy/kinetic"][0] + res.history["energy/strain"][0]
+        errs.append(np.max(np.abs(tot - tot[0])) / e0)
+        p = (m.mass[:, None] * res.final_state.v).sum(0)
+        assert np.allclose(p, (m.mass[:, None] * st.v).sum(0), atol=1e-12)
+    assert errs[1] < 5e-3
+    assert errs[0] / errs[1] > 2.5
+
+
+def test_gravity_free_fall_and_external_work():
+    m = build_model(straight(10), [0, 11], R, MAT)
+    T = 1e-3
+    res = simulate(m, [Gravity([0, 0, -9.81])], SimulationSettings(end_time_s=T, output_frames=2))
+    t = res.frames_time[-1]
+    assert res.frames_positions[-1, :, 2].mean() == pytest.approx(-0.5 * 9.81 * t**2, rel=1e-3)
+    h = res.history
+    assert h["energy/external"][-1] == pytest.approx(h["energy/kinetic"][-1], rel=1e-3)
+    assert abs(h["energy/residual"][-1]) < 1e-3
+
+
+def test_damping_energy_balance_and_line_load():
+    m = build_model(straight(), [0, 51], R, MAT)
+    q = 0.5  # N/m
+    eff = [Clamps([Clamp(0, "start")]), Loads([LineLoad(0, [0, -q, 0])]), Damping(9000.0)]
+    res = simulate(m, eff, SimulationSettings(end_time_s=4e-3, output_frames=2))
+    I = np.pi * R**4 / 4
+    ref = q * 0.015**4 / (8 * 15e9 * I)
+    assert -res.frames_positions[-1, -1, 1] == pytest.approx(ref, rel=0.01)
+    h = res.history
+    assert h["energy/damping"][-1] > 0
+    assert np.max(np.abs(h["energy/residual"])) < 1e-3
+    # static: W_ext = 2 SE
+    assert h["energy/external"][-1] == pytest.approx(2 * h["energy/strain"][-1], rel=1e-3)
+
+
+def test_plate_reaction_equals_weight_and_walls():
+    x = straight(20, 6e-3)
+    m = build_model(x, [0, 21], R, MAT)
+    g = 200.0  # strong gravity to make the force large compared with noise
+    eff = [Gravity([0, 0, -g]), Plates(axis="z", lower="fixed", upper="none"), Damping(2e4),
+           Walls({"x": (-R - 1e-6, 6e-3 + R + 1e-6)})]
+    res = simulate(m, eff, SimulationSettings(end_time_s=2e-3, output_frames=2))
+    W = m.mass.sum() * g
+    assert res.history["plate_force"][-1, 0] == pytest.approx(W, rel=1e-3)
+    assert res.history["plate_force"][-1, 1] == 0.0
+    assert res.history["wall_force"].shape[1] == 2
+    assert np.all(res.history["wall_force"] == 0.0)
+    pen = R - (res.frames_positions[-1, :, 2] - (-R))
+    assert pen.max() > 0 and pen.max() < 0.01 * R  # penalty penetration is small
+
+
+def test_moving_plate_compresses_and_balances_energy():
+    # two crossed short fibers on top of each other, squeezed: here one fiber with its axis along x
+    x = straight(20, 6e-3)
+    m = build_model(x, [0, 21], R, MAT)
+    eff = [Plates(axis="y", lower="moving", upper="fixed", displacement_m=2e-6, velocity_m_s=0.05),
+           Damping(1e4)]
+    res = simulate(m, eff, SimulationSettings(output_frames=3))
+    h = res.history
+    assert h["plate_displacement"][-1, 0] == pytest.approx(2e-6, rel=1e-6)
+    assert h["plate_force"][-1, 0] > 0 and h["plate_force"][-1, 1] > 0
+    assert h["energy/external"][-1] > 0
+    assert abs(h["energy/residual"][-1]) < 0.02
+
+
+def test_drive_moves_fiber_rigidly():
+    x = np.vstack([straight(10, 3e-3), straight(10, 3e-3) + [0, 1e-3, 0]])
+    m = build_model(x, [0, 11, 22], R, MAT)
+    d = [0.0, 0.0, -0.3e-3]
+    res = simulate(m, [Drives([Drive(1, d, 1000e-3 / 60)])], SimulationSettings(output_frames=3))
+    disp = res.frames_positions[-1, 11:] - m.nodes_m[11:]
+    assert np.allclose(disp, d, atol=1e-12)
+    assert np.allclose(res.frames_positions[-1, :11], m.nodes_m[:11])
+    # smooth ramp: velocity is zero at the end
+    assert np.abs(res.final_state.v[11:]).max() < 1e-6
+
+
+def test_absent_effects_cost_no_memory():
+    m = build_model(straight(10), [0, 11], R, MAT)
+    integ = Integrator(m, [], 1e-8)
+    sc = integ.scene
+    assert sc.f_ext.size == 0 and sc.fix_mask.size == 0 and sc.pl_axis.size == 0
+    assert integ.strain_prev.size == 0 and not sc.contact_on
+
+
+def test_user_dt_above_limit_refused_and_forced_run_diagnosed():
+    m = build_model(straight(), [0, 51], R, MAT)
+    with pytest.raises(FiberpipeError, match="above the stable limit"):
+        simulate(m, [], SimulationSettings(dt_s=2e-7, end_time_s=1e-4))
+    st = State.at_rest(m)
+    st.x[25, 2] += 1e-7  # a small perturbation that the unstable step amplifies
+    with pytest.raises(SimulationDiverged) as ei:
+        simulate(m, [Clamps([Clamp(0, "start")])],
+                 SimulationSettings(dt_s=1.3e-7, force_dt=True, end_time_s=2e-3, output_frames=5), state=st)
+    exc = ei.value
+    assert "fiber 0" in str(exc) and "stable limit" in str(exc)
+    pr = exc.partial_result
+    assert not pr.completed and len(pr.frames_time) >= 1 and np.all(np.isfinite(pr.frames_positions))
+
+
+@njit(cache=True)
+def _push_kernel(x, q, v, w, f, mom, acc, t, dt, data):
+    # a fake contact pass: constant force on one node, its work bookkept as penalty work
+    i = int(data[0][0])
+    f[i, 2] += data[0][1]
+    acc[ACC_PW] += data[0][1] * v[i, 2] * dt
+    return 7
+
+
+def test_contact_hook_is_called():
+    m = build_model(straight(10), [0, 11], R, MAT)
+    hook = ContactHook(_push_kernel, (np.array([10.0, 1e-3]),))
+    res = simulate(m, [Clamps([Clamp(0, "start")]), hook, Damping(2e4)],
+                   SimulationSettings(end_time_s=2e-3, output_frames=2))
+    assert np.all(res.history["contacts"] == 7)
+    assert res.frames_positions[-1, -1, 2] > 0  # pushed up
+    assert "contact" in res.effects
+
+
+def test_effects_parameter_checks():
+    with pytest.raises(FiberpipeError):
+        Damping(-1.0)
+    with pytest.raises(FiberpipeError):
+        Plates(axis="w")
+    with pytest.raises(FiberpipeError):
+        Plates(lower="moving", displacement_m=0.0)
+    with pytest.raises(FiberpipeError):
+        Walls({"x": (1.0, 0.0)})
+    m = build_model(straight(10), [0, 11], R, MAT)
+    with pytest.raises(FiberpipeError, match="fiber 3"):
+        simulate(m, [Clamps([Clamp(3, "start")])], SimulationSettings(end_time_s=1e-6))
