@@ -1,0 +1,121 @@
+"""Bad input through the CLI: a one-line error, non-zero exit, no traceback, earlier results kept.
+
+Includes a property-based (hypothesis) fuzz over malformed configs and volumes.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fiberpipe.cli import main
+
+GOOD = {
+    "name": "fuzz",
+    "input": {"polylines": [[[0, 0, 0], ["3 mm", 0, 0]], [[0, "1 mm", 0], ["3 mm", "1 mm", 0]]]},
+    "fiber": {"radius": "0.25 mm"},
+    "mesh": {"element_length": "0.3 mm"},
+}
+
+
+def _invoke(args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def _assert_clean_failure(result):
+    assert result.exit_code != 0, result.output
+    assert "Traceback" not in result.output
+    errors = [ln for ln in result.output.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+
+
+def _volume_config(tmp_path: Path, volume_name: str, **extra) -> Path:
+    cfg = {"name": "vol", "input": {"volume": volume_name, "voxel_size": "15 um", **extra}}
+    p = tmp_path / "vol.yaml"
+    p.write_text(yaml.safe_dump(cfg))
+    return p
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: np.save(d / "v.npy", np.zeros((0, 4, 4))), "empty"),
+        (lambda d: np.save(d / "v.npy", np.full((8, 8, 8), np.nan)), "NaN"),
+        (lambda d: np.save(d / "v.npy", np.zeros((16, 16))), "2D"),
+        (lambda d: np.save(d / "v.npy", np.ones((16, 16, 16))), ""),
+        (lambda d: (d / "v.npy").write_bytes(b"\x93NUMPY garbage"), ""),
+    ],
+)
+def test_bad_volumes(tmp_path, make, message):
+    make(tmp_path)
+    r = _invoke(["run", _volume_config(tmp_path, "v.npy"), "--out", tmp_path / "run"])
+    _assert_clean_failure(r)
+    assert message.lower() in r.output.lower()
+
+
+@pytest.mark.parametrize("content", [b"", b"II*\x00 truncated tiff", b"not a tiff at all"])
+def test_bad_tiffs(tmp_path, content):
+    (tmp_path / "v.tif").write_bytes(content)
+    _assert_clean_failure(_invoke(["run", _volume_config(tmp_path, "v.tif"), "--out", tmp_path / "run"]))
+
+
+def test_wrong_artifact_kind_is_refused(tmp_path):
+    p = tmp_path / "good.yaml"
+    p.write_text(yaml.safe_dump(GOOD))
+    assert _invoke(["run", p, "--out", tmp_path / "run", "--to", "mesh"]).exit_code == 0
+    cfg = dict(GOOD, input={"fibers": str(tmp_path / "run" / "mesh.h5")})
+    q = tmp_path / "wrongkind.yaml"
+    q.write_text(yaml.safe_dump(cfg))
+    r = _invoke(["run", q, "--out", tmp_path / "run2"])
+    _assert_clean_failure(r)
+    assert "is a mesh artifact, but a fibers artifact is needed" in r.output
+
+
+# -- fuzz -----------------------------------------------------------------------------------------
+
+SECTIONS = ["name", "input", "segment", "trace", "mesh", "material", "fiber", "scene", "solver", "post", "bogus"]
+KEYS = ["radius", "element_length", "youngs_modulus", "density", "effects", "mu", "alpha", "dt_safety", "law", "x", "polylines", "typo"]
+VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-5, 5),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+    st.sampled_from(["0.3 mm", "-1 mm", "15 GPa", "3 kg", "1e5 1/s", "nan mm", "1/0", "mm", "[", "{a: 1}"]),
+    st.lists(st.integers(-2, 2), max_size=3),
+)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(section=st.sampled_from(SECTIONS), key=st.sampled_from(KEYS), value=VALUES)
+def test_fuzzed_configs_fail_cleanly_or_run(tmp_path, section, key, value):
+    cfg = yaml.safe_load(yaml.safe_dump(GOOD))
+    if section in ("name",):
+        cfg["name"] = value
+    else:
+        if not isinstance(cfg.get(section), dict):
+            cfg[section] = {}
+        cfg[section][key] = value
+    p = tmp_path / "fuzz.yaml"
+    p.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "run"
+    r = _invoke(["run", p, "--out", out, "--to", "mesh"])
+    if r.exit_code == 0:
+        assert (out / "mesh.h5").exists()
+    else:
+        _assert_clean_failure(r)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(shape=st.lists(st.integers(0, 12), min_size=1, max_size=4), fill=st.sampled_from([0.0, 1.0, np.nan, np.inf, "random"]))
+def test_fuzzed_volumes_fail_cleanly_or_run(tmp_path, shape, fill):
+    arr = np.random.default_rng(0).random(shape) if fill == "random" else np.full(shape, fill)
+    np.save(tmp_path / "v.npy", arr)
+    r = _invoke(["run", _volume_config(tmp_path, "v.npy"), "--out", tmp_path / "run", "--to", "trace"])
+    if r.exit_code != 0:
+        _assert_clean_failure(r)
