@@ -137,8 +137,8 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
 
     Returns
     -------
-    (strain_energy_J, damping_power_W) : the stored energy if ``record``; the power dissipated by
-    the stiffness-proportional damping stress (0 if off).
+    (strain_energy_J, damping_energy_J) : the stored energy if ``record``; the energy dissipated
+    in this step by the stiffness-proportional damping stress (0 if off).
     """
     se = 0.0
     pd = 0.0
@@ -201,7 +201,7 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
             sm0 = beta_over_dt * d0 * dk0
             sm1 = beta_over_dt * d1 * dk1
             sm2 = beta_over_dt * d2 * dk2
-            # power = stress · strain rate (per unit time: Δstrain/Δt = (β/Δt)⁻¹ ... ) — use β/Δt form
+            # energy dissipated this step: damping stress · Δstrain · L0
             pd += ((sn0 * dg0 + sn1 * dg1 + sn2 * dg2) / il + sm0 * dk0 + sm1 * dk1 + sm2 * dk2)
             nb0 += sn0
             nb1 += sn1
