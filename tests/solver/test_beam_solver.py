@@ -244,3 +244,17 @@ def test_effects_parameter_checks():
     m = build_model(straight(10), [0, 11], R, MAT)
     with pytest.raises(FiberpipeError, match="fiber 3"):
         simulate(m, [Clamps([Clamp(3, "start")])], SimulationSettings(end_time_s=1e-6))
+
+
+def test_stiffness_proportional_damping_dissipates_and_balances():
+    m = build_model(straight(), [0, 51], R, MAT)
+    beta = 2e-9
+    from fiberpipe.solver import choose_time_step
+
+    dt, rep = choose_time_step(m, [Damping(0.0, beta)], SimulationSettings())
+    assert rep.dt_stable_s < stable_time_step(m).dt_stable_s
+    eff = [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -1e-3], "end")]), Damping(3000.0, beta)]
+    res = simulate(m, eff, SimulationSettings(end_time_s=1e-3, output_frames=2))
+    h = res.history
+    assert h["energy/damping"][-1] > 0
+    assert np.max(np.abs(h["energy/residual"][len(h["time"]) // 10:])) < 1e-2
