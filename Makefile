@@ -8,7 +8,7 @@ FP     := $(VENV)/bin/fiberpipe
 export NUMBA_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 
-.PHONY: setup demo test test-all verify bench bench-imaging bench-solver clean help
+.PHONY: setup demo test test-all verify bench bench-imaging bench-solver reproduce studies clean help
 
 help:
 	@echo "make setup    create .venv and install fiberpipe with its test extras"
@@ -45,6 +45,20 @@ bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
 bench: bench-solver bench-imaging
+
+# The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
+REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/identified paper-40/oriented \
+                 paper-40/alpha-0 paper-40/alpha-1e4
+REPRO_RUNS := $(addprefix runs/reproduce/,$(subst /,-,$(REPRO_CONFIGS)))
+
+runs/reproduce/%: setup
+	$(FP) --quiet run configs/$(subst paper-40-,paper-40/,$*).yaml --out $@
+
+reproduce: $(REPRO_RUNS)
+	$(FP) compare $(REPRO_RUNS) --out runs/reproduce/comparison
+
+studies: setup
+	for s in configs/studies/*.yaml; do $(FP) study $$s --out runs/studies/$$(basename $$s .yaml) || exit 1; done
 
 clean:
 	rm -rf runs .pytest_cache

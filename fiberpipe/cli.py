@@ -160,6 +160,16 @@ def phantom(out, **kw):
 
 
 @main.command()
+@click.argument("run_dirs", nargs=-1, required=True, type=click.Path(file_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), required=True, help="Folder for comparison.png and comparison.md.")
+def compare(run_dirs, out):
+    """Gather the force-displacement curves of several run folders into one plot and table."""
+    from fiberpipe.post.compare import compare_runs
+
+    click.echo(compare_runs([Path(d) for d in run_dirs], Path(out)))
+
+
+@main.command()
 @click.argument("artifact", type=click.Path(dir_okay=False))
 @click.option("--check", is_flag=True, help="Verify the artifact's integrity and the hashes of its inputs.")
 def inspect(artifact, check):

@@ -1,0 +1,58 @@
+"""Gather the curves of several runs into one comparison plot and table (``make reproduce``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fiberpipe.artifacts import write_text_atomic
+from fiberpipe.errors import InputError
+from fiberpipe.post.curves import force_displacement
+from fiberpipe.post.history import load_simulation
+from fiberpipe.post.plots import plot_force_displacement
+
+
+def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
+    """Write ``comparison.png`` (F(U) of every run) and ``comparison.md`` (key figures); return the table."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    curves, rows = {}, []
+    for d in run_dirs:
+        d = Path(d)
+        sim_path = d / "simulation.h5"
+        if not sim_path.exists():
+            raise InputError(f"{d} has no simulation.h5: run it first")
+        sim = load_simulation(sim_path)
+        name = d.name
+        summary = {}
+        if (d / "post" / "summary.json").exists():
+            summary = json.loads((d / "post" / "summary.json").read_text())
+        try:
+            U, F = force_displacement(sim)
+            curves[name] = (U, F)
+            final = float(F[-1])
+            peak = float(np.max(F))
+        except KeyError:
+            final = peak = float("nan")
+        rows.append(
+            {
+                "run": name,
+                "final_load_N": final,
+                "max_load_N": peak,
+                "peak_ke_over_se": summary.get("peak_ke_over_se", float("nan")),
+                "energy_residual": summary.get("energy_balance_residual_max", float("nan")),
+                "steps": int(sim.attrs.get("steps", 0)),
+                "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
+            }
+        )
+    if curves:
+        plot_force_displacement(out_dir / "comparison.png", curves, title="compaction load, all runs")
+    cols = list(rows[0]) if rows else []
+    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    for r in rows:
+        lines.append("| " + " | ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r.values()) + " |")
+    table = "\n".join(lines)
+    write_text_atomic(out_dir / "comparison.md", "# Comparison\n\n" + table + "\n\n![F(U)](comparison.png)\n")
+    return table
