@@ -143,11 +143,31 @@ def trace(config, out, force, truth):
 @click.option("--cnr", "contrast_to_noise", default=5.0, show_default=True, type=float, help="Contrast-to-noise ratio.")
 @click.option("--blur", "blur_sigma_vox", default=1.0, show_default=True, type=float, help="PSF sigma, voxels.")
 @click.option("--seed", default=0, show_default=True, type=int)
-def phantom(out, **kw):
-    """Make a synthetic CT volume of curved, touching fibers with its ground truth."""
+@click.option("--from-simulation", "from_simulation", type=click.Path(dir_okay=False),
+              help="Render a frame of this simulation.h5 instead (closes the loop: trace it again).")
+@click.option("--frame", default=-1, show_default=True, type=int, help="Frame index for --from-simulation.")
+def phantom(out, from_simulation, frame, **kw):
+    """Make a synthetic CT volume of curved, touching fibers with its ground truth.
+
+    With --from-simulation, render a simulated frame instead; truth.h5 then holds that frame's
+    mid-lines in the volume's coordinates (origin of voxel 0 in the 'origin_m' attribute).
+    """
     from fiberpipe.config import PhantomConfig
     from fiberpipe.errors import ConfigError
     from fiberpipe.stages.phantom import run_phantom
+
+    if from_simulation:
+        from fiberpipe.stages.phantom import render_simulation_frame
+        from fiberpipe.units import to_si
+
+        try:
+            vs = to_si(kw["voxel_size"], "length")
+        except ValueError as exc:
+            raise ConfigError(f"--voxel-size: {exc}") from None
+        figures = render_simulation_frame(Path(from_simulation), frame, vs, Path(out), contrast_to_noise=kw["contrast_to_noise"],
+                                          blur_sigma_vox=kw["blur_sigma_vox"], seed=kw["seed"])
+        click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {frame}, shape {figures['shape']}")
+        return
 
     kw["shape"] = list(kw["shape"])
     kw["voxel_size"] = kw["voxel_size"]

@@ -28,3 +28,21 @@ def run_phantom(pcfg: PhantomConfig, out_dir: Path, *, config_sha256: str = "") 
     save_volume_tif(out_dir / "volume.tif", volume, pcfg.voxel_size)
     write_fibers(out_dir / "truth.h5", truth, config_sha256=config_sha256)
     return {"fibers": int(truth.n_fibers), "shape": list(volume.shape), "voxel_size_m": pcfg.voxel_size}
+
+
+def render_simulation_frame(sim_path: Path, frame: int, voxel_size_m: float, out_dir: Path, **render_kw) -> dict:
+    """Render frame ``frame`` of a simulation into ``out_dir/volume.tif`` + ``truth.h5`` (closed loop)."""
+    from fiberpipe.imaging.io import save_volume_tif
+    from fiberpipe.polylines import Polylines
+    from fiberpipe.post.closed_loop import frame_polylines, render_for_tracing
+    from fiberpipe.post.history import load_simulation
+
+    sim = load_simulation(sim_path)
+    fibers = frame_polylines(sim, frame)
+    vol, origin = render_for_tracing(fibers, voxel_size_m, **render_kw)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_volume_tif(out_dir / "volume.tif", vol, voxel_size_m)
+    shifted = Polylines(fibers.points_m - origin, fibers.offsets, fibers.radius_m)
+    write_fibers(out_dir / "truth.h5", shifted, attrs={"origin_m": [float(v) for v in origin], "frame": int(frame)})
+    return {"shape": list(vol.shape), "origin_m": [float(v) for v in origin]}
