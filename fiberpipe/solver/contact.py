@@ -424,3 +424,11 @@ def compute_contact(x, seg_nodes, seg_radius, pairs, n_pairs, law, f_out, buffer
         buffers.delta,
     )
     return e, na, buffers
+
+
+def contact_effect(model, scene_cfg, material=None):
+    """The scene's contact/friction hook (``build_simulation`` calls this); see
+    :func:`fiberpipe.solver.contact_effect.contact_effect`."""
+    from fiberpipe.solver.contact_effect import contact_effect as _factory
+
+    return _factory(model, scene_cfg, material)

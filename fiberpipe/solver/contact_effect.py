@@ -1,0 +1,332 @@
+"""The fiber–fiber contact/friction hook of the step loop: ``contact_effect(model, scene_cfg, material)``.
+
+Builds a :class:`fiberpipe.solver.effects.ContactHook` whose kernel :func:`contact_step` runs once per
+step (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
+
+1. Verlet list: rebuilt when a node has moved more than skin/2 since the last build (or at the first
+   call); the new list goes into the spare buffers, the friction history is remapped by pair key,
+   then the buffers are swapped. Buffers live in numba typed lists inside ``data``, so the kernel
+   grows them itself when :func:`fiberpipe.solver.neighbours.build_pairs` reports an overflow
+   (no Python round trip, no lost contacts).
+2. Normal contact forces (:func:`fiberpipe.solver.contact.contact_forces`) with the scene's law.
+3. Friction (if ``friction`` is in ``scene.effects``): fiber–fiber
+   (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
+   the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
+   rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
+4. Energies: ALLPW += work of all contact forces on the fibers (trapezoid ``½Δt(f_{n−1} + f_n)·v_{n−½}``,
+   so the work of step n is complete one call later) + the friction dissipation; ALLFD += friction
+   dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
+   elastic contact energy and the friction loss, as Abaqus' ALLPW includes penalty friction).
+
+Returns the number of fiber–fiber segment pairs in contact (history column ``contacts``).
+Forces act on the centre lines (no moments; friction does not make fibers roll): see
+``docs/contact.md`` "What's left".
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numba.typed import List
+
+from ..errors import FiberpipeError
+from ._kernels_boundary import ramp_fraction
+from ._kernels_integrate import ACC_FD, ACC_PW
+from .contact import contact_forces, gauss_points
+from .friction import friction_forces, plane_friction, remap_history
+from .laws import make_law
+from .neighbours import build_pairs, max_displacement_exceeds
+
+# integer state slots (data[I_STATE])
+IS_LAW = 0
+IS_FRICTION = 1       # 1: fiber–fiber friction on
+IS_PLANE_FRICTION = 2  # 1: fiber–plane friction on
+IS_NPAIRS = 3
+IS_NBUILDS = 4
+IS_NGROW = 5          # times the buffers grew
+IS_NACTIVE = 6
+IS_SIZE = 8
+# float state slots (data[F_STATE])
+FS_SKIN = 0
+FS_SEXCL = 1
+FS_MU = 2
+FS_KT = 3
+FS_FN_SUM = 4        # Σ normal force of the pairs in contact at the last step, N
+FS_DELTA_MAX = 5     # largest penetration at the last step, m
+FS_FRIC_SUM = 6      # Σ |f_t| (fiber–fiber) at the last step, N
+FS_SIZE = 8
+
+DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max
+DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
+DEFAULT_PAIRS_PER_SEGMENT = 16     # initial capacity per segment (grown by the kernel if needed)
+
+
+@njit(cache=True)
+def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1):
+    """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
+    history, swap. L_h2 = [hist, hist_spare, c_n]; L_h1 = [c_fn, c_s, c_t, c_phi, c_delta]."""
+    while True:
+        n = build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, fstate[FS_SKIN], fstate[FS_SEXCL],
+                        L_pairs[1], L_keys[1])
+        if n >= 0:
+            break
+        cap = int(1.5 * (-n)) + 64
+        L_pairs[1] = np.zeros((cap, 2), np.int64)
+        L_keys[1] = np.zeros(cap, np.int64)
+        L_h2[1] = np.zeros((cap, 3))
+        istate[IS_NGROW] += 1
+    if L_h2[1].shape[0] < L_pairs[1].shape[0]:
+        L_h2[1] = np.zeros((L_pairs[1].shape[0], 3))
+    if L_h1[0].shape[0] < n:
+        cap = L_pairs[1].shape[0]
+        L_h2[2] = np.zeros((cap, 3))
+        for k in range(5):
+            L_h1[k] = np.zeros(cap)
+    if istate[IS_FRICTION] == 1:
+        remap_history(L_keys[0], istate[IS_NPAIRS], L_h2[0], L_keys[1], n, L_h2[1])
+    tp = L_pairs[0]
+    L_pairs[0] = L_pairs[1]
+    L_pairs[1] = tp
+    tk = L_keys[0]
+    L_keys[0] = L_keys[1]
+    L_keys[1] = tk
+    th = L_h2[0]
+    L_h2[0] = L_h2[1]
+    L_h2[1] = th
+    istate[IS_NPAIRS] = n
+    istate[IS_NBUILDS] += 1
+    x_ref[:, :] = x
+
+
+@njit(cache=True, fastmath=True)
+def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
+    """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring."""
+    (istate, fstate, seg_nodes, seg_radius, seg_fiber, seg_arc, law_params, gxi, gw, x_ref,
+     L_pairs, L_keys, L_h2, L_h1, fc, fc_prev,
+     radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
+     pl_hist, pl_tforce) = data
+    N = x.shape[0]
+    if istate[IS_NBUILDS] == 0 or max_displacement_exceeds(x, x_ref, 0.5 * fstate[FS_SKIN]):
+        _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1)
+    pairs = L_pairs[0]
+    hist = L_h2[0]
+    c_n = L_h2[2]
+    c_fn = L_h1[0]
+    c_s = L_h1[1]
+    c_t = L_h1[2]
+    c_phi = L_h1[3]
+    c_delta = L_h1[4]
+    n_pairs = istate[IS_NPAIRS]
+    for i in range(N):
+        fc[i, 0] = 0.0
+        fc[i, 1] = 0.0
+        fc[i, 2] = 0.0
+    energy, n_active = contact_forces(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
+                                      gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta)
+    diss = 0.0
+    mu = fstate[FS_MU]
+    kt = fstate[FS_KT]
+    if istate[IS_FRICTION] == 1:
+        diss += friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, kt, dt, hist, fc)
+    P = pl_axis.shape[0]
+    if istate[IS_PLANE_FRICTION] == 1 and P > 0:
+        for p in range(P):
+            r0 = ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
+            pl_pos[p] = pl_pos0[p] + pl_sign[p] * pl_move[p] * r0
+            vel = pl_sign[p] * pl_move[p] * (r0 - ramp_fraction(t - dt, pl_T[p], pl_ta[p], pl_mode[p])) / dt
+            pl_vel[p, 0] = 0.0
+            pl_vel[p, 1] = 0.0
+            pl_vel[p, 2] = 0.0
+            pl_vel[p, pl_axis[p]] = vel
+        diss += plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, kt, dt, pl_hist, fc,
+                               pl_tforce)
+    # work of the contact forces on the fibers: ½Δt (f_{n−1} + f_n)·v_{n−½}; add to f; keep f_n
+    pw = 0.0
+    for i in range(N):
+        a0 = fc[i, 0]
+        a1 = fc[i, 1]
+        a2 = fc[i, 2]
+        pw += (a0 + fc_prev[i, 0]) * v[i, 0] + (a1 + fc_prev[i, 1]) * v[i, 1] + (a2 + fc_prev[i, 2]) * v[i, 2]
+        f[i, 0] += a0
+        f[i, 1] += a1
+        f[i, 2] += a2
+        fc_prev[i, 0] = a0
+        fc_prev[i, 1] = a1
+        fc_prev[i, 2] = a2
+    acc[ACC_PW] += 0.5 * dt * pw + diss
+    acc[ACC_FD] += diss
+    # statistics of this step
+    fsum = 0.0
+    dmax = 0.0
+    for k in range(n_pairs):
+        if c_fn[k] > 0.0:
+            fsum += c_fn[k]
+            if c_delta[k] > dmax:
+                dmax = c_delta[k]
+    fstate[FS_FN_SUM] = fsum
+    fstate[FS_DELTA_MAX] = dmax
+    istate[IS_NACTIVE] = n_active
+    return n_active
+
+
+def law_from_config(contact_cfg, material):
+    """A :class:`fiberpipe.solver.laws.ContactLaw` from the scene's ``contact`` block (SI values)."""
+    E = float(material.youngs_modulus_pa)
+    nu = material.poisson_ratio
+    if nu is None:  # from the shear modulus
+        nu = E / (2.0 * float(material.shear_modulus_pa)) - 1.0
+    kw = dict(E_pa=E, nu=float(nu))
+    name = getattr(contact_cfg, "law", "hertz_oriented") if contact_cfg is not None else "hertz_oriented"
+    if name == "linear":
+        return make_law("linear", stiffness=float(contact_cfg.stiffness), **kw)
+    if name == "scaled_stiffness":
+        if contact_cfg.preset is not None:
+            return make_law("scaled_stiffness", preset=contact_cfg.preset, **kw)
+        return make_law("scaled_stiffness", d_m=float(contact_cfg.d), S=float(contact_cfg.s),
+                        S0=float(contact_cfg.s0), K_def=float(contact_cfg.k_def), **kw)
+    if name == "hertz_crossed":
+        return make_law("hertz_crossed", phi_deg=math.degrees(float(contact_cfg.angle)), **kw)
+    return make_law(name, **kw)
+
+
+class ContactSetup:
+    """Everything ``prepare`` builds, kept for inspection after a run (``hook.setup_info``)."""
+
+    def __init__(self, law, contact_on, friction_on, mu, k_t, skin, n_gauss):
+        self.law = law
+        self.contact_on = contact_on
+        self.friction_on = friction_on
+        self.mu = mu
+        self.k_t = k_t
+        self.skin = skin
+        self.n_gauss = n_gauss
+        self.data = None
+
+    # convenient views of the kernel state
+    @property
+    def n_pairs(self) -> int:
+        return int(self.data[0][IS_NPAIRS])
+
+    @property
+    def n_builds(self) -> int:
+        return int(self.data[0][IS_NBUILDS])
+
+    @property
+    def n_active(self) -> int:
+        return int(self.data[0][IS_NACTIVE])
+
+    @property
+    def normal_force_sum(self) -> float:
+        return float(self.data[1][FS_FN_SUM])
+
+    def records(self):
+        """(pairs, c_fn, c_n, c_s, c_t, c_phi, c_delta) of the last step (copies, first n_pairs rows)."""
+        n = self.n_pairs
+        L_pairs, L_h2, L_h1 = self.data[10], self.data[12], self.data[13]
+        return (np.array(L_pairs[0][:n]), np.array(L_h1[0][:n]), np.array(L_h2[2][:n]), np.array(L_h1[1][:n]),
+                np.array(L_h1[2][:n]), np.array(L_h1[3][:n]), np.array(L_h1[4][:n]))
+
+
+def make_contact_hook(model, *, law=None, contact: bool = True, friction: bool = False, mu: float = 0.2,
+                      k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
+                      plane_friction_on: bool = True):
+    """A :class:`ContactHook` for ``model`` (Python API; :func:`contact_effect` maps a config onto it).
+
+    law : ContactLaw (default hertz_oriented for the model's material). contact : fiber–fiber normal
+    contact on. friction : Coulomb friction on (fiber–fiber if ``contact``, and fiber–plane for the
+    scene's plates/walls if ``plane_friction_on``). mu : coefficient. k_t : N/m, tangential penalty
+    (default 0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin (default 0.2 r_max).
+    n_gauss : Gauss points per segment in the line part.
+    """
+    from .effects import ContactHook
+
+    mat = model.material
+    if law is None:
+        law = make_law("hertz_oriented", E_pa=mat.youngs_modulus_pa,
+                       nu=mat.poisson_ratio if mat.poisson_ratio is not None else 0.3)
+    E = model.n_elements
+    seg_nodes = np.empty((E, 2), np.int64)
+    seg_nodes[:, 0] = model.el_n1
+    seg_nodes[:, 1] = model.el_n1 + 1
+    seg_radius = np.ascontiguousarray(model.el_radius, dtype=np.float64)
+    seg_fiber = np.ascontiguousarray(model.el_fiber, dtype=np.int64)
+    L0 = np.asarray(model.el_L0, dtype=np.float64)
+    arc = np.empty((E, 2))
+    acc = 0.0
+    for e in range(E):
+        if e == 0 or seg_fiber[e] != seg_fiber[e - 1]:
+            acc = 0.0
+        arc[e, 0] = acc
+        acc += L0[e]
+        arc[e, 1] = acc
+    rmax = float(seg_radius.max()) if E else 0.0
+    skin = float(skin_m) if skin_m is not None else DEFAULT_SKIN_FACTOR * rmax
+    if not skin > 0:
+        raise FiberpipeError(f"contact.skin must be > 0, got {skin}")
+    if mu < 0:
+        raise FiberpipeError(f"friction.mu must be >= 0, got {mu}")
+    info = ContactSetup(law, contact, friction, mu, k_t, skin, n_gauss)
+
+    def prepare(model_, scene):
+        dt = float(scene.dt)
+        kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / dt) ** 2
+        info.k_t = kt
+        N = model_.n_nodes
+        cap = max(DEFAULT_PAIRS_PER_SEGMENT * E, 64) if contact else 1
+        istate = np.zeros(IS_SIZE, np.int64)
+        fstate = np.zeros(FS_SIZE)
+        istate[IS_LAW] = law.law_id
+        istate[IS_FRICTION] = 1 if (friction and contact) else 0
+        P = scene.pl_axis.size
+        istate[IS_PLANE_FRICTION] = 1 if (friction and plane_friction_on and P > 0) else 0
+        fstate[FS_SKIN] = skin
+        fstate[FS_SEXCL] = 2.0 * rmax
+        fstate[FS_MU] = mu
+        fstate[FS_KT] = kt
+        gxi, gw = gauss_points(n_gauss)
+        L_pairs = List([np.zeros((cap, 2), np.int64), np.zeros((cap, 2), np.int64)])
+        L_keys = List([np.zeros(cap, np.int64), np.zeros(cap, np.int64)])
+        L_h2 = List([np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))])
+        L_h1 = List([np.zeros(cap) for _ in range(5)])
+        k_pen = scene.k_pen() if P > 0 else np.zeros(0)
+        seg_nodes_u = seg_nodes if contact else seg_nodes[:0]
+        data = (istate, fstate, seg_nodes_u, seg_radius[: len(seg_nodes_u)], seg_fiber[: len(seg_nodes_u)],
+                arc[: len(seg_nodes_u)], law.params(), gxi, gw, np.array(model_.nodes_m, dtype=np.float64),
+                L_pairs, L_keys, L_h2, L_h1, np.zeros((N, 3)), np.zeros((N, 3)),
+                np.ascontiguousarray(model_.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
+                scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), scene.pl_pos0.astype(np.float64),
+                scene.pl_move.astype(np.float64), scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64),
+                scene.pl_mode.astype(np.int64), scene.pl_pos0.astype(np.float64).copy(), np.zeros((P, 3)),
+                np.zeros((N, max(P, 1), 3)), np.zeros((max(P, 1), 3)))
+        info.data = data
+        return data
+
+    hook = ContactHook(kernel=contact_step, prepare=prepare)
+    hook.setup_info = info
+    if not contact:
+        hook.name = "friction"
+    return hook
+
+
+def contact_effect(model, scene_cfg, material=None):
+    """The scene's fiber–fiber contact (and friction) as a :class:`ContactHook`.
+
+    Reads ``scene_cfg.effects`` (``contact``, ``friction``), ``scene_cfg.contact`` (``law``,
+    ``preset``/``k_def``/``s0``/``s``/``d``, ``stiffness``, ``angle``, ``skin``) and
+    ``scene_cfg.friction`` (``mu``, ``stiffness`` = k_t in N/m). ``material``: the solver's
+    :class:`fiberpipe.solver.model.Material` (default: the model's).
+    """
+    material = material if material is not None else model.material
+    effects = list(getattr(scene_cfg, "effects", []) or [])
+    contact_on = "contact" in effects
+    friction_on = "friction" in effects
+    ccfg = getattr(scene_cfg, "contact", None)
+    fcfg = getattr(scene_cfg, "friction", None)
+    law = law_from_config(ccfg, material)
+    skin = getattr(ccfg, "skin", None) if ccfg is not None else None
+    mu = float(getattr(fcfg, "mu", 0.2)) if fcfg is not None else 0.2
+    kt = getattr(fcfg, "stiffness", None) if fcfg is not None else None
+    return make_contact_hook(model, law=law, contact=contact_on, friction=friction_on, mu=mu,
+                             k_t=None if kt is None else float(kt), skin_m=None if skin is None else float(skin))
