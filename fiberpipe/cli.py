@@ -106,7 +106,30 @@ def _stage_command(name: str, doc: str):
 _stage_command("segment", "Segment the volume into a fiber mask (mask.h5).")
 _stage_command("skeletonize", "Thin the mask to a skeleton with local radii (skeleton.h5).")
 _stage_command("mesh", "Mesh the fibers into beam elements (mesh.h5, mesh.vtu, model.inp).")
-_stage_command("simulate", "Simulate the scene on the mesh (simulation.h5, frames/*.vtu, simulation.pvd).")
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
+@click.option("--force", is_flag=True, help="Rerun even if up to date; discards a checkpoint.")
+@click.option("--resume", is_flag=True, help="Continue from the run folder's simulation.checkpoint.h5 (same config and mesh).")
+def simulate(config, out, force, resume):
+    """Simulate the scene on the mesh (simulation.h5, frames/*.vtu, simulation.pvd).
+
+    Reads its inputs from, and writes into, the run folder. Writes simulation.checkpoint.h5 every
+    solver.checkpoint_every steps and on Ctrl-C/SIGTERM (exit status 130/143); without --resume a
+    checkpoint of the same config is picked up too, --force discards it.
+    """
+    from fiberpipe.errors import ConfigError
+    from fiberpipe.pipeline import run_pipeline
+
+    if resume and force:
+        raise ConfigError("--resume and --force contradict each other (--force discards the checkpoint)")
+    cfg = _load(config)
+    out = Path(out) if out else _default_out(config)
+    run_pipeline(cfg, out, from_stage="simulate", to_stage="simulate", force=force, echo=click.echo,
+                 resume="require" if resume else None)
+
 _stage_command("post", "Post-process a simulation: curves, energies, plots, report (post/).")
 
 

@@ -112,10 +112,10 @@ def _do_mesh(cfg, run_dir, inputs, key):
     return run_mesh(cfg, inputs["fibers"], run_dir / "mesh.h5", config_sha256=key)
 
 
-def _do_simulate(cfg, run_dir, inputs, key):
+def _do_simulate(cfg, run_dir, inputs, key, *, resume="auto", echo=None):
     from fiberpipe.stages.simulate import run_simulate
 
-    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key)
+    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume, echo=echo)
 
 
 def _do_post(cfg, run_dir, inputs, key):
@@ -226,6 +226,7 @@ def run_pipeline(
     to_stage: str | None = None,
     force: bool = False,
     echo: Callable[[str], None] | None = None,
+    resume: str | None = None,
 ) -> RunReport:
     """Run the stages of ``cfg`` into ``run_dir``; return what each stage did.
 
@@ -237,6 +238,10 @@ def run_pipeline(
         Rerun even the stages whose cache key is unchanged.
     echo : callable, optional
         Receives one human-readable line per stage (the CLI prints them).
+    resume : str, optional
+        What the simulate stage does with a checkpoint (``simulation.checkpoint.h5``): ``"auto"``
+        (default) resumes from one of the same config and mesh, ``"require"`` insists on one,
+        ``"discard"`` deletes it (the default with ``force``).
     """
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -283,7 +288,11 @@ def run_pipeline(
                 continue
             t0 = time.perf_counter()
             log.info("%s: started", name)
-            figures = stage.func(cfg, run_dir, inputs, key) or {}
+            if name == "simulate":
+                mode = resume or ("discard" if force else "auto")
+                figures = stage.func(cfg, run_dir, inputs, key, resume=mode, echo=echo) or {}
+            else:
+                figures = stage.func(cfg, run_dir, inputs, key) or {}
             wall = time.perf_counter() - t0
             figures = {"wall_time_s": round(wall, 3), **figures}
             log.info("%s: done in %.2f s %s", name, wall, json.dumps(figures, default=str))

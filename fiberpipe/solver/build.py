@@ -8,6 +8,8 @@ mass_scaling). Only the effects listed in ``scene.effects`` are built.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ..errors import FiberpipeError
@@ -15,6 +17,74 @@ from .effects import (SceneArrays, Clamp, Clamps, Damping, Drive, Drives, Effect
                       PointLoad, Walls)
 from .integrator import SimulationSettings
 from .model import Material, Model, build_model
+
+log = logging.getLogger(__name__)
+
+#: an initial penetration of a plate or wall deeper than this fraction of the fiber radius is an error
+CUT_TOLERANCE = 0.25
+
+
+def _mm(v: float) -> str:
+    return f"{v * 1e3:.4g} mm"
+
+
+def check_scene_geometry(model: Model, effects) -> list[str]:
+    """Plates and walls against the bundle, before anything runs.
+
+    Errors (``FiberpipeError`` naming the key): a plate or wall that cuts through the bundle (a node
+    more than ``CUT_TOLERANCE`` radii past it: the penalty would blow the fibers apart at t = 0);
+    plates that never touch the fibers (their gaps to the bundle add up to more than their travel).
+    Returns warnings (also logged): a plate that starts away from the bundle, a slight overlap.
+    """
+    warnings: list[str] = []
+    x, r = model.nodes_m, model.radius_node
+    axes = {"x": 0, "y": 1, "z": 2}
+
+    def cut(key: str, ax: int, pos: float, low_side: bool) -> None:
+        depth = (pos - (x[:, ax] - r)) if low_side else ((x[:, ax] + r) - pos)
+        i = int(np.argmax(depth / r))
+        if depth[i] > CUT_TOLERANCE * r[i]:
+            ext = float(np.min(x[:, ax] - r)) if low_side else float(np.max(x[:, ax] + r))
+            raise FiberpipeError(
+                f"the plane at {_mm(pos)} cuts through the bundle: fiber {int(model.node_fiber[i])} (node {i}) reaches "
+                f"{_mm(depth[i])} past it with its radius; positions are those of the planes, not of fiber axes: put it "
+                f"{'at or below' if low_side else 'at or above'} {_mm(ext)} (or leave it unset for plates)", where=key)
+        if depth[i] > 0:
+            warnings.append(f"{key}: the plane at {_mm(pos)} overlaps fiber {int(model.node_fiber[i])} by "
+                            f"{_mm(depth[i])} at the start (pushed out in the first steps)")
+
+    for e in effects:
+        if isinstance(e, Walls):
+            for axn, (lo, hi) in e.planes.items():
+                cut(f"scene.walls.{axn}", axes[axn], lo, True)
+                cut(f"scene.walls.{axn}", axes[axn], hi, False)
+        elif isinstance(e, Plates):
+            ax = axes[e.axis]
+            lo_b, hi_b = float(np.min(x[:, ax] - r)), float(np.max(x[:, ax] + r))
+            gaps, travel = 0.0, 0.0
+            for kind, pos, low_side, ext in (("lower", e.lower_position_m, True, lo_b),
+                                             ("upper", e.upper_position_m, False, hi_b)):
+                mode = getattr(e, kind)
+                if mode == "none":
+                    continue
+                travel += e.displacement_m if mode == "moving" else 0.0
+                if pos is None:
+                    continue
+                key = f"scene.plates.{kind}_position"
+                cut(key, ax, float(pos), low_side)
+                gap = (ext - float(pos)) if low_side else (float(pos) - ext)
+                if gap > 0:
+                    gaps += gap
+                    warnings.append(f"{key}: the {kind} plate starts {_mm(gap)} away from the bundle "
+                                    f"(nothing is compressed until it has travelled that far)")
+            if "moving" in (e.lower, e.upper) and gaps > 0 and gaps >= travel:
+                raise FiberpipeError(
+                    f"the plates never touch the fibers: they start {_mm(gaps)} away from the bundle in all but "
+                    f"travel only {_mm(travel)} (loading.displacement); move them closer or leave the positions "
+                    "unset (plates then start touching the bundle)", where="scene.plates")
+    for w in warnings:
+        log.warning(w)
+    return warnings
 
 
 def material_from_config(cfg) -> Material:
@@ -90,8 +160,10 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
     for e in effects:
         if isinstance(e, (Clamps, Loads, Drives)):
             e.setup(model, SceneArrays(model, 1.0))  # checks fiber/node indices now, with a clear error
+    check_scene_geometry(model, effects)
     settings = SimulationSettings(
         dt_safety=float(s.dt_safety), dt_s=getattr(s, "dt", None), end_time_s=s.end_time,
         output_frames=int(s.output_frames), history_every=getattr(s, "history_every", None),
+        checkpoint_every=getattr(s, "checkpoint_every", None),
     )
     return model, effects, settings

@@ -1,8 +1,13 @@
 """Run API: settings, the chunked driver around the jitted step loop, results and diagnosis.
 
-``simulate`` calls :func:`advance` once per output frame (or per ``max_chunk_steps``); each call
-runs many steps inside one jitted kernel (``_kernels_integrate.advance_kernel``), so Python only
-runs between frames: output, progress callback, divergence diagnosis.
+``simulate`` calls :meth:`Integrator.advance` once per chunk; each call runs many steps inside one
+jitted kernel (``_kernels_integrate.advance_kernel``), so Python only runs between chunks: output,
+progress callback, checkpoints, signals, divergence diagnosis.
+
+Chunk boundaries are a fixed grid of absolute step numbers (multiples of ``chunk_steps`` and of
+``checkpoint_every``, plus the output-frame steps), independent of where the run started: a run
+resumed from a checkpoint (taken at a boundary) makes exactly the same kernel calls from there on
+as an uninterrupted run, so its results are the same bit for bit (``fiberpipe.solver.checkpoint``).
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 from ..errors import FiberpipeError, SimulationDiverged
 from . import _kernels_integrate as K
 from ._kernels_beam import beam_forces
+from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
 from .model import Model
 from .state import State
@@ -43,6 +49,12 @@ class SimulationSettings:
     speed_limit_m_s : float, optional — a node faster than this is a blow-up (default 0.2 c).
     runaway_m : float, optional — a node farther than this from its rest position is a blow-up
         (default 10 × the bounding-box diagonal + 1 mm).
+    checkpoint_every : int, optional — steps between checkpoints (``on_checkpoint`` of :func:`simulate`).
+    chunk_steps : int, optional — steps per jitted call (default: about 5e6 element-steps, ≤
+        ``max_chunk_steps``): the granularity of progress, Ctrl-C and the plate/box checks.
+    penetration_limit : float — a node deeper than this fraction of its radius into a plate or wall
+        is a runaway penetration (default 0.5); more than 2 radii (centre a radius beyond the
+        plane) is a fiber leaving the box.
     """
 
     dt_safety: float = 0.9
@@ -54,6 +66,9 @@ class SimulationSettings:
     max_chunk_steps: int = 200_000
     speed_limit_m_s: float | None = None
     runaway_m: float | None = None
+    checkpoint_every: int | None = None
+    chunk_steps: int | None = None
+    penetration_limit: float = 0.5
 
     def __post_init__(self):
         if not 0.0 < self.dt_safety <= 1.0:
@@ -64,6 +79,12 @@ class SimulationSettings:
             raise FiberpipeError(f"solver.end_time must be > 0, got {self.end_time_s}")
         if self.dt_s is not None and not self.dt_s > 0:
             raise FiberpipeError(f"solver.dt must be > 0, got {self.dt_s}")
+        if self.checkpoint_every is not None and not int(self.checkpoint_every) >= 1:
+            raise FiberpipeError(f"solver.checkpoint_every must be ≥ 1, got {self.checkpoint_every}")
+        if self.chunk_steps is not None and not int(self.chunk_steps) >= 1:
+            raise FiberpipeError(f"chunk_steps must be ≥ 1, got {self.chunk_steps}")
+        if not 0 < self.penetration_limit < 2:
+            raise FiberpipeError(f"penetration_limit must be in (0, 2) radii, got {self.penetration_limit}")
 
 
 @dataclass
@@ -180,6 +201,19 @@ class Integrator:
         state.t = state.step * self.dt
         return int(status), int(done), int(bad)
 
+    def snapshot_arrays(self) -> dict:
+        """Copies of the integrator's mutable arrays (for a checkpoint)."""
+        return {k: getattr(self, k).copy() for k in INTEG_ARRAYS}
+
+    def restore_arrays(self, arrays: dict) -> None:
+        """Copy saved mutable arrays back in place (shapes must agree)."""
+        for k in INTEG_ARRAYS:
+            cur, new = getattr(self, k), np.asarray(arrays[k])
+            if cur.shape != new.shape:
+                raise FiberpipeError(f"checkpoint does not fit this scene: integrator array {k} has shape "
+                                     f"{new.shape}, the scene needs {cur.shape}")
+            cur[...] = new
+
 
 def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] = (), *, dt: float | None = None) -> State:
     """Advance ``state`` in place by ``n_steps`` steps (one jitted call) and return it.
@@ -196,15 +230,55 @@ def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] 
     return state
 
 
+STATUS_PENETRATION = 5  # checked in Python between chunks
+STATUS_LEFT_BOX = 6
+
 _STATUS_TEXT = {
     K.STATUS_NAN: "NaN or inf in the state",
     K.STATUS_SPEED: "a node moved faster than the speed limit",
     K.STATUS_RUNAWAY: "a node ran away from its rest position",
     K.STATUS_ENERGY: "kinetic energy blew up (> 1000 × the energy put in)",
+    STATUS_PENETRATION: "runaway penetration into a plate or wall",
+    STATUS_LEFT_BOX: "a fiber left the box (through a plate or wall)",
 }
 
 
-def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep: TimeStepReport | None) -> str:
+def _plane_name(sc: SceneArrays, p: int) -> str:
+    c = int(sc.pl_hist_col[p])
+    if c in (K.H_PLATE_FORCE, K.H_PLATE_FORCE + 1):
+        return ("lower", "upper")[c - K.H_PLATE_FORCE] + " plate"
+    k = c - K.H_WALL
+    return f"wall {sc.wall_names[k]}" if 0 <= k < len(sc.wall_names) else f"plane {p}"
+
+
+def _plane_check(model: Model, integ: "Integrator", state: State, limit: float) -> tuple[int, int, str]:
+    """Runaway penetration into (depth > ``limit`` radii) or escape through (centre beyond by more than a
+    radius) a plate or wall; returns ``(status, node, detail)``."""
+    sc = integ.scene
+    if sc.pl_axis.size == 0:
+        return K.STATUS_OK, -1, ""
+    r = model.radius_node
+    worst, node, plane = -np.inf, -1, -1
+    with np.errstate(invalid="ignore"):
+        for p in range(sc.pl_axis.size):
+            depth = (r - sc.pl_sign[p] * (state.x[:, sc.pl_axis[p]] - integ.pl_pos[p])) / r
+            i = int(np.nanargmax(depth)) if np.any(np.isfinite(depth)) else -1
+            if i >= 0 and depth[i] > worst:
+                worst, node, plane = float(depth[i]), i, p
+    if node < 0 or worst <= limit:
+        return K.STATUS_OK, -1, ""
+    name = _plane_name(sc, plane)
+    ax = "xyz"[int(sc.pl_axis[plane])]
+    where = f"{name} ({ax} = {integ.pl_pos[plane] * 1e3:.4g} mm)"
+    if worst > 2.0:
+        return (STATUS_LEFT_BOX, node,
+                f"its centre is {(worst - 1.0) * r[node] * 1e3:.3g} mm beyond the {where}")
+    return (STATUS_PENETRATION, node,
+            f"it is {worst:.2f} radii ({worst * r[node] * 1e3:.3g} mm) into the {where}")
+
+
+def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep: TimeStepReport | None,
+              detail: str = "", last_row: np.ndarray | None = None) -> str:
     x = state.x
     finite = np.all(np.isfinite(x), axis=1) & np.all(np.isfinite(state.v), axis=1)
     if bad < 0 or bad >= model.n_nodes:
@@ -217,15 +291,32 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
     el = int(els[0]) if els.size else -1
     speed = float(np.linalg.norm(state.v[bad])) if finite[bad] else float("nan")
     quantity = _STATUS_TEXT.get(status, f"status {status}")
+    energy = ""
+    if last_row is not None and last_row.size > K.H_FD:
+        ke, se = last_row[K.H_KE], last_row[K.H_SE]
+        wk, pw = last_row[K.H_WK], last_row[K.H_PW]
+        if status == K.STATUS_NAN:
+            bad_e = [n for n, v in (("kinetic", ke), ("strain", se)) if not np.isfinite(v)]
+            energy = f"; {' and '.join(bad_e) or 'no'} energy non-finite"
+        else:
+            energy = (f"; energies: kinetic {ke:.3g} J, strain {se:.3g} J, external work {wk:.3g} J, "
+                      f"contact work {pw:.3g} J")
     hint = []
     if rep is not None and dt > rep.dt_stable_s:
         hint.append(f"dt {dt:.4g} s is above the stable limit {rep.dt_stable_s:.4g} s: leave solver.dt unset "
                     f"or lower it")
+    elif status == STATUS_PENETRATION:
+        hint.append("the plane penalty cannot hold the load: lower loading.velocity or the loads, raise "
+                    "plates/walls penalty_factor (≤ 0.25), lower solver.dt_safety, or add damping")
+    elif status == STATUS_LEFT_BOX:
+        hint.append("a fiber was pushed through a plate or wall: check the loads and drives (too large for "
+                    "the plane penalty), the plate/wall positions, lower solver.dt_safety, or add damping")
     else:
-        hint.append("lower solver.dt_safety, soften the penalty (plates/walls penalty_factor, contact "
-                    "stiffness), add damping, or check the input for overlapping fibers")
+        hint.append("lower solver.dt_safety (e.g. 0.5), add damping (scene.damping.alpha), soften the penalty "
+                    "(plates/walls penalty_factor, contact stiffness), or check the input for overlapping fibers")
     return (f"simulation diverged at t = {state.t:.6g} s (step {state.step}): {quantity}; node {bad} "
-            f"(fiber {fiber}, element {el}), speed {speed:.3g} m/s. Suggested fix: {'; '.join(hint)}")
+            f"(fiber {fiber}, element {el}), speed {speed:.3g} m/s" + (f", {detail}" if detail else "")
+            + f"{energy}. Suggested fix: {'; '.join(hint)}")
 
 
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
@@ -247,9 +338,23 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
     return out
 
 
+def _copy_tree(obj):
+    if isinstance(obj, tuple):
+        return tuple(_copy_tree(o) for o in obj)
+    return obj.copy() if isinstance(obj, np.ndarray) else obj
+
+
+def default_chunk_steps(model: Model, settings: SimulationSettings) -> int:
+    """Steps per jitted call: about 5e6 element-steps (≈ 0.3 s on one core), at most ``max_chunk_steps``."""
+    if settings.chunk_steps is not None:
+        return int(settings.chunk_steps)
+    return int(max(100, min(settings.max_chunk_steps, 5_000_000 // max(model.n_elements, 1))))
+
+
 def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettings | None = None, *,
              state: State | None = None, progress: Callable | None = None,
-             on_frame: Callable | None = None) -> SimulationResult:
+             on_frame: Callable | None = None, resume: Checkpoint | None = None,
+             on_checkpoint: Callable | None = None, should_stop: Callable | None = None) -> SimulationResult:
     """Run the explicit dynamics of ``model`` under ``effects``.
 
     Parameters
@@ -260,6 +365,12 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     state : State, optional — initial state (default: at rest in the rest geometry).
     progress : callable ``progress(t_s, end_time_s, steps)``, optional — called between jitted chunks.
     on_frame : callable ``on_frame(k, t_s, positions (N,3))``, optional — called at each output frame.
+    resume : Checkpoint, optional — continue the run saved in this checkpoint (same model, effects
+        and settings); the result equals the uninterrupted run's bit for bit.
+    on_checkpoint : callable ``on_checkpoint(Checkpoint)``, optional — called every
+        ``settings.checkpoint_every`` steps and when ``should_stop`` asks to stop.
+    should_stop : callable ``() -> signal number or None``, optional — polled between chunks; when it
+        returns a truthy value the run saves a checkpoint and raises :class:`SimulationInterrupted`.
 
     Returns
     -------
@@ -267,14 +378,27 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
 
     Raises
     ------
-    FiberpipeError — a user dt above the stable limit (unless ``force_dt``), no end time.
-    SimulationDiverged — NaN, speed or runaway displacement, kinetic energy blow-up; the exception's
-        ``partial_result`` holds the frames and history up to the last good frame.
+    FiberpipeError — a user dt above the stable limit (unless ``force_dt``), no end time, a
+        checkpoint that does not fit.
+    SimulationDiverged — NaN, speed or runaway displacement, kinetic energy blow-up, runaway
+        penetration into a plate/wall or a fiber leaving the box; the exception's
+        ``partial_result`` holds the frames (plus the last good state as a final frame) and history.
+    SimulationInterrupted — ``should_stop`` asked to stop (a checkpoint was passed to ``on_checkpoint``).
     """
     settings = settings or SimulationSettings()
     t_wall = time.perf_counter()
     dt, rep = choose_time_step(model, effects, settings)
-    state = State.at_rest(model) if state is None else state
+    if resume is not None:
+        if resume.x.shape != (model.n_nodes, 3):
+            raise FiberpipeError(f"checkpoint has {resume.x.shape[0]} nodes, the model {model.n_nodes}: it belongs "
+                                 "to another mesh")
+        if resume.dt_s != dt:
+            raise FiberpipeError(f"checkpoint was run with dt = {resume.dt_s:.6g} s, this run would use {dt:.6g} s: "
+                                 "it belongs to another config")
+        state = State(resume.x.copy(), resume.q.copy(), resume.v.copy(), resume.w.copy(), float(resume.t),
+                      int(resume.step), resume.acc.copy())
+    else:
+        state = State.at_rest(model) if state is None else state
     # end time
     probe = SceneArrays(model, dt)
     for e in effects:
@@ -286,12 +410,42 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     total_steps = int(math.ceil(end_time / dt - 1e-9))
     every = settings.history_every or max(1, total_steps // 2000)
     rows = total_steps // every + 1
-    ke0, se0 = _initial_energies(model, state)
+    chunk = default_chunk_steps(model, settings)
+    ce = int(settings.checkpoint_every or 0)
+    if resume is not None:
+        got = (resume.total_steps, resume.history_every, resume.chunk_steps, resume.checkpoint_every)
+        if got != (total_steps, every, chunk, ce):
+            raise FiberpipeError(f"checkpoint (total steps, history_every, chunk, checkpoint_every) = {got} does not "
+                                 f"match this run's {(total_steps, every, chunk, ce)}: it belongs to another config")
+        origin, ke0, se0 = resume.origin_step, resume.e0_ke, resume.e0_se
+        wall_before = resume.wall_time_s
+    else:
+        origin = state.step
+        ke0, se0 = _initial_energies(model, state)
+        wall_before = 0.0
     integ = Integrator(model, effects, dt, history_rows=rows, history_every=every,
                        speed_limit_m_s=settings.speed_limit_m_s, runaway_m=settings.runaway_m,
                        e_ref_J=max(ke0 + se0, 1e-12))
+    sc = integ.scene
     frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
+    frame_set = {int(k) for k in frame_steps}
     ft, fx, fq = [], [], []
+    names = [e.name for e in effects]
+    if resume is not None:
+        integ.restore_arrays(resume.integ)
+        h = np.asarray(resume.hist)
+        if h.shape[0] > rows or h.shape[1] != integ.hist.shape[1]:
+            raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integ.hist.shape}")
+        integ.hist[:h.shape[0]] = h
+        integ.h_row = int(h.shape[0])
+        if sc.contact_on and resume.contact_data is not None:
+            sc.contact_data = restore_into(sc.contact_data, resume.contact_data)
+        for e in effects:
+            if e.name in resume.effect_arrays and hasattr(e, "restore_arrays"):
+                e.restore_arrays(resume.effect_arrays[e.name])
+        ft = [float(t) for t in resume.frames_time]
+        fx = [np.array(a) for a in resume.frames_positions]
+        fq = [np.array(a) for a in resume.frames_rotations]
 
     def take_frame():
         ft.append(state.t)
@@ -300,39 +454,75 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
         if on_frame is not None:
             on_frame(len(ft) - 1, state.t, fx[-1])
 
+    def capture() -> Checkpoint:
+        return Checkpoint(
+            x=state.x.copy(), q=state.q.copy(), v=state.v.copy(), w=state.w.copy(), acc=state.acc.copy(),
+            t=state.t, step=state.step, origin_step=origin, total_steps=total_steps, dt_s=dt,
+            history_every=every, chunk_steps=chunk, checkpoint_every=ce, e0_ke=ke0, e0_se=se0,
+            wall_time_s=wall_before + time.perf_counter() - t_wall, effects=names,
+            integ=integ.snapshot_arrays(), hist=integ.hist[:integ.h_row].copy(),
+            frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
+            frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
+            contact_data=_copy_tree(sc.contact_data) if sc.contact_on else None,
+            effect_arrays={e.name: dict(e.checkpoint_arrays()) for e in effects if hasattr(e, "checkpoint_arrays")},
+        )
+
     def result(completed: bool) -> SimulationResult:
         return SimulationResult(
             frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
             frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
-            history=_history_dict(integ.hist, integ.h_row, integ.scene.n_walls, ke0 + se0),
-            dt_s=dt, steps=state.step, elements=model.n_elements, wall_time_s=time.perf_counter() - t_wall,
-            effects=[e.name for e in effects], timestep=rep, final_state=state, completed=completed,
-            wall_names=list(integ.scene.wall_names),
+            history=_history_dict(integ.hist, integ.h_row, sc.n_walls, ke0 + se0),
+            dt_s=dt, steps=state.step, elements=model.n_elements,
+            wall_time_s=wall_before + time.perf_counter() - t_wall,
+            effects=names, timestep=rep, final_state=state, completed=completed,
+            wall_names=list(sc.wall_names),
             notes=[rep.summary(), f"dt = {dt:.4g} s ({dt / rep.dt_stable_s:.3g} × stable)"]
+            + ([f"resumed from a checkpoint at t = {resume.t:.6g} s (step {resume.step})"] if resume is not None else [])
             + ([f"rotary inertia scaled by {model.rotary_inertia_scale:g}: rotational dynamics are slowed "
                 f"(accuracy trade-off)"] if model.rotary_inertia_scale != 1.0 else []),
         )
 
-    start_step = state.step
-    take_frame() if frame_steps[0] == 0 else None
-    for target in frame_steps[1:]:
-        target = int(target) + start_step
-        while state.step < target:
-            n = min(target - state.step, settings.max_chunk_steps)
-            last_good = state.copy()
-            status, done, bad = integ.advance(state, n)
-            if status != K.STATUS_OK:
-                msg = _diagnose(model, state, status, bad, dt, rep)
-                diag_state = state
-                # keep the last good state as the partial result's final state
-                state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
-                state.t, state.step = last_good.t, last_good.step
-                exc = SimulationDiverged(msg)
-                exc.partial_result = result(False)
-                exc.diagnosis = msg
-                exc.bad_node = bad
-                raise exc
-            if progress is not None:
-                progress(state.t, end_time, state.step)
+    if resume is None and 0 in frame_set:
         take_frame()
+    rel = state.step - origin
+    big = total_steps + 1
+    while rel < total_steps:
+        nxt = min(int(frame_steps[np.searchsorted(frame_steps, rel, side="right")]) if rel < frame_steps[-1] else big,
+                  (rel // chunk + 1) * chunk, (rel // ce + 1) * ce if ce else big, total_steps)
+        last_good = state.copy()
+        status, done, bad = integ.advance(state, nxt - rel)
+        detail = ""
+        if status == K.STATUS_OK:
+            status, bad, detail = _plane_check(model, integ, state, settings.penetration_limit)
+        if status != K.STATUS_OK:
+            row = integ.hist[integ.h_row - 1] if integ.h_row > 0 else None
+            msg = _diagnose(model, state, status, bad, dt, rep, detail, row)
+            # keep the last good state as the partial result's final state (and last frame)
+            state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
+            state.t, state.step, state.acc[:] = last_good.t, last_good.step, last_good.acc
+            if not ft or state.t > ft[-1]:
+                ft.append(state.t)
+                fx.append(state.x.copy())
+                fq.append(state.q.copy())
+            exc = SimulationDiverged(msg)
+            exc.partial_result = result(False)
+            exc.partial_result.notes.append(f"diverged; the last frame is the last good state (t = {state.t:.6g} s)")
+            exc.diagnosis = msg
+            exc.bad_node = bad
+            exc.status = status
+            raise exc
+        rel = state.step - origin
+        if rel in frame_set:
+            take_frame()
+        if progress is not None:
+            progress(state.t, end_time, state.step)
+        stop = should_stop() if should_stop is not None else None
+        if rel < total_steps and (stop or (ce and rel % ce == 0)):
+            ck = capture()
+            if on_checkpoint is not None:
+                on_checkpoint(ck)
+            if stop:
+                raise SimulationInterrupted(f"interrupted at t = {state.t:.6g} s (step {state.step} of "
+                                            f"{origin + total_steps})", signum=int(stop) if not isinstance(stop, bool) else None,
+                                            checkpoint=ck)
     return result(True)

@@ -5,18 +5,30 @@ Layout of ``simulation.h5`` (SPEC section 4): ``/frames/time`` (K,), ``/frames/p
 ``/history/plate_force`` (T, 2), ``/history/wall_force`` (T, W), ``/history/energy/<name>`` (T,),
 plus whatever else the solver records under ``/history``; the mesh itself under ``/mesh``;
 root attributes ``dt_s``, ``steps``, ``elements``, ``wall_time_s``, ``effects`` (JSON list).
+
+Reliability (docs/reliability.md): every ``solver.checkpoint_every`` steps, and on SIGINT/SIGTERM
+(handlers installed only around the step loop), the run writes ``simulation.checkpoint.h5`` beside
+the output; Ctrl-C then exits with status 130 (SIGTERM 143) and a one-line message naming the
+resume command. ``resume="auto"`` (``fiberpipe run``) continues from a checkpoint of the same config
+and mesh, ``"require"`` (``fiberpipe simulate --resume``) insists on one, ``"discard"``
+(``--force``) deletes it. A diverged run keeps its last good frames in ``simulation_diverged.h5``
+(+ ``frames_diverged/``) and leaves the last checkpoint in place. The checkpoint is removed once
+``simulation.h5`` is written.
 """
 
 from __future__ import annotations
 
 import logging
+import signal
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from fiberpipe.artifacts import read_mesh, write_artifact
 from fiberpipe.config import Config
-from fiberpipe.errors import SimulationDiverged
+from fiberpipe.errors import ArtifactError, FiberpipeError, SimulationDiverged
 from fiberpipe.io.vtk import mesh_vtu, write_pvd
 from fiberpipe.stages._common import input_hashes
 
@@ -65,38 +77,136 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
     return write_artifact(path, "simulation", datasets, units=units, attrs=attrs, config_sha256=config_sha256, inputs=inputs)
 
 
-def write_frames_vtk(out_dir: Path, mesh, frames_time, frames_positions, *, stem: str = "simulation") -> Path:
-    """One VTU per frame in ``out_dir/frames/`` plus ``out_dir/<stem>.pvd`` for ParaView."""
-    frames_dir = out_dir / "frames"
+def write_frames_vtk(out_dir: Path, mesh, frames_time, frames_positions, *, stem: str = "simulation",
+                     frames_dir_name: str = "frames") -> Path:
+    """One VTU per frame in ``out_dir/<frames_dir_name>/`` plus ``out_dir/<stem>.pvd`` for ParaView
+    (each file written atomically)."""
+    frames_dir = out_dir / frames_dir_name
     frames_dir.mkdir(parents=True, exist_ok=True)
     entries = []
     for k, (t, pos) in enumerate(zip(frames_time, frames_positions)):
         name = f"frame_{k:05d}.vtu"
         disp = pos - mesh.nodes_m
         mesh_vtu(frames_dir / name, mesh, points_m=pos, point_data={"displacement": disp})
-        entries.append((float(t), f"frames/{name}"))
+        entries.append((float(t), f"{frames_dir_name}/{name}"))
     return write_pvd(out_dir / f"{stem}.pvd", entries)
 
 
-def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str = "") -> dict:
+@contextmanager
+def stop_on_signals():
+    """Catch SIGINT and SIGTERM while the block runs: the first one only sets a flag (the run finishes
+    its jitted chunk, writes a checkpoint and stops); a second Ctrl-C interrupts at once. Yields a
+    callable returning the signal number received (or None). Outside the main thread, no handlers."""
+    got: dict = {"sig": None}
+
+    def handler(signum, frame):
+        if got["sig"] is not None and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        got["sig"] = signum
+        log.warning("received signal %d: stopping after the current chunk and writing a checkpoint", signum)
+
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield lambda: got["sig"]
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+
+def _resume_command(cfg: Config, run_dir: Path) -> str:
+    src = getattr(cfg, "source_path", None) or "CONFIG.yaml"
+    return f"fiberpipe simulate {src} --out {run_dir} --resume"
+
+
+def load_resume_checkpoint(ck_path: Path, config_sha256: str, mode: str, echo=None):
+    """The checkpoint to resume from (or None) according to ``mode`` (auto | require | discard)."""
+    from fiberpipe.solver.checkpoint import read_checkpoint
+
+    say = echo or (lambda s: None)
+    if mode == "discard":
+        if ck_path.exists():
+            ck_path.unlink()
+            log.info("simulate: discarded checkpoint %s (--force)", ck_path)
+        return None
+    if not ck_path.exists():
+        if mode == "require":
+            raise FiberpipeError("no checkpoint to resume from (run without --resume to start the simulation)",
+                                 where=str(ck_path))
+        return None
+    try:
+        ck = read_checkpoint(ck_path, config_sha256=config_sha256 or None)
+    except ArtifactError as exc:
+        if mode == "require":
+            raise
+        msg = f"simulate: ignoring {exc}; starting from t = 0"
+        log.warning(msg)
+        say(msg)
+        return None
+    msg = (f"simulate: resuming from checkpoint {ck_path.name} at t = {ck.t:.6g} s "
+           f"(step {ck.step} of {ck.origin_step + ck.total_steps})")
+    log.info(msg)
+    say(msg)
+    return ck
+
+
+def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str = "", resume: str = "auto",
+                 echo=None) -> dict:
+    """Run the simulate stage into ``out`` (``simulation.h5``); see the module docstring for
+    checkpoints, signals and ``resume`` (auto | require | discard)."""
     from fiberpipe.solver.build import build_simulation
+    from fiberpipe.solver.checkpoint import CHECKPOINT_NAME, SimulationInterrupted, write_checkpoint
     from fiberpipe.solver.simulate import simulate
 
+    if resume not in ("auto", "require", "discard"):
+        raise ValueError(f"resume must be auto, require or discard, got {resume!r}")
     mesh = read_mesh(mesh_path)
     out = Path(out)
+    run_dir = out.parent
+    ck_path = run_dir / CHECKPOINT_NAME
     inputs = input_hashes({"mesh": Path(mesh_path)})
     model, effects, settings = build_simulation(mesh, cfg)
+    ck = load_resume_checkpoint(ck_path, config_sha256, resume, echo)
+    saved = {"step": None}
+
+    def on_checkpoint(c):
+        write_checkpoint(ck_path, c, config_sha256=config_sha256, inputs=inputs)
+        saved["step"] = c.step
+        log.info("simulate: checkpoint at t = %.6g s (step %d) -> %s", c.t, c.step, ck_path)
+
+    bar = _progress_callback()
     try:
-        result = simulate(model, effects, settings, progress=_progress_callback())
+        with stop_on_signals() as should_stop:
+            result = simulate(model, effects, settings, progress=bar, resume=ck,
+                              on_checkpoint=on_checkpoint, should_stop=should_stop)
+    except SimulationInterrupted as exc:
+        msg = (f"simulation {exc}; checkpoint saved to {ck_path}; resume with: {_resume_command(cfg, run_dir)} "
+               f"(or fiberpipe run, which picks it up)")
+        log.warning(msg)
+        raise SimulationInterrupted(msg, signum=exc.exit_code - 128) from None
     except SimulationDiverged as exc:
+        log.error("simulate: %s", exc)
         partial = getattr(exc, "partial_result", None)
+        kept = []
         if partial is not None and len(partial.frames_time):
             keep = out.with_name("simulation_diverged.h5")
-            write_simulation(keep, mesh, partial, config_sha256=config_sha256, inputs=inputs, extra_attrs={"diverged": str(exc)})
-            raise SimulationDiverged(f"{exc} (last good frames kept in {keep})") from None
-        raise
+            write_simulation(keep, mesh, partial, config_sha256=config_sha256, inputs=inputs,
+                             extra_attrs={"diverged": str(exc), "completed": False})
+            write_frames_vtk(run_dir, mesh, partial.frames_time, partial.frames_positions,
+                             stem="simulation_diverged", frames_dir_name="frames_diverged")
+            kept.append(f"last good frames kept in {keep}")
+        if ck_path.exists():
+            kept.append(f"last checkpoint {ck_path.name} kept")
+        raise SimulationDiverged(f"{exc}" + (f" ({'; '.join(kept)})" if kept else "")) from None
+    finally:
+        if bar is not None:
+            bar.close()
     write_simulation(out, mesh, result, config_sha256=config_sha256, inputs=inputs)
-    write_frames_vtk(out.parent, mesh, result.frames_time, result.frames_positions)
+    write_frames_vtk(run_dir, mesh, result.frames_time, result.frames_positions)
+    if ck_path.exists():
+        ck_path.unlink()
     steps = int(result.steps)
     figures = {
         "dt_s": float(result.dt_s),
@@ -107,6 +217,8 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
         "effects": list(result.effects),
         "frames": int(len(result.frames_time)),
     }
+    if ck is not None:
+        figures["resumed_from_step"] = int(ck.step)
     hist = result.history
     if "plate_force" in hist and len(hist["plate_force"]):
         figures["final_plate_force_N"] = [float(v) for v in np.asarray(hist["plate_force"])[-1]]
@@ -123,14 +235,17 @@ def _progress_callback():
 
     state = {}
 
-    def callback(done_steps: int, total_steps: int):
+    def callback(t_s: float, end_time_s: float, steps: int):
         if "bar" not in state:
             bar = Progress(TextColumn("simulate"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"), TimeRemainingColumn(), transient=True)
             bar.start()
             state["bar"] = bar
-            state["task"] = bar.add_task("simulate", total=total_steps)
-        state["bar"].update(state["task"], completed=done_steps)
-        if done_steps >= total_steps:
+            state["task"] = bar.add_task("simulate", total=end_time_s)
+        state["bar"].update(state["task"], completed=min(t_s, end_time_s))
+
+    def close():
+        if "bar" in state:
             state["bar"].stop()
 
+    callback.close = close
     return callback
