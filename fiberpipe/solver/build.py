@@ -21,6 +21,7 @@ from .model import Material, Model, build_model
 log = logging.getLogger(__name__)
 
 #: an initial penetration of a plate or wall deeper than this fraction of the fiber radius is an error
+#: (deeper than 1 % a warning)
 CUT_TOLERANCE = 0.25
 
 
@@ -49,7 +50,7 @@ def check_scene_geometry(model: Model, effects) -> list[str]:
                 f"the plane at {_mm(pos)} cuts through the bundle: fiber {int(model.node_fiber[i])} (node {i}) reaches "
                 f"{_mm(depth[i])} past it with its radius; positions are those of the planes, not of fiber axes: put it "
                 f"{'at or below' if low_side else 'at or above'} {_mm(ext)} (or leave it unset for plates)", where=key)
-        if depth[i] > 0:
+        if depth[i] > 0.01 * r[i]:
             warnings.append(f"{key}: the plane at {_mm(pos)} overlaps fiber {int(model.node_fiber[i])} by "
                             f"{_mm(depth[i])} at the start (pushed out in the first steps)")
 

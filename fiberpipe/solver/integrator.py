@@ -179,7 +179,10 @@ class Integrator:
             span = np.ptp(model.nodes_m, axis=0)
             runaway_m = 10.0 * float(np.linalg.norm(span)) + 1e-3
         self.x_limit = float(runaway_m)
-        self.e_ref = float(e_ref_J)
+        # floor of the blow-up check's energy scale: the kinetic energy one step of the constant loads
+        # gives from rest (at the first history row the loads' work f·(x_n − x_0) is still 0)
+        one_step = float(np.sum(np.sum(sc.f_ext**2, axis=1) * self.dt**2 / model.mass)) if sc.f_ext.size else 0.0
+        self.e_ref = max(float(e_ref_J), one_step)
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""

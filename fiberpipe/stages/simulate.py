@@ -142,8 +142,8 @@ def load_resume_checkpoint(ck_path: Path, config_sha256: str, mode: str, echo=No
         if mode == "require":
             raise
         msg = f"simulate: ignoring {exc}; starting from t = 0"
-        log.warning(msg)
-        say(msg)
+        (log.info if echo else log.warning)(msg)
+        say(f"warning: {msg}")
         return None
     msg = (f"simulate: resuming from checkpoint {ck_path.name} at t = {ck.t:.6g} s "
            f"(step {ck.step} of {ck.origin_step + ck.total_steps})")
@@ -184,10 +184,10 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     except SimulationInterrupted as exc:
         msg = (f"simulation {exc}; checkpoint saved to {ck_path}; resume with: {_resume_command(cfg, run_dir)} "
                f"(or fiberpipe run, which picks it up)")
-        log.warning(msg)
+        log.info(msg)  # run.log; the CLI prints the message itself as the one error line
         raise SimulationInterrupted(msg, signum=exc.exit_code - 128) from None
     except SimulationDiverged as exc:
-        log.error("simulate: %s", exc)
+        log.info("simulate stopped: %s", exc)  # run.log; the CLI prints the one error line
         partial = getattr(exc, "partial_result", None)
         kept = []
         if partial is not None and len(partial.frames_time):
