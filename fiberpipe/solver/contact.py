@@ -69,6 +69,42 @@ def _window(s):
 
 
 @njit(cache=True, fastmath=True)
+def _joint_share(x, seg_nodes, e, s, d_own, o0, o1, to, rr, c0, c1, tc):
+    """Share of the point contact owned by segment ``e`` (against the other segment ``o0``–``o1``).
+
+    The neighbouring segment of the same fibre at the end nearer to the line closest parameter
+    ``s`` competes for the contact: the segment whose clamped segment–segment distance is smaller
+    owns it, with a linear ramp over ``1e-9 (r_i + r_j)`` so that the two shares sum to 1 exactly
+    (both pairs evaluate the same two distances with the same arguments) and equal distances give
+    ½ each: a crossing exactly on a straight joint, or on a kinked joint (convex: both line
+    closest points fall outside the segments; concave: both inside), is counted once. A fibre's
+    free end has no competitor: the segment owns its clamped closest point if the line closest
+    point is inside it, otherwise nothing (the crossing passes beyond the fibre's end).
+    """
+    E = seg_nodes.shape[0]
+    if s > 0.5:
+        nj = seg_nodes[e, 1]
+        if e + 1 >= E or seg_nodes[e + 1, 0] != nj:
+            return 1.0 if s <= 1.0 else 0.0
+        n0 = nj
+        n1 = seg_nodes[e + 1, 1]
+    else:
+        nj = seg_nodes[e, 0]
+        if e - 1 < 0 or seg_nodes[e - 1, 1] != nj:
+            return 1.0 if s >= 0.0 else 0.0
+        n0 = seg_nodes[e - 1, 0]
+        n1 = nj
+    for k in range(3):
+        c0[k] = x[n0, k]
+        c1[k] = x[n1, k]
+        tc[k] = c1[k] - c0[k]
+    d2, sn, tn = segment_distance2(c0, c1, o0, o1, tc, to)
+    tol = 1e-9 * rr
+    wgt = 0.5 + (math.sqrt(d2) - d_own) / (2.0 * tol)
+    return min(max(wgt, 0.0), 1.0)
+
+
+@njit(cache=True, fastmath=True)
 def segment_distance2(a0, a1, b0, b1, ta, tb):
     """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
     r0 = a0[0] - b0[0]
@@ -257,6 +293,9 @@ def contact_forces(
     b1 = np.empty(3)
     ta = np.empty(3)
     tb = np.empty(3)
+    w0buf = np.empty(3)
+    w1buf = np.empty(3)
+    wtbuf = np.empty(3)
     for k in range(n_pairs):
         i = pairs[k, 0]
         j = pairs[k, 1]
@@ -299,16 +338,15 @@ def contact_forces(
             br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
             s = (ab * br - ar * bb) / den
             t = (aa * br - ab * ar) / den
-            # partition of unity across element joints: the closest point belongs to this pair
-            # with weight win(s)·win(t), win ramping 0→1 over ±JOINT_EPS (relative) around each
-            # end, so adjacent collinear pairs share a contact at a joint with weights summing to
-            # 1 whatever the rounding of s and t (a sharp [0, 1) claim drops or doubles it).
-            ws_ = _window(s)
-            wt_ = _window(t)
+            # ownership across element joints (partition of unity): compare with the neighbouring
+            # segment at the nearer end, on each fibre (see _joint_share)
+            d_own = math.sqrt(dist2)
+            ws_ = _joint_share(x, seg_nodes, i, s, d_own, b0, b1, tb, rr, w0buf, w1buf, wtbuf)
+            wt_ = _joint_share(x, seg_nodes, j, t, d_own, a0, a1, ta, rr, w0buf, w1buf, wtbuf)
             wst = ws_ * wt_
             if wst > 0.0:
-                s = min(max(s, 0.0), 1.0)
-                t = min(max(t, 0.0), 1.0)
+                s = sc
+                t = tc
                 d0 = r0 + s * ta[0] - t * tb[0]
                 d1 = r1 + s * ta[1] - t * tb[1]
                 d2 = r2 + s * ta[2] - t * tb[2]

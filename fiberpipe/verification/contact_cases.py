@@ -1,0 +1,410 @@
+"""Verification cases of SPEC section 8, cases 5–8 (fiber–fiber contact and friction), through the dynamics.
+
+Every case runs the real solver (``simulate``) with the contact hook of
+:mod:`fiberpipe.solver.contact_effect` on the study's fiber (r = 0.25 mm, E = 15 GPa, ν = 0.3,
+ρ = 1380 kg/m³, 0.3 mm elements) at 0.9 × the stable step, and returns :class:`Row` (or a list).
+``quick=True`` is a shorter variant of the same case for the default test suite.
+
+* ``contact_pair_*``: two fibers pressed together (parallel: a line load; crossed at Φ: a point
+  load over the crossing), damped to rest; δ read from the settled centre lines, F = the applied
+  load (equilibrium); reference: Johnson's line law / exact elliptical Hertz K(Φ)δ^{3/2}.
+* ``three_beam_static``: the study's Fig. 11 / appendix Eqs. 6–7 with measured β.
+* ``rearrangement``: the study's Figs. 8–10: beam 1 driven down onto beams 2 and 3 (μ = 0.2);
+  u_y(u_z) against the quasi-static kinematic curve and a slow reference run.
+* ``inclined_plate``: gravity tilted by θ on a flat plate, μ = 0.2: stick / a = g(sin θ − μ cos θ).
+* ``sliding_parallel``: a fiber sliding along a parallel neighbour across many element joints,
+  normal force constant.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates, PointLoad,
+                      SimulationSettings, State, Walls, build_model, choose_time_step, simulate)
+from ..solver.contact import contact_forces, gauss_points
+from ..solver.contact_effect import make_contact_hook
+from ..solver.laws import make_law
+from ..solver.neighbours import build_pairs
+from .cases import A_M2, E_PA, MATERIAL, NU, R_M, RHO, Row
+
+G = 9.81
+E_STAR = E_PA / (2 * (1 - NU**2))
+LE = 0.3e-3
+
+
+def _fiber_nodes(p0, p1, n_el):
+    p0 = np.asarray(p0, float)
+    p1 = np.asarray(p1, float)
+    s = np.linspace(0.0, 1.0, n_el + 1)[:, None]
+    return p0 + s * (p1 - p0)
+
+
+def _model(polys):
+    """polys: list of (p0, p1, n_el) straight fibers."""
+    xs = [_fiber_nodes(*p) for p in polys]
+    off = np.cumsum([0] + [len(x) for x in xs])
+    return build_model(np.vstack(xs), off, R_M, MATERIAL)
+
+
+def johnson_delta(p_n_per_m, r=R_M):
+    """Approach δ [m] of two equal parallel cylinders under line load P (Johnson 1985, line contact)."""
+    b = math.sqrt(4 * p_n_per_m * (r / 2) / (math.pi * E_STAR))
+    return p_n_per_m / (math.pi * E_STAR) * (2 * math.log(4 * r / b) - 1)
+
+
+def _clamp_all(model, fiber):
+    n = int(model.node_offsets[fiber + 1] - model.node_offsets[fiber])
+    return [Clamp(fiber, k) for k in range(n)]
+
+
+def _segments(model):
+    seg = np.empty((model.n_elements, 2), np.int64)
+    seg[:, 0] = model.el_n1
+    seg[:, 1] = model.el_n1 + 1
+    return seg
+
+
+def pair_force(model, x, law, fa, fb, n_gauss=2):
+    """Force vector (N) that fiber ``fa`` exerts on fiber ``fb`` at positions ``x`` (the run's kernel)."""
+    seg = _segments(model)
+    E = len(seg)
+    arc = np.zeros((E, 2))
+    cap = 64 * E
+    pairs = np.zeros((cap, 2), np.int64)
+    keys = np.zeros(cap, np.int64)
+    n = build_pairs(x, seg, model.el_radius.astype(float), model.el_fiber.astype(np.int64), arc, 1e-5, 0.0,
+                    pairs, keys)
+    pf = model.el_fiber[pairs[:n]]
+    sel = ((pf[:, 0] == fa) & (pf[:, 1] == fb)) | ((pf[:, 0] == fb) & (pf[:, 1] == fa))
+    pr = np.ascontiguousarray(pairs[:n][sel])
+    m = len(pr)
+    f = np.zeros_like(x)
+    gxi, gw = gauss_points(n_gauss)
+    z = np.zeros(max(m, 1))
+    contact_forces(x, seg, model.el_radius.astype(float), pr, m, law.law_id, law.params(), gxi, gw, f,
+                   z.copy(), np.zeros((max(m, 1), 3)), z.copy(), z.copy(), z.copy(), z.copy())
+    nodes = model.node_fiber == fb
+    return f[nodes].sum(axis=0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Case 5: two fibers pressed together
+# ---------------------------------------------------------------------------------------------
+
+def contact_pair_parallel(quick: bool = False) -> list[Row]:
+    """Parallel fibers (15 mm), lower clamped, upper pressed by a line load p; F = pL vs Johnson P(δ)."""
+    loads = [66.0] if quick else [6.6, 66.0, 660.0]
+    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    rows = []
+    L = 15e-3
+    for p in loads:
+        m = _model([((0, 0, 0), (L, 0, 0), 50), ((0, 0, 2 * R_M), (L, 0, 2 * R_M), 50)])
+        eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]), Damping(2e6),
+               make_contact_hook(m, law=law)]
+        res = simulate(m, eff, SimulationSettings(end_time_s=0.3e-3, output_frames=2))
+        x = res.frames_positions[-1]
+        d = 2 * R_M - (x[m.node_fiber == 1, 2] - x[m.node_fiber == 0, 2])
+        delta = float(np.mean(d[1:-1]))
+        ref = float(law.line_force(delta))
+        rows.append(Row(f"contact parallel, p = {p:g} N/m: Johnson P(δ = {delta * 1e9:.2f} nm)", ref, p,
+                        abs(p - ref) / ref, 0.02, "N/m", f"δ spread {np.ptp(d) / delta:.1e}"))
+    return rows
+
+
+def contact_pair_crossed(phi_deg: float, quick: bool = False, force_n: float = 1e-3) -> Row:
+    """Crossed fibers at Φ: lower clamped, upper pressed at the crossing by a point force F;
+    F vs K(Φ)δ^{3/2} (exact elliptical Hertz, law ``hertz_oriented``)."""
+    L = 15e-3
+    n_el = 50
+    c = L / 2
+    ph = math.radians(phi_deg)
+    u = np.array([math.cos(ph), math.sin(ph), 0.0])
+    mid = np.array([c, 0.0, 2 * R_M])
+    m = _model([((0, 0, 0), (L, 0, 0), n_el), (mid - u * L / 2, mid + u * L / 2, n_el)])
+    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    K = float(law.point_force(1.0, phi_deg))
+    eff = [Clamps(_clamp_all(m, 0)), Loads([PointLoad(1, [0, 0, -force_n], n_el // 2)]), Damping(2.5e5),
+           make_contact_hook(m, law=law)]
+    T = 0.6e-3 if quick else 1.2e-3
+    res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=2))
+    x = res.frames_positions[-1]
+    # δ at the crossing: distance from B's middle node (the loaded crossing) to A's (clamped, straight) axis
+    a0, a1 = x[0], x[n_el]
+    pb = x[n_el + 1 + n_el // 2]
+    ta = (a1 - a0) / np.linalg.norm(a1 - a0)
+    dist = float(np.linalg.norm(np.cross(pb - a0, ta)))
+    delta = 2 * R_M - dist
+    ref = K * delta**1.5
+    f_meas = pair_force(m, x, law, 0, 1)[2]
+    return Row(f"contact crossed Φ = {phi_deg:g}°: K(Φ)δ^1.5 at δ = {delta * 1e9:.2f} nm", ref, force_n,
+               abs(force_n - ref) / ref, 0.02, "N", f"kernel force at rest {f_meas:.6g} N")
+
+
+# ---------------------------------------------------------------------------------------------
+# Case 6: the study's static 3-beam case (Fig. 11, appendix Eqs. 6-7)
+# ---------------------------------------------------------------------------------------------
+
+def _three_beams(L, n_el, z1_extra=0.0):
+    """Beam 1 (fiber 0) on beams 2 (fiber 1, y = −r) and 3 (fiber 2, y = +r), lying on z = 0."""
+    h = math.sqrt(3.0) * R_M
+    return _model([((0, 0, R_M + h + z1_extra), (L, 0, R_M + h + z1_extra), n_el),
+                   ((0, -R_M, R_M), (L, -R_M, R_M), n_el),
+                   ((0, R_M, R_M), (L, R_M, R_M), n_el)])
+
+
+def three_beam_static(quick: bool = False, alphas=(1e5, 0.0)) -> list[Row]:
+    """NF = (q + w)/(2 cos β) and RF = √((½(q+w)tan β)² + (½(q+3w))²) on beam 2 (Eqs. 6–7), β measured.
+
+    Beams 2 and 3 on a fixed plate, confined by walls at y = ±2r; q on beam 1, gravity on all.
+    α = 1e5: settled from rest. α = 0: continued undamped from that state, forces averaged over
+    the run (damping forces vanish at rest, so the static forces must not change).
+    NF: force of beam 1 on beam 2 from the contact kernel at the settled positions; RF: plate
+    penalty force on beam 2 (z) and the wall force (y).
+    """
+    L = 15e-3 if not quick else 6e-3
+    n_el = int(round(L / LE))
+    qs = [66.0] if quick else [16.5, 33.0, 66.0]
+    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    w_line = RHO * A_M2 * G
+    errs = {a: {"NF": [], "RF": []} for a in alphas}
+    vals = {a: {} for a in alphas}
+    for q in qs:
+        m = _three_beams(L, n_el)
+
+        def effects(alpha):
+            eff = [Gravity([0, 0, -G]), Loads([LineLoad(0, [0, 0, -q])]),
+                   Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
+                   Walls({"y": (-2 * R_M, 2 * R_M)}), make_contact_hook(m, law=law)]
+            if alpha > 0:
+                eff.append(Damping(alpha))
+            return eff
+
+        state = None
+        for alpha in sorted(alphas, reverse=True):
+            frames = []
+            eff = effects(alpha)
+            dt, _ = choose_time_step(m, eff, SimulationSettings())
+            kpen = 0.1 * m.mass * (2.0 / dt) ** 2
+            if state is None:
+                T = 0.6e-3 if alpha > 0 else 0.4e-3
+                settings = SimulationSettings(end_time_s=T, output_frames=2)
+            else:
+                T = 0.2e-3
+                settings = SimulationSettings(end_time_s=T, output_frames=21)
+            res = simulate(m, eff, settings, state=state,
+                           on_frame=lambda k, t, x: frames.append(x.copy()))
+            state = res.final_state
+            use = frames[-1:] if alpha > 0 else frames[1:]
+            nf, rfz, beta = [], [], []
+            for x in use:
+                nf.append(np.linalg.norm(pair_force(m, x, law, 0, 1)))
+                sel = m.node_fiber == 1
+                pen = np.maximum(R_M - x[sel, 2], 0.0)
+                rfz.append(float(np.sum(kpen[sel] * pen)))
+                y1, z1 = x[m.node_fiber == 0, 1:].mean(axis=0)
+                y2, z2 = x[sel, 1:].mean(axis=0)
+                beta.append(math.atan2(y1 - y2, z1 - z2))
+            wf = res.history["wall_force"][:, 0]
+            wall = float(np.mean(wf[1:])) if alpha == 0 else float(wf[-1])
+            NF, RFz, b = float(np.mean(nf)), float(np.mean(rfz)), float(np.mean(beta))
+            QW = (q + w_line) * L
+            nf_ref = QW / (2 * math.cos(b))
+            rfy_ref = 0.5 * QW * math.tan(b)
+            rfz_ref = 0.5 * (q + 3 * w_line) * L
+            rf_ref = math.hypot(rfy_ref, rfz_ref)
+            rf = math.hypot(wall, RFz)
+            errs[alpha]["NF"].append(abs(NF - nf_ref) / nf_ref)
+            errs[alpha]["RF"].append(abs(rf - rf_ref) / rf_ref)
+            vals[alpha][q] = (nf_ref, NF, rf_ref, rf, b)
+    rows = []
+    qmax = max(qs)
+    for a in alphas:
+        nf_ref, NF, rf_ref, rf, b = vals[a][qmax]
+        rng = f"q ∈ {{{', '.join(f'{q:g}' for q in qs)}}} N/m"
+        rows.append(Row(f"3-beam static α = {a:g}: NF (Eq. 6), q = {qmax:g} N/m (max error over {rng})", nf_ref, NF,
+                        max(errs[a]["NF"]), 0.01, "N", f"β = {math.degrees(b):.4f}°"))
+        rows.append(Row(f"3-beam static α = {a:g}: RF (Eq. 7), q = {qmax:g} N/m (max error over {rng})", rf_ref, rf,
+                        max(errs[a]["RF"]), 0.01, "N"))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Case 7: the study's rearrangement case (Figs. 8-10)
+# ---------------------------------------------------------------------------------------------
+
+def kinematic_uy(uz, r=R_M):
+    """Quasi-static u_y(u_z) of beams 2/3 while they stay in contact with beam 1 (rigid sections)."""
+    h = math.sqrt(3.0) * r - np.asarray(uz)
+    return np.sqrt(np.maximum(4 * r * r - h * h, 0.0)) - r
+
+
+def rearrangement_run(velocity_m_s, alpha, *, length_m=15e-3, uz_m=0.3e-3, mu=0.2, frames=61):
+    """Beam 1 driven down by ``uz_m`` at ``velocity_m_s`` onto beams 2/3 lying on a fixed plate.
+    Returns (u_z (K,), u_y (K,) mean of beams 2 and 3 (outward), wall time s, result)."""
+    n_el = int(round(length_m / LE))
+    m = _three_beams(length_m, n_el)
+    eff = [Gravity([0, 0, -G]), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
+           Drives([Drive(0, [0, 0, -uz_m], velocity_m_s)]),
+           make_contact_hook(m, law=make_law("hertz_oriented", E_pa=E_PA, nu=NU), friction=True, mu=mu)]
+    if alpha > 0:
+        eff.append(Damping(alpha))
+    t0 = time.perf_counter()
+    res = simulate(m, eff, SimulationSettings(output_frames=frames))
+    wall = time.perf_counter() - t0
+    X = res.frames_positions
+    x0 = X[0]
+    uz = -(X[:, m.node_fiber == 0, 2].mean(axis=1) - x0[m.node_fiber == 0, 2].mean())
+    uy2 = -(X[:, m.node_fiber == 1, 1].mean(axis=1) - x0[m.node_fiber == 1, 1].mean())
+    uy3 = X[:, m.node_fiber == 2, 1].mean(axis=1) - x0[m.node_fiber == 2, 1].mean()
+    return uz, 0.5 * (uy2 + uy3), wall, res
+
+
+def _curve_error(uz, uy, uz_ref, uy_ref):
+    """max |u_y − u_y,ref| over the common u_z range / max |u_y,ref|."""
+    o = np.argsort(uz_ref)
+    ref = np.interp(uz, np.asarray(uz_ref)[o], np.asarray(uy_ref)[o])
+    sel = uz <= np.max(uz_ref) + 1e-12
+    return float(np.max(np.abs(uy[sel] - ref[sel])) / np.max(np.abs(uy_ref)))
+
+
+def rearrangement(quick: bool = False) -> list[Row]:
+    """u_y(u_z) at 1e3 mm/min, α = 1e5 vs the quasi-static reference (< 5 %); α = 0 departs.
+
+    quick: 3 mm beams, reference = the quasi-static kinematic curve (beams 2/3 stay in contact with
+    beam 1 and do not move unless pushed). Full: 15 mm beams (the study's), reference = a 10×
+    slower run (100 mm/min, α = 1e5), plus the kinematic curve; wall times of each run reported.
+    """
+    v_fast = 1.0 / 60.0  # 1e3 mm/min
+    L = 3e-3 if quick else 15e-3
+    runs = {"α = 1e5, 1e3 mm/min": (v_fast, 1e5), "α = 0, 1e3 mm/min": (v_fast, 0.0)}
+    if not quick:
+        runs["α = 1e5, 100 mm/min (reference)"] = (v_fast / 10, 1e5)
+    out = {k: rearrangement_run(v, a, length_m=L) for k, (v, a) in runs.items()}
+    rows = []
+    if quick:
+        ref_name = "kinematic"
+        ref = lambda uz: kinematic_uy(uz)  # noqa: E731
+    else:
+        ref_name = "slow run"
+        uz_r, uy_r = out["α = 1e5, 100 mm/min (reference)"][:2]
+        ref = lambda uz: np.interp(uz, uz_r[np.argsort(uz_r)], uy_r[np.argsort(uz_r)])  # noqa: E731
+    for k in ("α = 1e5, 1e3 mm/min", "α = 0, 1e3 mm/min"):
+        uz, uy, wall, res = out[k]
+        yref = ref(uz)
+        err = float(np.max(np.abs(uy - yref)) / np.max(np.abs(yref)))
+        kin = float(np.max(np.abs(uy - kinematic_uy(uz))) / np.max(np.abs(kinematic_uy(uz))))
+        tol = 0.05
+        passed_is_departure = k.startswith("α = 0")
+        if passed_is_departure:  # pass when the curve error exceeds 5 %: error column 0 (departs) or 1
+            rows.append(Row(f"rearrangement {k}: departs from the {ref_name} (max curve error > 5 %)",
+                            tol, err, 0.0 if err > tol else 1.0, 0.5, "",
+                            f"u_y(end) {uy[-1] * 1e3:.4f} mm vs {yref[-1] * 1e3:.4f} mm, wall {wall:.1f} s, "
+                            f"{res.steps} steps"))
+            continue
+        rows.append(Row(f"rearrangement {k}: max |u_y − ref| / max u_y,ref vs {ref_name}",
+                        float(yref[-1]), float(uy[-1]), err, tol, "m",
+                        f"max curve error {100 * err:.2f} %, vs kinematic {100 * kin:.2f} %, wall {wall:.1f} s, "
+                        f"{res.steps} steps"))
+    if not quick:
+        uz, uy, wall, res = out["α = 1e5, 100 mm/min (reference)"]
+        kin = float(np.max(np.abs(uy - kinematic_uy(uz))) / np.max(np.abs(kinematic_uy(uz))))
+        rows.append(Row("rearrangement reference (100 mm/min, α = 1e5) vs kinematic curve", float(kinematic_uy(uz[-1])),
+                        float(uy[-1]), kin, 0.05, "m", f"wall {wall:.1f} s, {res.steps} steps"))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Case 8: friction on an inclined plate
+# ---------------------------------------------------------------------------------------------
+
+def inclined_plate(theta_deg: float, quick: bool = False, mu: float = 0.2) -> Row:
+    """A 3 mm fiber on a flat plate under gravity tilted by θ (equivalent to an inclined plate).
+    tan θ < μ: sticks (displacement vs ½ g sin θ T², must be < 1 % of it);
+    else a = g(sin θ − μ cos θ) from a quadratic fit of the mean position (< 1 %)."""
+    L = 3e-3
+    n_el = 10
+    th = math.radians(theta_deg)
+    gvec = [G * math.sin(th), 0.0, -G * math.cos(th)]
+    probe = _model([((0, 0, R_M), (L, 0, R_M), n_el)])
+    eff0 = [Gravity(gvec), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0)]
+    dt, _ = choose_time_step(probe, eff0, SimulationSettings())
+    # start at the static penetration of the plate penalty (k = 0.1 m (2/Δt)², same δ on every node)
+    d_s = G * math.cos(th) / (0.1 * (2.0 / dt) ** 2)
+    m = _model([((0, 0, R_M - d_s), (L, 0, R_M - d_s), n_el)])
+    eff = [Gravity(gvec), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
+           make_contact_hook(m, contact=False, friction=True, mu=mu)]
+    T = 1e-3 if quick else 3e-3
+    res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=41))
+    t = res.frames_time
+    xm = res.frames_positions[:, :, 0].mean(axis=1) - m.nodes_m[:, 0].mean()
+    if math.tan(th) < mu:
+        scale = 0.5 * G * math.sin(th) * T**2
+        return Row(f"friction inclined θ = {theta_deg:g}° (tan θ < μ = {mu:g}): sticks, |u|/(½ g sin θ T²)",
+                   0.0, float(abs(xm[-1])), float(abs(xm[-1]) / scale), 0.01, "m")
+    sel = t > 0.1 * T
+    c = np.polyfit(t[sel], xm[sel], 2)
+    a = 2 * c[0]
+    ref = G * (math.sin(th) - mu * math.cos(th))
+    return Row(f"friction inclined θ = {theta_deg:g}° (tan θ > μ = {mu:g}): a = g(sin θ − μ cos θ)", ref, a,
+               abs(a - ref) / ref, 0.01, "m/s²")
+
+
+# ---------------------------------------------------------------------------------------------
+# Sliding along a parallel neighbour across element joints
+# ---------------------------------------------------------------------------------------------
+
+def sliding_parallel(quick: bool = False, p: float = 66.0, speed_m_s: float = 5.0) -> Row:
+    """A 3 mm fiber (0.25 mm elements) pressed by p onto a clamped 6 mm one (0.3 mm elements),
+    sliding along it at ``speed_m_s`` (no damping, no friction) across many joints of both;
+    the total normal force (kernel, each frame) stays within 1 % of p·L."""
+    LA, LB = 6e-3, 3e-3
+    d0 = johnson_delta(p)
+    zb = 2 * R_M - d0
+    m = _model([((0, 0, 0), (LA, 0, 0), 20), ((1e-3, 0, zb), (1e-3 + LB, 0, zb), 12)])
+    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]), make_contact_hook(m, law=law)]
+    dist = 0.6e-3 if quick else 1.8e-3
+    T = dist / speed_m_s
+    st = State.at_rest(m)
+    st.v[m.node_fiber == 1, 0] = speed_m_s
+    forces = []
+    res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=61), state=st,
+                   on_frame=lambda k, t, x: forces.append(pair_force(m, x, law, 0, 1)[2]))
+    F = np.array(forces)
+    ref = p * LB
+    err = float(np.max(np.abs(F - ref)) / ref)
+    moved = float(res.frames_positions[-1, m.node_fiber == 1, 0].mean() - m.nodes_m[m.node_fiber == 1, 0].mean())
+    return Row(f"sliding along a parallel fiber ({moved * 1e3:.2f} mm, {moved / 0.25e-3:.1f} × B's elements): "
+               f"normal force", ref, float(F[np.argmax(np.abs(F - ref))]), err, 0.01, "N")
+
+
+def _crossed(phi):
+    return lambda quick=False: contact_pair_crossed(phi, quick)
+
+
+CONTACT_CASES = {
+    "contact_parallel": contact_pair_parallel,
+    "contact_crossed_2": _crossed(2.0),
+    "contact_crossed_6": _crossed(6.0),
+    "contact_crossed_10": _crossed(10.0),
+    "contact_crossed_90": _crossed(90.0),
+    "three_beam_static": three_beam_static,
+    "rearrangement": rearrangement,
+    "friction_inclined_stick": lambda quick=False: inclined_plate(5.0, quick),
+    "friction_inclined_slide": lambda quick=False: inclined_plate(20.0, quick),
+    "sliding_parallel": sliding_parallel,
+}
+
+
+def run_all(quick: bool = False, only=None) -> list[Row]:
+    rows = []
+    for name, fn in CONTACT_CASES.items():
+        if only and name not in only:
+            continue
+        r = fn(quick=quick)
+        rows.extend(r if isinstance(r, list) else [r])
+    return rows
