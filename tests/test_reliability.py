@@ -330,7 +330,7 @@ def _with(path: str, value):
     ("scene.damping", {"alpha": "-1 1/s"}, "alpha"),
     ("scene.friction", {"mu": -0.2}, "mu"),
     ("scene.plates", {"axis": "z", "lower": "moving", "upper": "fixed", "lower_position": "-2 mm",
-                      "upper_position": "4 mm"}, "scene.plates: the plates never touch the fibers"),
+                      "upper_position": "4 mm"}, "scene.plates: the plates never touch the fibers: their gaps to the bundle add up to 4 mm"),
     ("scene.plates", {"axis": "z", "lower": "moving", "upper": "fixed", "lower_position": "0.5 mm"},
      "scene.plates.lower_position: the plane at 0.5 mm cuts through the bundle"),
     ("scene.walls", {"y": ["-0.1 mm", "0.1 mm"]}, "scene.walls.y: the plane at -0.1 mm cuts through the bundle"),
@@ -354,3 +354,49 @@ def test_plate_starting_away_from_the_bundle_warns(tmp_path, caplog):
     m = one_fiber()
     w = check_scene_geometry(m, [Plates(axis="z", displacement_m=1e-3, velocity_m_s=1.0, lower_position_m=-0.5e-3)])
     assert len(w) == 1 and "starts 0.25 mm away from the bundle" in w[0]
+
+
+# -- fuzz of the scene and solver sections through the simulate stage ----------------------------------
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+FUZZ_KEYS = {
+    "plates": ["axis", "lower", "upper", "lower_position", "upper_position", "bogus"],
+    "walls": ["x", "y", "z"],
+    "loading": ["displacement", "velocity", "ramp"],
+    "damping": ["alpha"],
+    "gravity": ["acceleration"],
+    "solver": ["output_frames", "checkpoint_every", "history_every", "dt_safety"],
+}
+FUZZ_VALUES = st.one_of(
+    st.none(), st.booleans(), st.integers(-3, 30), st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6),
+    st.sampled_from(["0.3 mm", "-1 mm", "1e9 mm", "1000 mm/min", "-5 mm/min", "nan mm", "inf mm", "15 GPa",
+                     "moving", "fixed", "none", "smooth", "q"]),
+    st.lists(st.one_of(st.integers(-2, 2), st.sampled_from(["-0.2 mm", "0.2 mm", "5 mm", "x"])), max_size=4),
+)
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(block=st.sampled_from(sorted(FUZZ_KEYS)), data=st.data())
+def test_fuzzed_scene_and_solver_fail_cleanly_or_run(tmp_path_factory, reference, block, data):
+    key = data.draw(st.sampled_from(FUZZ_KEYS[block]))
+    value = data.draw(FUZZ_VALUES)
+    d = tmp_path_factory.mktemp("fuzz")
+    run = d / "run"
+    shutil.copytree(reference, run)
+    (run / "simulation.h5").unlink()
+    cfg = yaml.safe_load(yaml.safe_dump(SCENE))
+    cfg["solver"]["end_time"] = "1e-6 s"  # a dozen steps: the point is the input handling
+    target = cfg["solver"] if block == "solver" else cfg["scene"].setdefault(block, {})
+    if block == "solver" and key == "dt_safety" and isinstance(value, float) and 0 < value < 1e-3:
+        value = 1e-3  # a legal but glacial run is not what this test is about
+    target[key] = value
+    before = snapshot(run)
+    r = cli("run", write_cfg(d / "fuzz.yaml", cfg), "--out", run, "--to", "simulate")
+    if r.exit_code == 0:
+        assert (run / "simulation.h5").exists()
+    else:
+        one_line_error(r)
+        assert {k: v for k, v in snapshot(run).items() if not k.startswith(("simulation_diverged", "frames_diverged"))} == before

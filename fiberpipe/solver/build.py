@@ -49,7 +49,8 @@ def check_scene_geometry(model: Model, effects) -> list[str]:
             raise FiberpipeError(
                 f"the plane at {_mm(pos)} cuts through the bundle: fiber {int(model.node_fiber[i])} (node {i}) reaches "
                 f"{_mm(depth[i])} past it with its radius; positions are those of the planes, not of fiber axes: put it "
-                f"{'at or below' if low_side else 'at or above'} {_mm(ext)} (or leave it unset for plates)", where=key)
+                f"{'at or below' if low_side else 'at or above'} {_mm(ext)}"
+                + (" or leave it unset (the plate then touches the bundle)" if "plates" in key else ""), where=key)
         if depth[i] > 0.01 * r[i]:
             warnings.append(f"{key}: the plane at {_mm(pos)} overlaps fiber {int(model.node_fiber[i])} by "
                             f"{_mm(depth[i])} at the start (pushed out in the first steps)")
@@ -80,7 +81,7 @@ def check_scene_geometry(model: Model, effects) -> list[str]:
                                     f"(nothing is compressed until it has travelled that far)")
             if "moving" in (e.lower, e.upper) and gaps > 0 and gaps >= travel:
                 raise FiberpipeError(
-                    f"the plates never touch the fibers: they start {_mm(gaps)} away from the bundle in all but "
+                    f"the plates never touch the fibers: their gaps to the bundle add up to {_mm(gaps)} but they "
                     f"travel only {_mm(travel)} (loading.displacement); move them closer or leave the positions "
                     "unset (plates then start touching the bundle)", where="scene.plates")
     for w in warnings:

@@ -11,8 +11,8 @@ an uninterrupted run and gives the same results bit for bit (same machine, same 
 - the history rows written so far and the row counter, the frames written so far;
 - the run's constants that would otherwise be recomputed from the *initial* state: the initial
   kinetic + strain energy (energy reference of the blow-up check and the residual), the origin step;
-- the contact hook's ``data`` tuple, saved generically as a (nested) tuple of numpy arrays and
-  scalars, and any arrays an effect contributes through ``checkpoint_arrays()`` /
+- the contact hook's ``data`` tuple, saved generically as a (nested) tuple of numpy arrays,
+  numbers and numba typed lists of arrays (buffers the kernel grows are restored at their grown size), and any arrays an effect contributes through ``checkpoint_arrays()`` /
   ``restore_arrays(arrays)`` (an optional protocol: an effect with Python-side mutable state
   implements both).
 
@@ -101,6 +101,11 @@ def _flatten(obj, prefix: str, out: dict, spec: list):
         for i, item in enumerate(obj):
             _flatten(item, f"{prefix}/{i}", out, sub)
         spec.append(["tuple", sub])
+    elif _is_typed_list(obj):
+        sub = []
+        for i, item in enumerate(obj):
+            _flatten(np.asarray(item), f"{prefix}/{i}", out, sub)
+        spec.append(["list", sub])
     elif isinstance(obj, np.ndarray):
         out[prefix] = obj
         spec.append(["array", prefix])
@@ -118,10 +123,18 @@ def _flatten(obj, prefix: str, out: dict, spec: list):
                              "be saved (only tuples of numpy arrays and numbers)")
 
 
+def _is_typed_list(obj) -> bool:
+    return type(obj).__name__ == "List" and type(obj).__module__.startswith("numba")
+
+
 def _unflatten(spec, arrays: dict):
     kind, val = spec
     if kind == "tuple":
         return tuple(_unflatten(s, arrays) for s in val)
+    if kind == "list":
+        from numba.typed import List
+
+        return List([_unflatten(s, arrays) for s in val])
     a = arrays[val]
     if kind == "array":
         return np.array(a)  # a fresh writable, contiguous copy
@@ -137,6 +150,14 @@ def restore_into(current, saved):
     kernel may hold references to them); return the tuple to use from now on."""
     if isinstance(current, tuple) and isinstance(saved, tuple) and len(current) == len(saved):
         return tuple(restore_into(c, s) for c, s in zip(current, saved))
+    if _is_typed_list(current) and _is_typed_list(saved) and len(current) == len(saved):
+        for i in range(len(saved)):  # in place: the buffers may have grown, the list object stays
+            cur = current[i]
+            if cur.shape == saved[i].shape and cur.dtype == saved[i].dtype:
+                np.copyto(cur, saved[i])
+            else:
+                current[i] = saved[i]
+        return current
     if (isinstance(current, np.ndarray) and isinstance(saved, np.ndarray) and current.shape == saved.shape
             and current.dtype == saved.dtype and current.flags.writeable):
         np.copyto(current, saved)

@@ -187,6 +187,16 @@ class Integrator:
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
         m, sc = self.model, self.scene
+        try:
+            return self._advance(state, n_steps)
+        except ReferenceError:
+            # numba bug: saving a new specialisation of the cached kernel fails when its on-disk index
+            # holds one for a hook dispatcher that is not alive in this process. The new overload is
+            # already compiled and registered (numba adds it before saving) and nothing ran: retry.
+            return self._advance(state, n_steps)
+
+    def _advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
+        m, sc = self.model, self.scene
         status, done, self.h_row, bad = K.advance_kernel(
             m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
             m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
@@ -316,7 +326,8 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
                     "the plane penalty), the plate/wall positions, lower solver.dt_safety, or add damping")
     else:
         hint.append("lower solver.dt_safety (e.g. 0.5), add damping (scene.damping.alpha), soften the penalty "
-                    "(plates/walls penalty_factor, contact stiffness), or check the input for overlapping fibers")
+                    "(plates/walls penalty_factor, contact stiffness), check the loads, drives and loading velocity "
+                    "for a wrong unit, or the input for overlapping fibers")
     return (f"simulation diverged at t = {state.t:.6g} s (step {state.step}): {quantity}; node {bad} "
             f"(fiber {fiber}, element {el}), speed {speed:.3g} m/s" + (f", {detail}" if detail else "")
             + f"{energy}. Suggested fix: {'; '.join(hint)}")
@@ -344,7 +355,15 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
 def _copy_tree(obj):
     if isinstance(obj, tuple):
         return tuple(_copy_tree(o) for o in obj)
+    if type(obj).__name__ == "List" and type(obj).__module__.startswith("numba"):
+        from numba.typed import List
+
+        return List([np.array(a) for a in obj])
     return obj.copy() if isinstance(obj, np.ndarray) else obj
+
+
+#: a run longer than this many steps is refused as a probable unit mistake (≈ 1 day for 40 fibers)
+MAX_STEPS = 1e11
 
 
 def default_chunk_steps(model: Model, settings: SimulationSettings) -> int:
@@ -410,7 +429,12 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     end_time = settings.end_time_s if settings.end_time_s is not None else probe.end_time_hint
     if not end_time or end_time <= 0:
         raise FiberpipeError("no end time: set solver.end_time or a loading (moving plate) / drive")
-    total_steps = int(math.ceil(end_time / dt - 1e-9))
+    n = end_time / dt
+    if not (math.isfinite(n) and n <= MAX_STEPS):
+        raise FiberpipeError(f"the run would take {n:.3g} steps (end time {end_time:.4g} s / dt {dt:.4g} s), more "
+                             f"than {MAX_STEPS:.0e}: check solver.end_time, solver.dt / dt_safety, damping.beta "
+                             "(which lowers the stable step) and the loading velocity")
+    total_steps = int(math.ceil(n - 1e-9))
     every = settings.history_every or max(1, total_steps // 2000)
     rows = total_steps // every + 1
     chunk = default_chunk_steps(model, settings)

@@ -124,3 +124,22 @@ def test_checkpoint_size_scales_with_the_model(tmp_path):
     path = write_checkpoint(tmp_path / "ck.h5", saved[-1])
     # state (14 floats/node) + frames so far + history rows: a few tens of kB for 33 nodes
     assert path.stat().st_size < 200_000
+
+
+def test_resume_with_the_real_contact_hook_is_bit_for_bit(tmp_path):
+    """Fiber–fiber contact + friction + plates: the hook's data (neighbour list, friction history,
+    typed-list buffers grown in the kernel) round-trips through the checkpoint."""
+    ce = pytest.importorskip("fiberpipe.solver.contact_effect")
+    model = stack_model(n_fibers=3)
+
+    def effects():
+        return [Damping(1e4), Gravity([0, 0, -9.81]),
+                Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.02e-3, velocity_m_s=0.1),
+                ce.make_contact_hook(model, friction=True, mu=0.3)]
+
+    saved = []
+    ref = simulate(model, effects(), SimulationSettings(**SETTINGS), on_checkpoint=saved.append)
+    assert np.max(ref.history["contacts"]) > 0
+    for ck in (saved[0], saved[-1]):
+        path = write_checkpoint(tmp_path / "ck.h5", ck)
+        assert_same(ref, simulate(model, effects(), SimulationSettings(**SETTINGS), resume=read_checkpoint(path)))
