@@ -8,7 +8,7 @@ from fiberpipe.artifacts import read_fibers, write_mesh
 from fiberpipe.config import Config
 from fiberpipe.io.abaqus import write_abaqus_inp
 from fiberpipe.io.vtk import mesh_vtu
-from fiberpipe.model.mesh import mesh_polylines
+from fiberpipe.model.mesh import mesh_polylines, resolve_overlaps
 from fiberpipe.stages._common import input_hashes
 
 
@@ -20,6 +20,7 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
         smooth_sigma_m=cfg.mesh.smooth_sigma,
         radius_m=cfg.fiber.radius,
     )
+    overlaps = resolve_overlaps(mesh, max_shift_m=cfg.mesh.max_overlap_shift) if cfg.mesh.resolve_overlaps else None
     m = cfg.material
     write_mesh(
         out,
@@ -39,7 +40,12 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
         heading=f"fiberpipe {cfg.name}",
     )
     lengths = mesh.element_lengths_m()
+    figures = {} if overlaps is None else {
+        "initial_overlap_max_m": overlaps["max_overlap_before_m"],
+        "overlap_adjustment_max_m": overlaps["max_shift_m"],
+    }
     return {
+        **figures,
         "fibers": mesh.n_fibers,
         "nodes": mesh.n_nodes,
         "elements": mesh.n_elements,

@@ -40,3 +40,20 @@ def test_duplicate_points_are_cleaned_and_short_fibers_rejected():
         mesh_polylines(Polylines.from_list([[[0, 0, 0], [0, 0, 0.4e-3]]], 0.25e-3), 0.3e-3)
     with pytest.raises(InputError, match="positive"):
         mesh_polylines(Polylines.from_list([_arc()], 0.25e-3), -1.0)
+
+
+def test_overlapping_fibers_are_pushed_apart_without_stretching():
+    from fiberpipe.model.mesh import resolve_overlaps
+
+    z = np.linspace(0, 6e-3, 21)
+    a = np.c_[np.zeros_like(z), np.zeros_like(z), z]
+    b = np.c_[np.full_like(z, 0.46e-3), np.zeros_like(z), z]  # 40 um overlap for r = 0.25 mm
+    mesh = mesh_polylines(Polylines.from_list([a, b], 0.25e-3), 0.3e-3)
+    lengths = mesh.element_lengths_m()
+    info = resolve_overlaps(mesh)
+    assert info["max_overlap_before_m"] == pytest.approx(40e-6, rel=1e-6)
+    gap = mesh.fiber_nodes(1)[:, 0] - mesh.fiber_nodes(0)[:, 0]
+    assert np.all(gap >= 0.5e-3 - 1e-9) and np.all(gap < 0.5e-3 + 1e-6)
+    np.testing.assert_allclose(mesh.element_lengths_m(), lengths, rtol=1e-9)  # moved normal to the fibers
+    with pytest.raises(InputError, match="overlap"):
+        resolve_overlaps(mesh_polylines(Polylines.from_list([a, a + [0.1e-3, 0, 0]], 0.25e-3), 0.3e-3), max_shift_m=50e-6)
