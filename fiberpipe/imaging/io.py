@@ -356,5 +356,8 @@ def save_volume_tif(path, volume: np.ndarray, voxel_size_m) -> None:
         vol = vol.astype(np.uint8) * 255
     elif vol.dtype not in (np.uint8, np.uint16, np.float32):
         vol = vol.astype(np.float32)
-    tifffile.imwrite(path, vol, imagej=True, resolution=(1.0 / v[2], 1.0 / v[1]),
-                     metadata={"spacing": float(v[0]), "unit": "micron", "axes": "ZYX"})
+    from fiberpipe.artifacts import atomic_path
+
+    with atomic_path(path, suffix=".tif") as tmp:  # a crash never leaves a half-written volume
+        tifffile.imwrite(tmp, vol, imagej=True, resolution=(1.0 / v[2], 1.0 / v[1]),
+                         metadata={"spacing": float(v[0]), "unit": "micron", "axes": "ZYX"})

@@ -14,8 +14,12 @@ from fiberpipe.post.energies import ABAQUS_NAMES  # noqa: E402
 
 
 def _save(fig, path: Path) -> Path:
+    """Save a figure atomically (temporary file, then rename) and close it."""
+    from fiberpipe.artifacts import atomic_path
+
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return path
 

@@ -261,9 +261,9 @@ def _write_outputs(out: Path, spec: StudySpec, rows: list[dict], ref: dict, echo
         ax.set_ylabel(f"{err_cols[0]} [-]")
         ax.grid(alpha=0.3, which="both")
         ax.legend()
-        fig.tight_layout()
-        fig.savefig(out / "pareto.png", dpi=120)
-        plt.close(fig)
+        from fiberpipe.post.plots import _save
+
+        _save(fig, out / "pareto.png")
 
 
 def _cell(v):
