@@ -10,7 +10,14 @@ A study file::
       scene.damping.alpha: [0, "1e4 1/s", "1e5 1/s"]
     reference:                                # a named slow/fine run: overrides of the base
       overrides: {scene.drives.0.velocity: "10 mm/min"}
+      # or  run: path/to/simulation.h5         (an existing run, relative to this file)
+      # or  extrapolate: {key: mesh.element_length, order: 2}   (the converged limit: Richardson
+      #     extrapolation of the sweep's two finest values of ``key``; order "auto" estimates it
+      #     from the three finest; only for curve and final_load)
     measures: [curve, final_load, positions]  # error measures, the first is the Pareto axis
+    # measures: curve (F(U) of the plates, relative L2), final_load, positions (mean node distance
+    # at the end / fiber diameter), rearrangement (u_y(u_z) of the study's 3-beam case: max error
+    # / max u_y,ref, driven fiber 0 against the mean outward motion of the others)
     workers: 2                                # local processes (or Dask with --scheduler)
 
 # Strategy: each point is the base config with its overrides applied, validated up front (so a
@@ -29,23 +36,36 @@ import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any, Literal, Optional
+from typing import Any, Literal, Optional, Union
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from fiberpipe.artifacts import write_text_atomic
 from fiberpipe.config import load_raw, validate_config
 from fiberpipe.errors import ConfigError
 
-Measure = Literal["curve", "final_load", "positions", "tip"]
+Measure = Literal["curve", "final_load", "positions", "tip", "rearrangement"]
+
+
+class ExtrapolateSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    key: str
+    order: Union[float, Literal["auto"]] = 2.0
 
 
 class ReferenceSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     overrides: dict[str, Any] = Field(default_factory=dict)
     run: Optional[str] = None
+    extrapolate: Optional[ExtrapolateSpec] = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if self.run is not None and self.extrapolate is not None:
+            raise ValueError("give reference.run or reference.extrapolate, not both")
+        return self
 
 
 class StudySpec(BaseModel):
@@ -115,12 +135,43 @@ def _point(base: dict, overrides: dict, where: str) -> dict:
     return {"id": pid, "overrides": overrides, "raw": raw, "config_sha256": cfg.sha256()}
 
 
+_WARM: set = set()
+
+
+def _warm_up(raw: dict, cfg, where: str) -> None:
+    """Compile (or load from numba's cache) this scene's kernels once per process before a timed
+    run, so that the first point's wall time does not include JIT compilation: the same config
+    for a few dozen steps, into a throw-away folder."""
+    key = tuple(sorted(cfg.scene.effects)) + (str(getattr(cfg.scene.contact, "law", "")),)
+    if key in _WARM:
+        return
+    _WARM.add(key)
+    import tempfile
+
+    from fiberpipe.pipeline import run_pipeline
+
+    w = copy.deepcopy(raw)
+    w.setdefault("solver", {})
+    w["solver"]["end_time"] = 2e-6
+    w["solver"]["output_frames"] = 2
+    w["solver"].pop("checkpoint_every", None)
+    w.setdefault("post", {})
+    w["post"]["plots"] = False
+    try:
+        wcfg = validate_config(w, where=where)
+        with tempfile.TemporaryDirectory(prefix="fiberpipe-warm-") as d:
+            run_pipeline(wcfg, Path(d) / "run")
+    except Exception:  # a warm-up failure is not the point's failure: the real run reports it
+        pass
+
+
 def _run_point(raw: dict, run_dir: str, where: str) -> dict:
     """Run one point in this process (also used by worker processes)."""
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     from fiberpipe.pipeline import run_pipeline
 
     cfg = validate_config(copy.deepcopy(raw), where=where)
+    _warm_up(raw, cfg, where)
     t0 = time.perf_counter()
     report = run_pipeline(cfg, Path(run_dir))
     wall = time.perf_counter() - t0
@@ -128,33 +179,147 @@ def _run_point(raw: dict, run_dir: str, where: str) -> dict:
     return {"wall_time_s": wall, "solver_wall_time_s": sim.get("solver_wall_time_s"), "steps": sim.get("steps"), "elements": sim.get("elements")}
 
 
-def _errors(measures, ref_sim: Path, sim: Path) -> dict:
+def _key_value(raw: dict, dotted: str, where: str) -> float:
+    """The SI value of a dotted key in a raw config (validated, so units are converted)."""
+    cfg = validate_config(copy.deepcopy(raw), where=where)
+    cur: Any = cfg
+    for part in dotted.split("."):
+        cur = cur[int(part)] if isinstance(cur, (list, tuple)) else getattr(cur, part)
+    return float(cur)
+
+
+def rearrangement_curve(sim) -> tuple[np.ndarray, np.ndarray]:
+    """u_z (K,) of the driven fiber 0 (its mean downward displacement along z) and u_y (K,): the mean
+    outward (away from fiber 0, along y) displacement of the other fibers, on the output frames (m).
+    The study's 3-beam rearrangement case (its Figs. 8–10: u_y = u_y2 = −u_y3)."""
+    X = np.asarray(sim.frames_positions)
+    off = np.asarray(sim.mesh.node_offsets)
+    fib = [slice(int(off[i]), int(off[i + 1])) for i in range(len(off) - 1)]
+    z0 = X[:, fib[0], 2].mean(axis=1)
+    uz = -(z0 - z0[0])
+    y0 = X[0, fib[0], 1].mean()
+    uys = []
+    for f in fib[1:]:
+        y = X[:, f, 1].mean(axis=1)
+        uys.append((y - y[0]) * np.sign(y[0] - y0 or 1.0))
+    return uz, np.mean(uys, axis=0) if uys else np.zeros_like(uz)
+
+
+def _rearrangement_error(ref_sim, sim) -> float:
+    uz_r, uy_r = rearrangement_curve(ref_sim)
+    uz, uy = rearrangement_curve(sim)
+    o = np.argsort(uz_r)
+    sel = uz <= np.max(uz_r) + 1e-12
+    ref = np.interp(uz[sel], uz_r[o], uy_r[o])
+    return float(np.max(np.abs(uy[sel] - ref)) / max(float(np.max(np.abs(uy_r))), 1e-300))
+
+
+def _errors(measures, ref, sim_path: Path) -> dict:
+    """Errors of the run at ``sim_path`` against ``ref``: a ``SimulationData`` (reference run) or a
+    dict ``{"U", "F"}`` (an extrapolated limit curve)."""
     from fiberpipe.post.curves import curve_error, force_displacement
     from fiberpipe.post.history import load_simulation
 
-    r, s = load_simulation(ref_sim), load_simulation(sim)
+    s = load_simulation(sim_path)
+    r = ref if isinstance(ref, dict) else None
     out = {}
     for m in measures:
-        if m == "curve":
-            Ur, Fr = force_displacement(r)
+        if m in ("curve", "final_load"):
+            Ur, Fr = (r["U"], r["F"]) if r is not None else force_displacement(ref)
             U, F = force_displacement(s)
-            out["curve_error"] = curve_error(Ur, Fr, U, F, scale=float(np.max(np.abs(Fr))) or None)
-        elif m == "final_load":
-            _, Fr = force_displacement(r)
-            _, F = force_displacement(s)
-            out["final_load_error"] = float(abs(F[-1] - Fr[-1]) / max(abs(Fr[-1]), 1e-300))
+            if m == "curve":
+                out["curve_error"] = curve_error(Ur, Fr, U, F, scale=float(np.max(np.abs(Fr))) or None)
+            else:
+                out["final_load_error"] = float(abs(F[-1] - Fr[-1]) / max(abs(Fr[-1]), 1e-300))
+                out["final_load_N"] = float(F[-1])
+        elif m == "rearrangement":
+            if r is not None:
+                raise ConfigError("the rearrangement measure needs a reference run, not an extrapolated limit")
+            out["rearrangement_error"] = _rearrangement_error(ref, s)
         elif m in ("positions", "tip"):
-            pr, ps = r.frames_positions[-1], s.frames_positions[-1]
+            if r is not None:
+                out["position_error"] = float("nan")  # no extrapolated positions
+                continue
+            pr, ps = ref.frames_positions[-1], s.frames_positions[-1]
             if pr.shape == ps.shape:
                 d = np.linalg.norm(pr - ps, axis=1)
-                scale = 2 * float(np.mean(r.mesh.radius_m))
+                scale = 2 * float(np.mean(ref.mesh.radius_m))
                 out["position_error"] = float(np.mean(d) / scale)
             else:
                 from fiberpipe.post.positions import position_error
 
-                e = position_error(ps, s.mesh.node_offsets, pr, r.mesh.node_offsets)
-                out["position_error"] = e["mean_m"] / (2 * float(np.mean(r.mesh.radius_m)))
+                e = position_error(ps, s.mesh.node_offsets, pr, ref.mesh.node_offsets)
+                out["position_error"] = e["mean_m"] / (2 * float(np.mean(ref.mesh.radius_m)))
     return out
+
+
+def observed_order(h: list[float], f: list[np.ndarray]) -> float:
+    """Observed order of convergence from three solutions ``f`` at ``h`` (finest first), by the
+    fixed-point iteration of Celik et al. (J. Fluids Eng. 130, 2008, the GCI procedure), which allows
+    unequal refinement ratios; clamped to [0.5, 4]."""
+    r21, r32 = h[1] / h[0], h[2] / h[1]
+    e21 = float(np.linalg.norm(f[1] - f[0]))
+    e32 = float(np.linalg.norm(f[2] - f[1]))
+    if e21 <= 0 or e32 <= 0:
+        return 2.0
+    sgn = 1.0  # norms: monotone convergence assumed
+    p = 2.0
+    for _ in range(50):
+        q = np.log((r21**p - sgn) / (r32**p - sgn))
+        p_new = abs(np.log(e32 / e21) + q) / np.log(r21)
+        if abs(p_new - p) < 1e-6:
+            break
+        p = float(np.clip(p_new, 0.5, 4.0))
+    return float(np.clip(p, 0.5, 4.0))
+
+
+def richardson_limit(spec: StudySpec, points: list[dict], out: Path, where: str) -> dict:
+    """The converged limit of F(U) by Richardson extrapolation over ``reference.extrapolate.key``:
+    F_lim = F_1 + (F_1 − F_2)/(r^p − 1) on the finest run's U (F_1 finest, r = h_2/h_1)."""
+    from fiberpipe.post.curves import force_displacement
+    from fiberpipe.post.history import load_simulation
+
+    ex = spec.reference.extrapolate
+    if list(spec.sweep) != [ex.key]:
+        raise ConfigError(f"reference.extrapolate over {ex.key!r} needs a sweep of that key only", where=where)
+    hs = [(_key_value(p["raw"], ex.key, where), p) for p in points]
+    hs.sort(key=lambda t: t[0])
+    need = 3 if ex.order == "auto" else 2
+    if len(hs) < need:
+        raise ConfigError(f"reference.extrapolate needs at least {need} values of {ex.key}", where=where)
+    sims = [load_simulation(out / "points" / p["id"] / "simulation.h5") for _, p in hs[:need]]
+    U1, F1 = force_displacement(sims[0])
+    Fs = [F1]
+    for sim in sims[1:]:
+        U, F = force_displacement(sim)
+        o = np.argsort(U)
+        Fs.append(np.interp(U1, U[o], F[o]))
+    h = [t[0] for t in hs[:need]]
+    p = observed_order(h, Fs) if ex.order == "auto" else float(ex.order)
+    r = h[1] / h[0]
+    F_lim = Fs[0] + (Fs[0] - Fs[1]) / (r**p - 1.0)
+    return {"U": U1, "F": F_lim, "order": p, "h": h}
+
+
+def digit_cost(rows: list[dict], err_col: str) -> Optional[dict]:
+    """What one more digit of accuracy costs: a least-squares fit log10(error) = a + b log10(wall) over
+    the Pareto front (points with error > 0); factor = 10^(−1/b), the wall-time multiplier for a 10×
+    smaller error. None if the front has fewer than two points or the error does not fall with time."""
+    e = np.array([r.get(err_col, np.nan) for r in rows], float)
+    w = np.array([r["wall_time_s"] for r in rows], float)
+    ok = np.isfinite(e) & np.isfinite(w) & (e > 0) & (w > 0)
+    idx = [i for i in np.argsort(w) if ok[i]]
+    front, best = [], np.inf
+    for i in idx:
+        if e[i] < best:
+            best = e[i]
+            front.append(i)
+    if len(front) < 2:
+        return None
+    b, a = np.polyfit(np.log10(w[front]), np.log10(e[front]), 1)
+    if b >= 0:
+        return None
+    return {"slope": float(b), "factor": float(10 ** (-1.0 / b)), "front": [rows[i]["id"] for i in front]}
 
 
 def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, scheduler: str | None = None, echo=print) -> Path:
@@ -163,7 +328,8 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     spec, ctx = load_study(path)
     base = ctx["base"]
     points = study_points(spec, base, str(path))
-    ref = _point(base, spec.reference.overrides, str(path)) if spec.reference.run is None else None
+    use_ref_run = spec.reference.run is None and spec.reference.extrapolate is None
+    ref = _point(base, spec.reference.overrides, str(path)) if use_ref_run else None
     out = Path(out)
     (out / "points").mkdir(parents=True, exist_ok=True)
     jobs = []
@@ -171,21 +337,33 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
         jobs.append(("reference", ref["raw"], str(out / "reference")))
     jobs += [(p["id"], p["raw"], str(out / "points" / p["id"])) for p in points]
     nworkers = workers or spec.workers
-    echo(f"study {spec.name}: {len(points)} points + reference, {nworkers} worker(s)" + (f" on {scheduler}" if scheduler else ""))
+    echo(f"study {spec.name}: {len(points)} points" + (" + reference" if ref else "") + f", {nworkers} worker(s)" + (f" on {scheduler}" if scheduler else ""))
     results = _execute(jobs, nworkers, scheduler, str(path), echo)
-    ref_sim = Path(spec.reference.run) if spec.reference.run else out / "reference" / "simulation.h5"
-    if spec.reference.run and not ref_sim.is_absolute():
-        ref_sim = (path.parent / ref_sim).resolve()
+    from fiberpipe.post.history import load_simulation
+
+    limit = None
+    if spec.reference.extrapolate is not None:
+        limit = richardson_limit(spec, points, out, str(path))
+        ref_data = limit
+    else:
+        ref_sim = Path(spec.reference.run) if spec.reference.run else out / "reference" / "simulation.h5"
+        if spec.reference.run and not ref_sim.is_absolute():
+            ref_sim = (path.parent / ref_sim).resolve()
+        if not ref_sim.exists():
+            raise ConfigError("reference run not found", where=str(ref_sim))
+        ref_data = load_simulation(ref_sim)
     rows = []
     for p in points:
         res = results[p["id"]]
-        err = _errors(spec.measures, ref_sim, out / "points" / p["id"] / "simulation.h5")
+        err = _errors(spec.measures, ref_data, out / "points" / p["id"] / "simulation.h5")
         steps, elements = res.get("steps") or 0, res.get("elements") or 0
         solver_wall = res.get("solver_wall_time_s") or float("nan")
         row = {**{k: str(v) for k, v in p["overrides"].items()}, **err, "wall_time_s": solver_wall, "steps": steps,
                "element_steps_per_s": steps * elements / solver_wall if solver_wall and solver_wall == solver_wall else float("nan"), "id": p["id"]}
         rows.append(row)
-    ref_res = results.get("reference", {})
+    ref_res = dict(results.get("reference", {}))
+    if limit is not None:
+        ref_res["limit"] = limit
     _write_outputs(out, spec, rows, ref_res, echo)
     return out
 
@@ -229,9 +407,26 @@ def _write_outputs(out: Path, spec: StudySpec, rows: list[dict], ref: dict, echo
     cols = list(rows[0])
     write_csv(out / "study.csv", {c: [r.get(c) for r in rows] for c in cols})
     err_cols = [c for c in cols if c.endswith("_error")]
-    lines = [f"# Study {spec.name}", "", f"Reference: {spec.reference.run or spec.reference.overrides} "
-             f"(solver wall time {ref.get('solver_wall_time_s', float('nan')):.3g} s)" if ref else "", "",
-             "| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    rs = spec.reference
+    if rs.extrapolate is not None:
+        lim = ref.get("limit", {})
+        ref_txt = (f"Reference: the converged limit, Richardson extrapolation over `{rs.extrapolate.key}` from its two "
+                   f"finest values ({', '.join(f'{h:.4g}' for h in lim.get('h', [])[:2])}), order p = "
+                   f"{lim.get('order', float('nan')):.2f}" + (" (observed, from the three finest)" if rs.extrapolate.order == "auto" else ""))
+    elif rs.run:
+        ref_txt = f"Reference: the run `{rs.run}`"
+    else:
+        ov = ", ".join(f"`{k}` = {v}" for k, v in rs.overrides.items()) or "the base config"
+        ref_txt = f"Reference: {ov} (solver wall time {ref.get('solver_wall_time_s', float('nan')):.3g} s, {ref.get('steps')} steps)"
+    lines = [f"# Study {spec.name}", "", ref_txt, ""]
+    for c in err_cols:
+        dc = digit_cost(rows, c)
+        if dc is None:
+            lines.append(f"- `{c}`: no Pareto trade-off (the error does not fall as wall time grows over this sweep)")
+        else:
+            lines.append(f"- `{c}`: one more digit of accuracy (10× smaller error) costs ×{dc['factor']:.3g} in wall time "
+                         f"(fit over the Pareto front, {len(dc['front'])} points, slope {dc['slope']:.2f})")
+    lines += ["", "| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
     for r in rows:
         lines.append("| " + " | ".join(_cell(r.get(c)) for c in cols) + " |")
     write_text_atomic(out / "study.md", "\n".join(lines) + "\n")
