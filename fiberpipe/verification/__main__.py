@@ -6,7 +6,20 @@ import argparse
 import sys
 import time
 
-from .cases import CASES, run_all
+from .cases import CASES
+from .cases import run_all as run_beam_cases
+from .contact_cases import CONTACT_CASES
+from .contact_cases import run_all as run_contact_cases
+
+ALL_CASES = {**CASES, **CONTACT_CASES}
+
+
+def run_all(quick: bool = False, only=None):
+    """Every verification case of SPEC section 8 (beams 1-4, contact and friction 5-8)."""
+    beam = [c for c in (only or CASES) if c in CASES]
+    contact = [c for c in (only or CONTACT_CASES) if c in CONTACT_CASES]
+    rows = run_beam_cases(quick=quick, only=beam) if beam else []
+    return rows + (run_contact_cases(quick=quick, only=contact) if contact else [])
 
 
 def format_table(rows) -> str:
@@ -21,7 +34,7 @@ def format_table(rows) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fiberpipe.verification")
     ap.add_argument("--quick", action="store_true", help="shorter variants of each case")
-    ap.add_argument("cases", nargs="*", choices=[[]] + list(CASES), help="subset of cases")
+    ap.add_argument("cases", nargs="*", choices=[[]] + list(ALL_CASES), help="subset of cases")
     a = ap.parse_args(argv)
     t = time.perf_counter()
     rows = run_all(quick=a.quick, only=a.cases or None)
