@@ -25,6 +25,7 @@ the contact hook only. Works over a step use ``f_n · v̄ Δt`` (trapezoid, seco
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 from numba import njit
@@ -72,8 +73,7 @@ def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
     return 0
 
 
-@njit(cache=True, fastmath=True)
-def advance_kernel(
+def _advance_template(
     # model (static)
     el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
     mass, inv_mass, J, inv_J, radius_node, x0,
@@ -92,8 +92,9 @@ def advance_kernel(
     # planes
     pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_hist_col, k_pen,
     pl_pos, pl_force, pen_idx, pen_f,
-    # contact hook
-    contact_on, contact_fn, contact_data,
+    # contact hook (the hook kernel itself is the module global ``_contact_hook`` of the
+    # specialisation, see ``step_loop_for``)
+    contact_on, contact_data,
     # history
     hist, h_row, history_every,
     # checks
@@ -156,7 +157,7 @@ def advance_kernel(
             # and moments (N·m) into mom at time t_n, from x_n, q_n and the half-step velocities
             # v_{n−½}, w_{n−½}; adds its penalty work to acc[ACC_PW] and its friction dissipation
             # to acc[ACC_FD]; returns the number of active contacts.
-            n_contacts = contact_fn(x, q, v, w, f, mom, acc, t, dt, contact_data)
+            n_contacts = _contact_hook(x, q, v, w, f, mom, acc, t, dt, contact_data)
         for d in range(ND):
             s1 = ramp_fraction(t + dt, drive_T[d], drive_ta[d], drive_mode[d])
             s0 = ramp_fraction(t, drive_T[d], drive_ta[d], drive_mode[d])
@@ -343,3 +344,46 @@ def advance_kernel(
             if status != STATUS_OK:
                 break
     return status, done, h_row, bad
+
+
+# ---- specialisations of the step loop, one per contact hook -----------------------------------------
+#
+# The hook is NOT a first-class function argument: each specialisation is a copy of
+# ``_advance_template`` whose global ``_contact_hook`` is bound to one hook kernel, so numba compiles
+# the call directly (inlined, no indirect call) and never pickles a dispatcher type into its cache.
+# The built-in hooks (none, and ``contact_effect.contact_step``) are cached on disk under their own
+# names; their freshness covers every module of the package (``_jitcache``), so an edit of a contact
+# module recompiles them. A user hook (tests, scripts) gets an uncached specialisation, compiled
+# once per process and hook.
+
+_contact_hook = no_contact
+
+
+def _specialise(name: str, hook, cache: bool):
+    g = dict(globals())
+    g["_contact_hook"] = hook
+    tmpl = _advance_template
+    fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)
+    fn.__qualname__ = name
+    fn.__module__ = __name__
+    fn.__doc__ = tmpl.__doc__
+    return njit(cache=cache, fastmath=True)(fn)
+
+
+advance_plain = _specialise("advance_plain", no_contact, True)
+_LOOPS: dict = {}
+
+
+def step_loop_for(hook):
+    """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none)."""
+    if hook is no_contact:
+        return advance_plain
+    loop = _LOOPS.get(hook)
+    if loop is None:
+        from .contact_effect import contact_step
+        if hook is contact_step:
+            loop = _specialise("advance_contact", hook, True)
+        else:
+            loop = _specialise("advance_hook", hook, False)
+        _LOOPS[hook] = loop
+    return loop

@@ -1,7 +1,7 @@
 """Run API: settings, the chunked driver around the jitted step loop, results and diagnosis.
 
 ``simulate`` calls :meth:`Integrator.advance` once per chunk; each call runs many steps inside one
-jitted kernel (``_kernels_integrate.advance_kernel``), so Python only runs between chunks: output,
+jitted kernel (``_kernels_integrate.step_loop_for(hook)``), so Python only runs between chunks: output,
 progress callback, checkpoints, signals, divergence diagnosis.
 
 Chunk boundaries are a fixed grid of absolute step numbers (multiples of ``chunk_steps`` and of
@@ -159,6 +159,7 @@ class Integrator:
         for e in self.effects:
             e.setup(model, sc)
         self.scene = sc
+        self._loop = K.step_loop_for(sc.contact_fn if sc.contact_on else K.no_contact)
         n = model.n_nodes
         self.f = np.zeros((n, 3))
         self.mom = np.zeros((n, 3))
@@ -187,17 +188,7 @@ class Integrator:
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
         m, sc = self.model, self.scene
-        try:
-            return self._advance(state, n_steps)
-        except ReferenceError:
-            # numba bug: saving a new specialisation of the cached kernel fails when its on-disk index
-            # holds one for a hook dispatcher that is not alive in this process. The new overload is
-            # already compiled and registered (numba adds it before saving) and nothing ran: retry.
-            return self._advance(state, n_steps)
-
-    def _advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
-        m, sc = self.model, self.scene
-        status, done, self.h_row, bad = K.advance_kernel(
+        status, done, self.h_row, bad = self._loop(
             m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
             m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
             state.x, state.q, state.v, state.w, state.acc, state.t, state.step,
@@ -206,7 +197,7 @@ class Integrator:
             sc.fix_mask, sc.node_drive, sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v,
             sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode, sc.pl_hist_col,
             self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f,
-            sc.contact_on, sc.contact_fn, sc.contact_data,
+            sc.contact_on, sc.contact_data,
             self.hist, self.h_row, self.history_every,
             self.v_limit, self.x_limit, self.e_ref,
         )

@@ -1,0 +1,94 @@
+"""Numba cache freshness for the solver's kernels: a cached kernel is valid only for the exact sources
+of *every* module of ``fiberpipe/solver``.
+
+numba stamps a cached function with the hash of its own source file only. A cached kernel calls
+kernels of other modules (the step loop calls the beam forces and the contact pass, the contact pass
+calls the laws...), whose machine code is linked into the cache entry, so editing ``contact.py``
+would leave the step loop running the old contact code from the cache. This module registers a
+cache locator, tried before numba's own ones, for the functions defined in this package: same cache
+directory as numba would choose, but the source stamp is the SHA-256 of all ``*.py`` files of the
+package (plus numba's stamp of the function's own file). Any edit anywhere in the solver therefore
+invalidates every solver cache entry: stale code cannot run.
+
+Imported by ``fiberpipe/solver/__init__.py`` before any kernel module, so every ``@njit(cache=True)``
+of the package is covered (a package submodule import always runs the package ``__init__`` first).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+
+_PKG_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+@functools.lru_cache(maxsize=None)
+def _digest(key) -> str:
+    h = hashlib.sha256()
+    for name, _mt, _sz in key:
+        h.update(name.encode())
+        with open(os.path.join(_PKG_DIR, name), "rb") as fh:
+            h.update(fh.read())
+    return h.hexdigest()
+
+
+def package_source_digest() -> str:
+    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` (re-hashed when one changes)."""
+    key = []
+    for name in sorted(os.listdir(_PKG_DIR)):
+        if name.endswith(".py"):
+            st = os.stat(os.path.join(_PKG_DIR, name))
+            key.append((name, st.st_mtime_ns, st.st_size))
+    return _digest(tuple(key))
+
+
+def _install() -> bool:
+    try:
+        from numba.core import caching
+    except Exception:  # pragma: no cover - numba without the caching module
+        return False
+    base = getattr(caching, "_CacheLocator", None)
+    impl = getattr(caching, "_CacheImpl", None)
+    if base is None or impl is None or not hasattr(impl, "_locator_classes"):  # pragma: no cover
+        return False
+    if any(getattr(c, "_fiberpipe_solver", False) for c in impl._locator_classes):
+        return True
+
+    class SolverPackageLocator(base):
+        """Numba's own locator for the file, with the whole package's source digest as stamp."""
+
+        _fiberpipe_solver = True
+
+        def __init__(self, inner):
+            self._inner = inner
+
+        def ensure_cache_path(self):
+            return self._inner.ensure_cache_path()
+
+        def get_cache_path(self):
+            return self._inner.get_cache_path()
+
+        def get_source_stamp(self):
+            return (self._inner.get_source_stamp(), package_source_digest())
+
+        def get_disambiguator(self):
+            return self._inner.get_disambiguator()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if os.path.dirname(os.path.abspath(py_file)) != _PKG_DIR:
+                return None
+            for other in impl._locator_classes:
+                if other is cls:
+                    continue
+                inner = other.from_function(py_func, py_file)
+                if inner is not None:
+                    return cls(inner)
+            return None
+
+    impl._locator_classes.insert(0, SolverPackageLocator)
+    return True
+
+
+INSTALLED = _install()
