@@ -134,6 +134,33 @@ def segment_distance2(a0, a1, b0, b1, ta, tb):
     return d0 * d0 + d1 * d1 + d2 * d2, s, t
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
+    """:func:`segment_distance2` on scalars: r = a0 − b0, ta = a1 − a0, tb = b1 − b0."""
+    aa = ta0 * ta0 + ta1 * ta1 + ta2 * ta2
+    bb = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
+    ab = ta0 * tb0 + ta1 * tb1 + ta2 * tb2
+    ar = ta0 * r0 + ta1 * r1 + ta2 * r2
+    br = tb0 * r0 + tb1 * r1 + tb2 * r2
+    den = aa * bb - ab * ab
+    if den > 1e-12 * aa * bb:
+        s = (ab * br - ar * bb) / den
+        s = min(max(s, 0.0), 1.0)
+    else:
+        s = 0.0
+    t = (ab * s + br) / bb
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-ar / aa, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((ab - ar) / aa, 0.0), 1.0)
+    d0 = r0 + s * ta0 - t * tb0
+    d1 = r1 + s * ta1 - t * tb1
+    d2 = r2 + s * ta2 - t * tb2
+    return d0 * d0 + d1 * d1 + d2 * d2, s, t
+
+
 @njit(cache=True, fastmath=True)
 def _line_half(
     x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign
@@ -306,6 +333,19 @@ def contact_forces(
         ra = seg_radius[i]
         rb = seg_radius[j]
         rr = ra + rb
+        c_fn[k] = 0.0
+        # reject path on scalars (the common case: a Verlet candidate not touching)
+        xa0 = x[na0, 0]
+        ya0 = x[na0, 1]
+        za0 = x[na0, 2]
+        xb0 = x[nb0, 0]
+        yb0 = x[nb0, 1]
+        zb0 = x[nb0, 2]
+        dist2, sc, tc = _segment_distance2_s(xa0 - xb0, ya0 - yb0, za0 - zb0,
+                                             x[na1, 0] - xa0, x[na1, 1] - ya0, x[na1, 2] - za0,
+                                             x[nb1, 0] - xb0, x[nb1, 1] - yb0, x[nb1, 2] - zb0)
+        if dist2 >= rr * rr:
+            continue
         for c in range(3):
             a0[c] = x[na0, c]
             a1[c] = x[na1, c]
@@ -313,10 +353,6 @@ def contact_forces(
             b1[c] = x[nb1, c]
             ta[c] = a1[c] - a0[c]
             tb[c] = b1[c] - b0[c]
-        c_fn[k] = 0.0
-        dist2, sc, tc = segment_distance2(a0, a1, b0, b1, ta, tb)
-        if dist2 >= rr * rr:
-            continue
         for c in range(7):
             rec[c] = 0.0
         aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]

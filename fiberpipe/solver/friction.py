@@ -160,11 +160,11 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
             ax = pl_axis[p]
             sg = pl_sign[p]
             d = radius_node[i] - sg * (x[i, ax] - pl_pos[p])
-            h = hist[i, p]
             if d <= 0.0:
-                h[0] = 0.0
-                h[1] = 0.0
-                h[2] = 0.0
+                # (direct indexing: no array view in the common, not-touching case)
+                hist[i, p, 0] = 0.0
+                hist[i, p, 1] = 0.0
+                hist[i, p, 2] = 0.0
                 continue
             fn = k_pen[i] * d
             n0 = 0.0

@@ -169,3 +169,12 @@ def test_bad_parameters_raise():
     with pytest.raises(ConfigError):
         L.make_law("quadratic")
     assert isinstance(L.make_law("scaled_stiffness", preset="table3_identified"), L.ScaledStiffnessLaw)
+
+
+def test_tabulated_line_law_matches_lambert_w():
+    """The kernels' tabulated Johnson line law agrees with the Lambert-W iteration to 1e-10."""
+    for r2 in (R, 0.3e-3):
+        for delta in np.geomspace(1e-16, 0.26e-3, 3001):
+            p, e = L.hertz_parallel_line(delta, ESTAR, R, r2)
+            p0, e0 = L.hertz_parallel_line_exact(delta, ESTAR, R, r2)
+            assert p == pytest.approx(p0, rel=1e-10) and e == pytest.approx(e0, rel=1e-10)
