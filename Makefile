@@ -59,6 +59,7 @@ reproduce: $(REPRO_RUNS)
 
 studies: setup
 	for s in configs/studies/*.yaml; do $(FP) study $$s --out runs/studies/$$(basename $$s .yaml) || exit 1; done
+	$(PY) benchmarks/accuracy_cost_doc.py --runs runs/studies --out docs/accuracy-cost.md
 
 clean:
 	rm -rf runs .pytest_cache
