@@ -164,6 +164,7 @@ def mesh_polylines(
     smooth_sigma_m: float = 0.0,
     min_fiber_length_m: float | None = None,
     radius_m: float | None = None,
+    max_turn_rad: float = np.deg2rad(120.0),
 ) -> Mesh:
     """Mesh each polyline into 2-node beam elements of about ``element_length_m``.
 
@@ -202,6 +203,17 @@ def mesh_polylines(
                 f"{min_len * 1e3:.3g} mm (two elements); remove it or refine mesh.element_length"
             )
         res = resample_polyline(pts, element_length_m, smooth_sigma_m=smooth_sigma_m)
+        seg = np.diff(res, axis=0)
+        if len(seg) > 1:
+            u = seg / np.linalg.norm(seg, axis=1, keepdims=True)
+            turn = np.arccos(np.clip(np.sum(u[:-1] * u[1:], axis=1), -1.0, 1.0))
+            k = int(np.argmax(turn))
+            if turn[k] > max_turn_rad:
+                raise InputError(
+                    f"fiber {i} turns by {np.rad2deg(turn[k]):.0f} deg at node {k + 1} "
+                    f"({np.rad2deg(max_turn_rad):.0f} deg at most): a fiber folded on itself is a tracing "
+                    "artefact; smooth it (mesh.smooth_sigma) or remove it"
+                )
         nodes.append(res)
         offsets.append(offsets[-1] + len(res))
     radius = polylines.radius_m if radius_m is None else np.full(polylines.n_fibers, radius_m)
@@ -263,6 +275,7 @@ def resolve_overlaps(mesh: Mesh, *, tolerance_m: float = 1e-7, max_iterations: i
             break
         t = tangents(x)
         shift = np.zeros_like(x)
+        count = np.zeros(len(x))
         for k, (i, j) in enumerate(pairs[bad]):
             n = d[bad][k]
             n = n - 0.5 * (np.dot(n, t[i]) * t[i] + np.dot(n, t[j]) * t[j])
@@ -272,7 +285,10 @@ def resolve_overlaps(mesh: Mesh, *, tolerance_m: float = 1e-7, max_iterations: i
             s = 0.5 * (overlap[bad][k] + tolerance_m) * n / nn
             shift[i] -= s
             shift[j] += s
-        x += shift
+            count[i] += 1
+            count[j] += 1
+        # a node in several overlapping pairs gets the mean push, not the sum (no overshoot)
+        x += shift / np.maximum(count, 1)[:, None]
     moved = float(np.max(np.linalg.norm(x - x0, axis=1))) if len(x) else 0.0
     if max_shift_m is not None and moved > max_shift_m:
         raise InputError(
