@@ -60,7 +60,8 @@ def _round_robin(prepared: dict, steps: int, repeats: int) -> dict:
 
 def _time_simulate(model, steps, dt, repeats=3):
     best = np.inf
-    settings = SimulationSettings(dt_s=dt, end_time_s=steps * dt, output_frames=5)
+    # same history cadence as the bare-kernel timing (a real run records ~2000 rows over 1e5+ steps)
+    settings = SimulationSettings(dt_s=dt, end_time_s=steps * dt, output_frames=5, history_every=100)
     simulate(model, [], SimulationSettings(dt_s=dt, end_time_s=20 * dt, output_frames=2))  # warm
     for _ in range(repeats):
         t = time.perf_counter()
@@ -95,8 +96,9 @@ def main(argv=None):
     repeats = 5
     prepared = {"bare": _prepare(m, [], a.steps, repeats)}
     prepared.update({name: _prepare(m, make(), a.steps, repeats) for name, make in scenes.items()})
+    prepared["bare (again, last)"] = _prepare(m, [], a.steps, repeats)  # the first-timed slot runs slow
     times = _round_robin(prepared, a.steps, repeats)
-    bare, dt = times["bare"], prepared["bare"][2]
+    bare, dt = min(times["bare"], times["bare (again, last)"]), prepared["bare"][2]
     api = _time_simulate(m, a.steps, dt, repeats)
     rows = [(name, times[name]) for name in scenes]
     try:
