@@ -23,6 +23,7 @@ class SimulationData:
     frames_positions: np.ndarray  # (K, N, 3) m
     history: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T, ...) arrays
     energy: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T,) J
+    frame_fields: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. contact_force (K, N, 3) N
 
     @property
     def effects(self) -> list[str]:
@@ -33,8 +34,10 @@ class SimulationData:
 def load_simulation(path: str | Path) -> SimulationData:
     art = read_artifact(path, "simulation")
     mesh = Mesh(art["mesh/nodes"], art["mesh/node_offsets"], art["mesh/radius"])
-    history, energy = {}, {}
+    history, energy, fields = {}, {}, {}
     for name, arr in art.data.items():
+        if name.startswith("frames/") and name not in ("frames/time", "frames/positions"):
+            fields[name[len("frames/") :]] = arr
         if name.startswith("history/energy/"):
             energy[name[len("history/energy/") :]] = arr
         elif name.startswith("history/"):
@@ -47,4 +50,5 @@ def load_simulation(path: str | Path) -> SimulationData:
         frames_positions=art["frames/positions"],
         history=history,
         energy=energy,
+        frame_fields=fields,
     )

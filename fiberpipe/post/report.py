@@ -131,7 +131,11 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
     )
     geo["curvature_xz_per_m"] = np.array([projected_curvature(frames[k], mesh.node_offsets, "xz") for k in range(len(ft))])
     geo["curvature_yz_per_m"] = np.array([projected_curvature(frames[k], mesh.node_offsets, "yz") for k in range(len(ft))])
-    if "contacts" in h and len(h["contacts"]) == len(t_hist):
+    if "contacts_per_fiber" in sim.frame_fields:  # evaluated on each frame (stages/simulate.py)
+        geo["contacts_per_fiber"] = np.asarray(sim.frame_fields["contacts_per_fiber"], float).mean(axis=1)
+        geo["max_normal_force_N"] = np.asarray(sim.frame_fields["max_normal_force"], float)
+        geo["max_penetration_m"] = np.asarray(sim.frame_fields["max_penetration"], float)
+    elif "contacts" in h and len(h["contacts"]) == len(t_hist):
         geo["contacts_per_fiber"] = np.interp(ft, t_hist, 2.0 * np.asarray(h["contacts"], float) / mesh.n_fibers)
     ref = None
     if cfg.post.reference_fibers:

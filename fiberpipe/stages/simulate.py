@@ -64,8 +64,10 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
             key = f"history/{name}"
             datasets[key] = np.asarray(series)
             units[key] = "J" if name.startswith("energy/") else HISTORY_UNITS.get(name, "")
+    field_units = {"contact_force": "N", "max_normal_force": "N", "max_penetration": "m"}
     for name, arr in (getattr(result, "fields", None) or {}).items():
         datasets[f"frames/{name}"] = np.asarray(arr)
+        units[f"frames/{name}"] = field_units.get(name, "")
     attrs = {
         "dt_s": float(result.dt_s),
         "steps": int(result.steps),
@@ -78,16 +80,20 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
 
 
 def write_frames_vtk(out_dir: Path, mesh, frames_time, frames_positions, *, stem: str = "simulation",
-                     frames_dir_name: str = "frames") -> Path:
+                     frames_dir_name: str = "frames", contact_force=None) -> Path:
     """One VTU per frame in ``out_dir/<frames_dir_name>/`` plus ``out_dir/<stem>.pvd`` for ParaView
-    (each file written atomically)."""
+    (each file written atomically). ``contact_force`` (K, N, 3), N: the fiber–fiber normal contact
+    force on each node, written as point data ``contact_force`` and ``contact_force_magnitude``."""
     frames_dir = out_dir / frames_dir_name
     frames_dir.mkdir(parents=True, exist_ok=True)
     entries = []
     for k, (t, pos) in enumerate(zip(frames_time, frames_positions)):
         name = f"frame_{k:05d}.vtu"
-        disp = pos - mesh.nodes_m
-        mesh_vtu(frames_dir / name, mesh, points_m=pos, point_data={"displacement": disp})
+        point_data = {"displacement": pos - mesh.nodes_m}
+        if contact_force is not None:
+            point_data["contact_force"] = contact_force[k]
+            point_data["contact_force_magnitude"] = np.linalg.norm(contact_force[k], axis=1)
+        mesh_vtu(frames_dir / name, mesh, points_m=pos, point_data=point_data)
         entries.append((float(t), f"{frames_dir_name}/{name}"))
     return write_pvd(out_dir / f"{stem}.pvd", entries)
 
@@ -203,8 +209,15 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     finally:
         if bar is not None:
             bar.close()
+    contact = None
+    if "contact" in cfg.scene.effects:
+        from fiberpipe.post.contact_field import frame_contact_forces
+
+        contact = frame_contact_forces(mesh, np.asarray(result.frames_positions), cfg.scene, cfg.material)
+        result.fields = {**(getattr(result, "fields", None) or {}), **contact}
     write_simulation(out, mesh, result, config_sha256=config_sha256, inputs=inputs)
-    write_frames_vtk(run_dir, mesh, result.frames_time, result.frames_positions)
+    write_frames_vtk(run_dir, mesh, result.frames_time, result.frames_positions,
+                     contact_force=None if contact is None else contact["contact_force"])
     if ck_path.exists():
         ck_path.unlink()
     steps = int(result.steps)
