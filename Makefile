@@ -56,6 +56,7 @@ runs/reproduce/%: setup
 
 reproduce: $(REPRO_RUNS)
 	$(FP) compare $(REPRO_RUNS) --out runs/reproduce/comparison
+	$(PY) benchmarks/results_doc.py --runs runs/reproduce
 
 studies: setup
 	for s in configs/studies/*.yaml; do $(FP) study $$s --out runs/studies/$$(basename $$s .yaml) || exit 1; done
