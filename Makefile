@@ -56,6 +56,7 @@ runs/reproduce/%: setup
 
 reproduce: $(REPRO_RUNS)
 	$(FP) compare $(REPRO_RUNS) --out runs/reproduce/comparison
+	$(PY) -m fiberpipe.verification three_beam_static rearrangement | tee runs/reproduce/three_beam.md
 	$(PY) benchmarks/results_doc.py --runs runs/reproduce
 
 studies: setup
