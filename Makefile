@@ -44,7 +44,19 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
-bench: bench-solver bench-imaging
+.PHONY: bench-contact bench-pyelastica
+bench-contact: setup
+	$(PY) benchmarks/bench_contact.py
+
+bench-pyelastica: setup
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) benchmarks/bench_pyelastica.py
+
+# every figure of SPEC section 10 in one run (solver, contact, PyElastica, paper-40, imaging)
+# into docs/benchmarks.md; ~10 min on an idle machine
+bench: setup
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(FP) bench
 
 # The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
 REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/identified paper-40/oriented \

@@ -1,21 +1,21 @@
-"""Beam-solver throughput: element-steps per second for 40, 160 and 640 fibers of 50 elements.
+"""Solver throughput: element-steps per second for 40, 160 and 640 fibers of 50 elements, with and
+without fiber–fiber contact.
 
-No contact; clamps, damping and gravity on (the per-step cost of a compaction run without the
-contact pass). Writes a markdown table to docs/bench/solver.md.
+Scene: fibers of 50 elements (0.3 mm, r = 0.25 mm) on a square grid of pitch 2.2 r, slightly wavy
+(amplitude ≤ 0.02 mm, random phase: neighbours come within the Verlet skin but do not overlap),
+clamped at one end, damping α = 1e5 1/s, gravity across the fibers; with contact: the
+``hertz_oriented`` hook with friction (μ = 0.2). Stable dt × 0.9; best of ``--repeats`` timed calls of
+``Integrator.advance`` after a warm-up. Writes a markdown table to docs/bench/solver.md.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_solver.py [--steps 2000] [--threads 1]
-
-The step loop is serial (one thread); ``--threads`` is recorded but the beam kernel does not use
-prange (the notes' measurements show 10–20× slowdowns of prange on a shared 2-core machine).
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_solver.py [--steps 1000]
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import os
 import platform
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -27,23 +27,26 @@ from fiberpipe.solver.integrator import Integrator, choose_time_step, Simulation
 R = 0.25e-3
 
 
-def bundle(n_fibers: int, n_el: int = 50, L: float = 15e-3, seed: int = 0):
+def bundle(n_fibers: int, n_el: int = 50, L: float = 15e-3, seed: int = 0, wave: float = 0.02e-3):
     rng = np.random.default_rng(seed)
     side = int(np.ceil(np.sqrt(n_fibers)))
     xs = []
     s = np.linspace(0, L, n_el + 1)
     for k in range(n_fibers):
         i, j = divmod(k, side)
-        a, ph = 0.2e-3 * rng.random(), 2 * np.pi * rng.random()
+        a, ph = wave * rng.random(), 2 * np.pi * rng.random()
         xs.append(np.column_stack([2.2 * R * i + a * np.sin(2 * np.pi * s / L + ph),
                                    2.2 * R * j + a * np.cos(2 * np.pi * s / L + ph), s]))
     off = np.arange(n_fibers + 1) * (n_el + 1)
     return build_model(np.vstack(xs), off, R, Material(15e9, 1380.0, 0.3))
 
 
-def measure(n_fibers: int, steps: int, repeats: int = 3) -> dict:
+def measure(n_fibers: int, steps: int, repeats: int = 3, contact: bool = False) -> dict:
     m = bundle(n_fibers)
-    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, 0, -9.81])]
+    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
+    if contact:
+        from fiberpipe.solver.contact_effect import make_contact_hook
+        eff.append(make_contact_hook(m, friction=True))
     dt, _ = choose_time_step(m, eff, SimulationSettings())
     integ = Integrator(m, eff, dt, history_rows=steps * (repeats + 1) // 100 + 2, history_every=100)
     st = State.at_rest(m)
@@ -54,43 +57,65 @@ def measure(n_fibers: int, steps: int, repeats: int = 3) -> dict:
         integ.advance(st, steps)
         best = min(best, time.perf_counter() - t)
     es = m.n_elements * steps / best
-    return {"fibers": n_fibers, "elements": m.n_elements, "steps": steps, "seconds": best,
-            "us_per_step": 1e6 * best / steps, "ns_per_element_step": 1e9 / es, "Melem_steps_per_s": es / 1e6}
+    row = {"fibers": n_fibers, "elements": m.n_elements, "contact": contact, "steps": steps, "seconds": best,
+           "us_per_step": 1e6 * best / steps, "ns_per_element_step": 1e9 / es, "Melem_steps_per_s": es / 1e6}
+    if contact:
+        info = eff[-1].setup_info
+        row["pairs"] = info.n_pairs
+        row["active"] = info.n_active
+    return row
+
+
+def table(rows) -> list[str]:
+    lines = ["| fibers | elements | contact | steps | µs/step | ns/element-step | M element-steps/s | candidate pairs | in contact |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['fibers']} | {r['elements']} | {'on' if r['contact'] else 'off'} | {r['steps']} | "
+                     f"{r['us_per_step']:.1f} | {r['ns_per_element_step']:.1f} | {r['Melem_steps_per_s']:.2f} | "
+                     f"{r.get('pairs', '')} | {r.get('active', '')} |")
+    base = {r["fibers"]: r for r in rows}
+    for c in (False, True):
+        rs = [r for r in rows if r["contact"] == c]
+        r40 = next((r for r in rs if r["fibers"] == 40), None)
+        r640 = next((r for r in rs if r["fibers"] == 640), None)
+        if r40 and r640:
+            lines.append("")
+            lines.append(f"Cost per element-step at 640 fibers / at 40 fibers, contact {'on' if c else 'off'}: "
+                         f"**{r640['ns_per_element_step'] / r40['ns_per_element_step']:.2f}** (target ≤ 1.3).")
+    return lines
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--steps", type=int, default=2000)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--fibers", type=int, nargs="*", default=[40, 160, 640])
     ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs/bench/solver.md"))
     a = ap.parse_args(argv)
     import numba
 
-    rows = [measure(n, a.steps) for n in a.fibers]
+    rows = [measure(n, a.steps, a.repeats, c) for c in (False, True) for n in a.fibers]
     cpu = platform.processor() or platform.machine()
     try:
         cpu = next(l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name"))
     except Exception:
         pass
     lines = [
-        "# Beam solver throughput (no contact)",
+        "# Solver throughput (beams, with and without contact)",
         "",
         f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
-        f"- machine: {cpu}, {numba.config.NUMBA_NUM_THREADS} numba threads available, Python {platform.python_version()}, numba {numba.__version__}",
+        f"- machine: {cpu}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at the end, "
+        f"Python {platform.python_version()}, numba {numba.__version__}",
         f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_solver.py --steps {a.steps}`",
-        "- scene: fibers of 50 elements (0.3 mm, r = 0.25 mm, wavy), clamps + damping (α = 1e5) + gravity, stable dt × 0.9;",
-        "  one serial thread (the step loop does not use prange); best of 3 timed calls of `Integrator.advance`.",
+        "- scene: see the module docstring; one thread; best of "
+        f"{a.repeats} timed calls of `Integrator.advance`.",
         "",
-        "| fibers | elements | steps | µs/step | ns/element-step | M element-steps/s |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(f"| {r['fibers']} | {r['elements']} | {r['steps']} | {r['us_per_step']:.1f} | "
-                     f"{r['ns_per_element_step']:.1f} | {r['Melem_steps_per_s']:.2f} |")
+    ] + table(rows)
     text = "\n".join(lines) + "\n"
     print(text)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(text)
+    return rows
 
 
 if __name__ == "__main__":

@@ -239,10 +239,22 @@ def study(study_file, out, workers, scheduler):
 
 
 @main.command()
-@click.option("--quick", is_flag=True, help="Small sizes only.")
-def bench(quick):
-    """Performance benchmarks (SPEC section 10). Arrives with issue 7."""
-    raise FiberpipeError("fiberpipe bench is not implemented in this version yet (issue 7); see benchmarks/")
+@click.option("--quick", is_flag=True, help="Small sizes and short runs only (minutes, not the headline figures).")
+@click.option("--skip", multiple=True, type=click.Choice(["solver", "contact", "pyelastica", "paper40", "imaging"]),
+              help="Leave out a part (repeatable).")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Page to write (default docs/benchmarks.md of the checkout).")
+def bench(quick, skip, out):
+    """Performance benchmarks (SPEC section 10) into docs/benchmarks.md: solver element-steps/s
+    (40/160/640 fibers, contact off/on), contact cost per pair, PyElastica ratio, paper-40
+    time-to-solution, imaging throughput and memory. Run it on an idle machine."""
+    from fiberpipe.bench import run_bench
+
+    try:
+        text = run_bench(out, quick=quick, skip=tuple(skip), echo=click.echo)
+    except FileNotFoundError as exc:
+        raise FiberpipeError(str(exc)) from None
+    click.echo(text)
 
 
 @main.command()

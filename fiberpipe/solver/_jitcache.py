@@ -49,7 +49,7 @@ def _install() -> bool:
     except Exception:  # pragma: no cover - numba without the caching module
         return False
     base = getattr(caching, "_CacheLocator", None)
-    impl = getattr(caching, "_CacheImpl", None)
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # numba ≥ 0.61 / older
     if base is None or impl is None or not hasattr(impl, "_locator_classes"):  # pragma: no cover
         return False
     if any(getattr(c, "_fiberpipe_solver", False) for c in impl._locator_classes):
@@ -92,3 +92,6 @@ def _install() -> bool:
 
 
 INSTALLED = _install()
+if not INSTALLED:  # pragma: no cover - a numba whose caching internals moved: fail loudly, not stale
+    raise ImportError("fiberpipe.solver._jitcache: cannot register the solver's numba cache locator with this "
+                      "numba version (numba.core.caching changed); pin numba or update _jitcache.py")

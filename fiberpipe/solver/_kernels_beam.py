@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def quat_to_matrix(w, x, y, z):
     """Rotation matrix entries (row major) of the unit quaternion ``(w, x, y, z)``."""
     xx = x * x
@@ -57,7 +57,7 @@ def quat_to_matrix(w, x, y, z):
     )
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2):
     """Rotation vector ``log(R_1ᵀ R_2)`` (rad, in the node-1 frame); q2 already in q1's hemisphere."""
     # conj(q1) ⊗ q2
@@ -75,7 +75,7 @@ def _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2):
     return fac * rx, fac * ry, fac * rz
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
     """Rest strains of every element.
 
@@ -114,7 +114,7 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         gamma_rest[e, 2] = r02 * dx + r12 * dy + r22 * dz
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
                 record, beta_over_dt, strain_prev):
     """Add the internal forces and moments of all elements to ``f`` and ``mom``.

@@ -20,7 +20,7 @@ RAMP_SMOOTH = 1
 RAMP_SMOOTHSTEP = 2
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def ramp_fraction(t, duration, t_accel, mode):
     """Fraction (0…1) of a prescribed displacement reached at time ``t`` (s).
 
@@ -51,7 +51,7 @@ def ramp_fraction(t, duration, t_accel, mode):
     return v * (0.5 * ta + (t - ta))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
     """Penalty forces of rigid planes on the nodes.
 
@@ -76,23 +76,26 @@ def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force,
     n_pen = 0
     for p in range(pl_axis.shape[0]):
         pl_force[p] = 0.0
-    for i in range(x.shape[0]):
-        r = radius_node[i]
-        for p in range(pl_axis.shape[0]):
-            ax = pl_axis[p]
-            sg = pl_sign[p]
-            d = r - sg * (x[i, ax] - pl_pos[p])
+    # plane outer, node inner: a tight loop over the nodes per plane (most nodes do not touch)
+    for p in range(pl_axis.shape[0]):
+        ax = pl_axis[p]
+        sg = pl_sign[p]
+        pos = pl_pos[p]
+        fsum = 0.0
+        for i in range(x.shape[0]):
+            d = radius_node[i] - sg * (x[i, ax] - pos)
             if d > 0.0:
                 fn = k_pen[i] * d
                 f[i, ax] += sg * fn
-                pl_force[p] += fn
+                fsum += fn
                 pen_idx[n_pen] = i * 3 + ax
                 pen_f[n_pen] = sg * fn
                 n_pen += 1
+        pl_force[p] = fsum
     return n_pen
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def penalty_power(v, pen_idx, pen_f, n_pen):
     """Σ f·v over the plane contacts written by :func:`plane_contacts` (W)."""
     s = 0.0

@@ -67,7 +67,7 @@ STATUS_RUNAWAY = 3
 STATUS_ENERGY = 4
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
     """The default contact hook: does nothing, returns 0 active contacts."""
     return 0
@@ -367,7 +367,7 @@ def _specialise(name: str, hook, cache: bool):
     fn.__qualname__ = name
     fn.__module__ = __name__
     fn.__doc__ = tmpl.__doc__
-    return njit(cache=cache, fastmath=True)(fn)
+    return njit(cache=cache, fastmath=True, error_model="numpy")(fn)
 
 
 advance_plain = _specialise("advance_plain", no_contact, True)

@@ -58,7 +58,7 @@ def gauss_points(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
 JOINT_EPS = 1e-6
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _window(s):
     """1 inside (ε, 1 − ε), linear ramps to 0 at −ε and 1 + ε; win(s) + win(s − 1) = 1 near s = 1."""
     if s <= -JOINT_EPS or s >= 1.0 + JOINT_EPS:
@@ -68,7 +68,7 @@ def _window(s):
     return min(lo, hi, 1.0)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _joint_share(x, seg_nodes, e, s, d_own, o0, o1, to, rr, c0, c1, tc):
     """Share of the point contact owned by segment ``e`` (against the other segment ``o0``–``o1``).
 
@@ -104,7 +104,7 @@ def _joint_share(x, seg_nodes, e, s, d_own, o0, o1, to, rr, c0, c1, tc):
     return min(max(wgt, 0.0), 1.0)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def segment_distance2(a0, a1, b0, b1, ta, tb):
     """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
     r0 = a0[0] - b0[0]
@@ -134,7 +134,7 @@ def segment_distance2(a0, a1, b0, b1, ta, tb):
     return d0 * d0 + d1 * d1 + d2 * d2, s, t
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
     """:func:`segment_distance2` on scalars: r = a0 − b0, ta = a1 − a0, tb = b1 − b0."""
     aa = ta0 * ta0 + ta1 * ta1 + ta2 * ta2
@@ -161,7 +161,7 @@ def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
     return d0 * d0 + d1 * d1 + d2 * d2, s, t
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _line_half(
     x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign
 ):
@@ -274,7 +274,7 @@ def _line_half(
     return energy
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces(
     x,
     seg_nodes,

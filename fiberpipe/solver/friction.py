@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
     """Update history row h[k] in place; returns (f_t vector (3), dissipation)."""
     # rotate history into the current tangent plane, keep its magnitude
@@ -63,7 +63,7 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
     return t0, t1, t2, diss
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out):
     """Fiber–fiber friction forces, accumulated into ``f_out``; returns the dissipated energy [J].
 
@@ -114,7 +114,7 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
     return diss
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
     """Carry friction history across a neighbour-list rebuild by matching sorted pair keys.
 
@@ -138,7 +138,7 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
     return kept
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, k_t, dt, hist, f_out, pl_tforce):
     """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
 
@@ -155,31 +155,34 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
         pl_tforce[p, 0] = 0.0
         pl_tforce[p, 1] = 0.0
         pl_tforce[p, 2] = 0.0
-    for i in range(x.shape[0]):
-        for p in range(npl):
-            ax = pl_axis[p]
-            sg = pl_sign[p]
-            d = radius_node[i] - sg * (x[i, ax] - pl_pos[p])
+    hflat = hist.reshape(hist.shape[0] * npl, 3)  # a view (hist is C-contiguous): no per-node view
+    # plane outer, node inner (one axis per plane: a tight loop over the nodes, most not touching)
+    for p in range(npl):
+        ax = pl_axis[p]
+        sg = pl_sign[p]
+        pos = pl_pos[p]
+        n0 = 0.0
+        n1 = 0.0
+        n2 = 0.0
+        if ax == 0:
+            n0 = sg
+        elif ax == 1:
+            n1 = sg
+        else:
+            n2 = sg
+        for i in range(x.shape[0]):
+            d = radius_node[i] - sg * (x[i, ax] - pos)
             if d <= 0.0:
-                # (direct indexing: no array view in the common, not-touching case)
-                hist[i, p, 0] = 0.0
-                hist[i, p, 1] = 0.0
-                hist[i, p, 2] = 0.0
+                if hist[i, p, 0] != 0.0 or hist[i, p, 1] != 0.0 or hist[i, p, 2] != 0.0:
+                    hist[i, p, 0] = 0.0
+                    hist[i, p, 1] = 0.0
+                    hist[i, p, 2] = 0.0
                 continue
             fn = k_pen[i] * d
-            n0 = 0.0
-            n1 = 0.0
-            n2 = 0.0
-            if ax == 0:
-                n0 = sg
-            elif ax == 1:
-                n1 = sg
-            else:
-                n2 = sg
             du0 = (v[i, 0] - pl_vel[p, 0]) * dt
             du1 = (v[i, 1] - pl_vel[p, 1]) * dt
             du2 = (v[i, 2] - pl_vel[p, 2]) * dt
-            f0, f1, f2, dd = _return_map(hist[i], p, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
+            f0, f1, f2, dd = _return_map(hflat, i * npl + p, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
             diss += dd
             f_out[i, 0] += f0
             f_out[i, 1] += f1

@@ -178,7 +178,7 @@ def equivalent_angle(phi_rad, r1, r2):
 # ---------------------------------------------------------------------------------------------
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def smoothstep(x):
     """C¹ step 3x² − 2x³ on [0, 1], clamped."""
     if x <= 0.0:
@@ -188,7 +188,7 @@ def smoothstep(x):
     return x * x * (3.0 - 2.0 * x)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def lambertw_m1(z):
     """Lower branch W₋₁(z) of the Lambert W function for z in [−1/e, 0) (Halley iterations).
 
@@ -256,7 +256,7 @@ def _line_table():
 _LINE_TABLE = _line_table()
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _line_lnx(u):
     """ln x with u = x(−ln x − 1), ln x < −2 (table + cubic Hermite; exact iteration outside it)."""
     lam = math.log(u)
@@ -275,7 +275,7 @@ def _line_lnx(u):
     return lambertw_m1(-math.e * u) - 1.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def hertz_parallel_line(delta, e_star, r1, r2):
     """Line load p [N/m] and energy per length [J/m] of two parallel cylinders (Johnson 1985, line contact).
 
@@ -318,7 +318,7 @@ def hertz_parallel_line_exact(delta, e_star, r1, r2):
     return c * x, c * 4.0 * sr * (-0.5 * x * x * math.log(x) - 0.75 * x * x)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def scaled_stiffness_force(delta, d, s, s0, kdef, nseg):
     """The study's Eq. 1: piecewise-linear force with slope K_i = S0·K_def·S^(i−1) on [(i−1)d, id].
 
@@ -348,7 +348,7 @@ def scaled_stiffness_force(delta, d, s, s0, kdef, nseg):
     return f_m + km * r, e_m + f_m * r + 0.5 * km * r * r
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _equivalent_angle(phi, r1, r2):
     if r1 == r2:
         return phi
@@ -362,7 +362,7 @@ def _equivalent_angle(phi, r1, r2):
     return math.acos(c)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _table_lookup(params, phi_eq):
     """(k̂, â) at Φ_eq from the table in ``params`` (linear in ln Φ, clamped to the grid)."""
     nt = int(params[P_NTAB])
@@ -384,7 +384,7 @@ def _table_lookup(params, phi_eq):
     return math.exp(lk), math.exp(la)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def hertz_crossed_point(params, delta, r1, r2, phi):
     """F = K(Φ) δ^{3/2} [N], energy (2/5)Kδ^{5/2}, and ellipse semi-major axis a [m].
 
@@ -401,7 +401,7 @@ def hertz_crossed_point(params, delta, r1, r2, phi):
     return f, 0.4 * f * delta, ah * math.sqrt(re * delta)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _native(law_id, params, delta, r1, r2, phi):
     """The law's native evaluation: (value, energy); per length or per contact per P_PER_LENGTH."""
     if law_id == LAW_LINEAR:
@@ -417,7 +417,7 @@ def _native(law_id, params, delta, r1, r2, phi):
     return hertz_parallel_line(delta, params[P_ESTAR], r1, r2)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def law_line(law_id, params, delta, r1, r2):
     """Distributed line load p [N/m] and energy per unit length [J/m] at penetration δ [m]."""
     if delta <= 0.0:
@@ -431,7 +431,7 @@ def law_line(law_id, params, delta, r1, r2):
     return v * inv, e * inv
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def law_point(law_id, params, delta, r1, r2, phi):
     """Point force F [N] and energy [J] at penetration δ [m] and crossing angle Φ [rad]."""
     if delta <= 0.0:
@@ -446,7 +446,7 @@ def law_point(law_id, params, delta, r1, r2, phi):
     return v, e
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def law_weight(law_id, params, delta, r1, r2, phi):
     """Point share w ∈ [0, 1] (the distributed line part gets 1 − w).
 
@@ -470,7 +470,7 @@ def law_weight(law_id, params, delta, r1, r2, phi):
 _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def law_blended(law_id, params, delta, r1, r2, phi, length):
     """Total force [N] of two straight fibres of length ``length`` [m] crossing at their middles.
 

@@ -32,7 +32,7 @@ from numba import njit
 from fiberpipe.solver.contact import segment_distance2
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def max_displacement_exceeds(x, x_ref, limit):
     """True if any node moved more than ``limit`` [m] from ``x_ref`` (the positions at the last build)."""
     l2 = limit * limit
@@ -45,7 +45,7 @@ def max_displacement_exceeds(x, x_ref, limit):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
     """Build the Verlet list of candidate segment pairs.
 

@@ -1,0 +1,200 @@
+"""``fiberpipe bench``: the performance benchmarks of SPEC section 10 in one run, written to
+``docs/benchmarks.md`` with the machine, the command and the date (between the page's
+``fiberpipe bench`` markers; the hand-written analysis around them is kept).
+
+Parts (each can be skipped with ``--skip``):
+
+* ``solver``  — element-steps per second, 40/160/640 fibers of 50 elements, contact off and on
+  (``benchmarks/bench_solver.py``);
+* ``contact`` — ns per candidate pair of the contact pass, loose and squeezed bundles, per law
+  (``benchmarks/bench_contact.py``);
+* ``pyelastica`` — the same 40-rod bundle with contact in PyElastica and in fiberpipe, same steps,
+  as a ratio (``benchmarks/bench_pyelastica.py``; needs the ``bench`` extra);
+* ``paper40`` — time-to-solution of ``configs/paper-40.yaml`` at the study's settings (and the fast
+  settings of ``--fast-overrides``): wall time, U reached, final load;
+* ``imaging`` — the imaging stages' wall time and peak memory on a 200×400×1000 volume
+  (``benchmarks/bench_imaging.py``, part b; ``--quick``: a quarter of the length).
+
+The benchmark scripts live in the repository's ``benchmarks/`` folder (a source checkout).
+Measure on an idle machine: the load average is recorded with every part.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import importlib.util
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH_DIR = ROOT / "benchmarks"
+BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
+END = "<!-- fiberpipe bench: end -->"
+PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging")
+# settings found fastest within 2 % of the study-settings curve (docs/benchmarks.md, "fast settings")
+FAST_OVERRIDES = {"solver.mass_scaling": 100}
+
+
+def _load(name: str):
+    path = BENCH_DIR / f"{name}.py"
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: fiberpipe bench needs a source checkout with benchmarks/")
+    if str(BENCH_DIR) not in sys.path:
+        sys.path.insert(0, str(BENCH_DIR))
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def machine() -> str:
+    cpu = platform.machine()
+    try:
+        cpu = next(l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name"))
+    except Exception:
+        pass
+    import numba
+    import numpy
+    return (f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {numpy.__version__}, "
+            f"numba {numba.__version__}, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}")
+
+
+def load() -> str:
+    a, b, c = os.getloadavg()
+    return f"load average {a:.2f} / {b:.2f} / {c:.2f} (1/5/15 min)"
+
+
+def paper40_run(overrides: dict | None = None, config: Path | None = None) -> dict:
+    """Run ``configs/paper-40.yaml`` (mesh + simulate, in memory) and return the figures."""
+    from fiberpipe.config import load_config
+    from fiberpipe.artifacts import read_mesh
+    from fiberpipe.solver.build import build_simulation
+    from fiberpipe.solver import simulate
+    from fiberpipe.stages.mesh import run_mesh
+
+    config = config or ROOT / "configs" / "paper-40.yaml"
+    cfg = load_config(config, overrides or {})
+    with tempfile.TemporaryDirectory() as td:
+        mesh_path = Path(td) / "mesh.h5"
+        run_mesh(cfg, Path(cfg.input.fibers), mesh_path)
+        mesh = read_mesh(mesh_path)
+    model, effects, settings = build_simulation(mesh, cfg)
+    t0 = time.perf_counter()
+    res = simulate(model, effects, settings)
+    wall = time.perf_counter() - t0
+    h = res.history
+    U = h["plate_displacement"][:, 0]
+    F = h["plate_force"][:, 0]
+    return {"overrides": dict(overrides or {}), "wall_s": wall, "steps": int(res.steps), "elements": int(res.elements),
+            "dt_s": float(res.dt_s), "elem_steps": float(res.steps) * res.elements,
+            "Mes_per_s": res.steps * res.elements / wall / 1e6, "U_mm": float(U[-1] * 1e3),
+            "F_final_N": float(F[-1]), "F_max_N": float(F.max()), "completed": bool(res.completed),
+            "U_curve": U.copy(), "F_curve": F.copy(), "t_curve": h["time"].copy()}
+
+
+def curve_error(ref: dict, other: dict) -> float:
+    """Largest |F − F_ref| over the loading, relative to the largest reference force, at equal U."""
+    import numpy as np
+    u_ref, f_ref = ref["U_curve"], ref["F_curve"]
+    u, f = other["U_curve"], other["F_curve"]
+    # loading branch only (U increasing), compared at the reference's U samples
+    k = int(np.argmax(u_ref)) + 1
+    kk = int(np.argmax(u)) + 1
+    ui, order = np.unique(u[:kk], return_index=True)
+    fi = np.interp(u_ref[:k], ui, f[:kk][order])
+    return float(np.max(np.abs(fi - f_ref[:k])) / max(np.max(np.abs(f_ref[:k])), 1e-30))
+
+
+def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: int | None = None,
+              echo=print) -> str:
+    out = Path(out) if out else ROOT / "docs" / "benchmarks.md"
+    started = _dt.datetime.now(_dt.timezone.utc)
+    cmd = "fiberpipe bench" + (" --quick" if quick else "") + "".join(f" --skip {s}" for s in skip)
+    sec: list[str] = []
+    loads: dict = {}
+
+    if "solver" not in skip:
+        echo("bench: solver throughput ...")
+        bs = _load("bench_solver")
+        n = steps or (200 if quick else 1000)
+        rows = [bs.measure(f, n, 3, c) for c in (False, True) for f in (40, 160, 640)]
+        loads["solver"] = load()
+        sec += ["## Solver throughput", "",
+                f"`benchmarks/bench_solver.py` (one thread, best of 3 calls of {n} steps; {loads['solver']}). "
+                "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r, clamps, damping, "
+                "gravity; contact = hertz_oriented with friction.", ""] + bs.table(rows) + [""]
+    if "contact" not in skip:
+        echo("bench: contact pass ...")
+        bc = _load("bench_contact")
+        rows = bc.main(["--repeats", "20" if quick else "100"])
+        loads["contact"] = load()
+        sec += ["## Contact pass", "",
+                f"`benchmarks/bench_contact.py` (40 fibers × 50 elements, hex bundle, 2 Gauss points; {loads['contact']}).", "",
+                "| gap | law | candidate pairs | in contact | µs per pass | ns per pair | ns per pair in contact | ns per element | friction µs |",
+                "|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            sec.append(f"| {r['gap_nm']:.0f} nm | {r['law']} | {r['pairs']} | {r['active']} | {r['us_contact']:.0f} | "
+                       f"{r['ns_per_pair']:.1f} | {r['ns_per_active']:.0f} | {r['ns_per_element']:.0f} | {r['us_friction']:.0f} |")
+        sec.append("")
+    if "pyelastica" not in skip:
+        echo("bench: PyElastica ...")
+        bp = _load("bench_pyelastica")
+        try:
+            r = bp.measure(steps=20 if quick else 100, repeats=1 if quick else 3)
+        except ImportError as exc:
+            sec += ["## PyElastica", "", f"not run: {exc} (install the bench extra: `pip install -e '.[bench]'`)", ""]
+        else:
+            loads["pyelastica"] = load()
+            fp, pe = r["fiberpipe"], r["pyelastica"]
+            sec += ["## Against PyElastica (same 40-rod bundle, contact on, same steps)", "",
+                    f"`benchmarks/bench_pyelastica.py` ({loads['pyelastica']}).", "",
+                    "| code | elements | steps | dt (s) | wall (s) | k element-steps/s |", "|---|---|---|---|---|---|"]
+            for d in (fp, pe):
+                sec.append(f"| {d['code']} | {d['elements']} | {d['steps']} | {d['dt']:.3g} | {d['seconds']:.3f} | "
+                           f"{d['elem_steps_per_s'] / 1e3:.0f} |")
+            sec += ["", f"fiberpipe / PyElastica per element-step: **{r['ratio']:.0f}×** (target ≥ 100×).", ""]
+    if "paper40" not in skip:
+        echo("bench: paper-40 time-to-solution (study settings) ...")
+        ref = paper40_run({"solver.output_frames": 2})
+        loads["paper40"] = load()
+        rows = [("study settings", ref, None)]
+        if not quick:
+            echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} ...")
+            fast = paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2})
+            rows.append((", ".join(f"{k} = {v}" for k, v in FAST_OVERRIDES.items()), fast, curve_error(ref, fast)))
+        sec += ["## Time to solution: configs/paper-40.yaml", "",
+                f"Mesh + simulate in one process, one thread ({loads['paper40']}). Load = lower-plate force.", "",
+                "| settings | steps | element-steps | dt (s) | wall (s) | M element-steps/s | U reached (mm) | final load (N) | max load (N) | curve vs study settings |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
+        for name, r, err in rows:
+            sec.append(f"| {name} | {r['steps']} | {r['elem_steps']:.3g} | {r['dt_s']:.3g} | {r['wall_s']:.1f} | "
+                       f"{r['Mes_per_s']:.2f} | {r['U_mm']:.4f} | {r['F_final_N']:.4g} | {r['F_max_N']:.4g} | "
+                       f"{'—' if err is None else f'{100 * err:.2f} %'} |")
+        sec.append("")
+    if "imaging" not in skip:
+        echo("bench: imaging stages ...")
+        bi = _load("bench_imaging")
+        shape = (250, 200, 400) if quick else (1000, 200, 400)
+        with tempfile.TemporaryDirectory() as td:
+            head, tab, acc = bi.perf_part(shape, 12.0, [], Path(td))
+        loads["imaging"] = load()
+        sec += [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
+                f"`benchmarks/bench_imaging.py` part (b) ({loads['imaging']}). {head}", "", tab, "", acc, ""]
+    text = "\n".join([
+        BEGIN, "", "## Latest `fiberpipe bench` run", "",
+        f"- date: {started.strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- machine: {machine()}",
+        f"- command: `{cmd}`",
+        "", *[l.replace("## ", "### ", 1) if l.startswith("## ") else l for l in sec], END]) + "\n"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    old = out.read_text() if out.exists() else "# fiberpipe benchmarks\n\n"
+    if BEGIN in old and END in old:
+        new = old[: old.index(BEGIN)] + text + old[old.index(END) + len(END) + 1:]
+    else:
+        new = old.rstrip("\n") + "\n\n" + text
+    out.write_text(new)
+    return text
