@@ -36,7 +36,7 @@ BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
 PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging")
 # settings found fastest within 2 % of the study-settings curve (docs/benchmarks.md, "fast settings")
-FAST_OVERRIDES = {"solver.mass_scaling": 100}
+FAST_OVERRIDES = {"solver.mass_scaling": 100, "scene.damping.alpha": "1e3 1/s"}
 
 
 def _load(name: str):
@@ -138,7 +138,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
                 "|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             sec.append(f"| {r['gap_nm']:.0f} nm | {r['law']} | {r['pairs']} | {r['active']} | {r['us_contact']:.0f} | "
-                       f"{r['ns_per_pair']:.1f} | {r['ns_per_active']:.0f} | {r['ns_per_element']:.0f} | {r['us_friction']:.0f} |")
+                       f"{r['ns_per_pair']:.1f} | {(f"{r['ns_per_active']:.0f}" if r['active'] else '—')} | {r['ns_per_element']:.0f} | {r['us_friction']:.0f} |")
         sec.append("")
     if "pyelastica" not in skip:
         echo("bench: PyElastica ...")
