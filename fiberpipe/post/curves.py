@@ -10,7 +10,7 @@ def force_displacement(sim, *, load_cell: str = "upper") -> tuple[np.ndarray, np
 
     U is the displacement magnitude of the moving plate; F is the force the fibers exert on the
     plate carrying the load cell (``upper`` as in the study, else ``lower``), positive when
-    pressing. If the load-cell plate is absent (``none``), the other plate's force is used.
+    pressing. The caller picks the other plate when the load-cell one is absent (``none``).
 
     Returns
     -------
@@ -27,10 +27,7 @@ def force_displacement(sim, *, load_cell: str = "upper") -> tuple[np.ndarray, np
     moving = int(np.argmax(np.abs(disp).max(axis=0))) if disp.size else 0
     U = np.abs(disp[:, moving])
     col = 1 if load_cell == "upper" else 0
-    F = force[:, col]
-    if not np.any(F) and force.shape[1] > 1:
-        F = force[:, 1 - col]
-    return U, F
+    return U, force[:, col]
 
 
 def curve_error(U_ref, F_ref, U, F, *, scale: float | None = None) -> float:

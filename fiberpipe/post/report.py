@@ -46,6 +46,10 @@ def _fmt(v, unit="", digits=4):
     return f"{v:.{digits}g}{(' ' + unit) if unit else ''}"
 
 
+def scene_plates_upper(cfg: Config) -> str:
+    return cfg.scene.plates.upper if cfg.scene.plates is not None else "none"
+
+
 def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str = "") -> dict:
     """Post-process ``simulation.h5`` into ``out_dir`` (CSV, PNG, summary.json, report.md)."""
     sim = load_simulation(sim_path)
@@ -67,7 +71,8 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
     has_plates = "plates" in sim.effects and "plate_force" in h and np.size(h["plate_force"]) > 0
     U = None
     if has_plates:
-        U, F = force_displacement(sim)
+        load_cell = "upper" if scene_plates_upper(cfg) != "none" else "lower"
+        U, F = force_displacement(sim, load_cell=load_cell)
         force = np.atleast_2d(h["plate_force"])
         write_csv(
             out_dir / "force_displacement.csv",
