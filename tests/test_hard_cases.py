@@ -126,12 +126,10 @@ def test_half_diameter_overlap_is_resolved_by_the_mesh_stage_then_runs_quietly()
     assert np.max(np.abs(res.frames_positions[-1] - m.nodes_m)) < 1e-3 * R  # nothing pushed
 
 
-@pytest.mark.xfail(strict=True, reason="solver bug/gap: an initial overlap of r given to the solver stores ~1.6 J of "
-                   "contact energy (Hertz line law) released in a few steps: ejection at >1000 m/s, "
-                   "SimulationDiverged (speed limit) at step 6 even with alpha = 1e5; only the mesh stage's "
-                   "resolve_overlaps handles it (fiberpipe/solver/contact_effect.py has no initial-penetration offset)")
 def test_half_diameter_overlap_in_the_solver_is_pushed_apart_without_explosion():
     """The same overlap given straight to the solver (no adjustment), damped: pushed apart to
+    (was xfail: ~1.6 J stored, divergence at step 6; now the hook's initial-overlap offset, released
+    over ``contact.overlap_release`` = 0.1 ms, pushes the fibres apart gradually)
     contact (δ → 0), no NaN, speeds bounded (no divergence), energy balanced."""
     L, n = 3e-3, 10
     m = fibers_model([((0, 0, 0), (L, 0, 0), n), ((0, 0, R), (L, 0, R), n)])

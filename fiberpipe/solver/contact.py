@@ -163,12 +163,13 @@ def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _line_half(
-    x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign
+    x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign, off=0.0
 ):
     """Gauss points on segment A projected on segment B's line, weight ``scale``; accumulates forces.
 
-    rec[0..6] accumulates (Σ|f|, Σf_vec(3) B→A, Σ|f|·s_A, Σ|f|·t_B, max δ); ``sign`` = +1 if A is the
-    pair's first segment, −1 if swapped (so the record stays oriented first→second).
+    rec[0..7] accumulates (Σ|f|, Σf_vec(3) B→A, Σ|f|·s_A, Σ|f|·t_B, max δ, contact share);
+    ``sign`` = +1 if A is the pair's first segment, −1 if swapped (so the record stays oriented
+    first→second). ``off`` [m]: initial-overlap offset subtracted from δ (0: none).
     Returns the stored energy.
     """
     ta0 = x[na1, 0] - x[na0, 0]
@@ -234,10 +235,11 @@ def _line_half(
         d1 = c01 + s * c11
         d2 = c02 + s * c12
         d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        delta = rr - d
+        delta = rr - d - off
         if delta <= 0.0 or d <= 0.0:
             continue
         p, e = law_line(law_id, law_params, delta, ra, rb)
+        rec[7] += scale * gw[g] * span
         wl = scale * gw[g] * span * la
         fm = p * wl
         energy += e * wl
@@ -310,10 +312,65 @@ def contact_forces(
     -------
     (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
     constant blend weight), number of pairs in contact.
+
+    See :func:`contact_forces_ex` for the variant with per-pair overlap offsets and contact shares.
     """
+    empty = np.zeros(0)
+    return contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
+                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def contact_forces_ex(
+    x,
+    seg_nodes,
+    seg_radius,
+    pairs,
+    n_pairs,
+    law_id,
+    law_params,
+    gxi,
+    gw,
+    f_out,
+    c_fn,
+    c_n,
+    c_s,
+    c_t,
+    c_phi,
+    c_delta,
+    c_off,
+    c_share,
+    c_fsum,
+):
+    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    seg_nodes : (E, 2) int64 — node indices of each segment.
+    seg_radius : (E,) float64, m.
+    pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
+    law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
+    gxi, gw : Gauss nodes on (0, 1) and weights summing to 1 (:func:`gauss_points`).
+    f_out : (N, 3) float64, N — accumulated into (not zeroed).
+    c_fn, c_s, c_t, c_phi, c_delta : (P,) float64 — out, per pair; c_n : (P, 3) float64 — out.
+
+    Returns
+    -------
+    (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
+    constant blend weight), number of pairs in contact.
+
+    c_off : (P,) float64, m — per-pair initial-overlap offset subtracted from every penetration of
+        the pair (``δ_eff = δ − c_off[k]``; size 0: none). c_share, c_fsum : (P,) float64 — out if
+        size > 0: the pair's contact share (point part: its blend weight × joint share; line part:
+        the fraction of the segment length in contact, halves averaged; a full-length parallel
+        contact or a crossing counts 1) and Σ|f| of its contact points [N].
+    """
+    use_off = c_off.shape[0] > 0
+    use_share = c_share.shape[0] > 0
     energy = 0.0
     n_active = 0
-    rec = np.zeros(7)
+    rec = np.zeros(8)
     a0 = np.empty(3)
     a1 = np.empty(3)
     b0 = np.empty(3)
@@ -334,6 +391,7 @@ def contact_forces(
         rb = seg_radius[j]
         rr = ra + rb
         c_fn[k] = 0.0
+        off = c_off[k] if use_off else 0.0
         # reject path on scalars (the common case: a Verlet candidate not touching)
         xa0 = x[na0, 0]
         ya0 = x[na0, 1]
@@ -353,7 +411,7 @@ def contact_forces(
             b1[c] = x[nb1, c]
             ta[c] = a1[c] - a0[c]
             tb[c] = b1[c] - b0[c]
-        for c in range(7):
+        for c in range(8):
             rec[c] = 0.0
         aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
         bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
@@ -387,8 +445,9 @@ def contact_forces(
                 d1 = r1 + s * ta[1] - t * tb[1]
                 d2 = r2 + s * ta[2] - t * tb[2]
                 d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                delta = rr - d
+                delta = rr - d - off
                 if delta > 0.0:
+                    rec[7] += w * wst
                     if d > 1e-14 * rr:
                         inv = 1.0 / d
                         n0 = d0 * inv
@@ -431,8 +490,10 @@ def contact_forces(
             w = 0.0
         if w < 1.0:
             half = 0.5 * (1.0 - w)
-            energy += _line_half(x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, half, f_out, rec, 1.0)
-            energy += _line_half(x, nb0, nb1, na0, na1, rb, ra, law_id, law_params, gxi, gw, half, f_out, rec, -1.0)
+            energy += _line_half(x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, half, f_out, rec, 1.0,
+                                 off)
+            energy += _line_half(x, nb0, nb1, na0, na1, rb, ra, law_id, law_params, gxi, gw, half, f_out, rec, -1.0,
+                                 off)
         fsum = rec[0]
         if fsum > 0.0:
             n_active += 1
@@ -446,6 +507,9 @@ def contact_forces(
             c_t[k] = rec[5] / fsum
             c_phi[k] = phi
             c_delta[k] = rec[6]
+            if use_share:
+                c_share[k] = rec[7]
+                c_fsum[k] = fsum
     return energy, n_active
 
 

@@ -65,6 +65,15 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out):
+    """Fiber–fiber friction with the full ``k_t`` on every pair in contact (see :func:`friction_forces_ex`);
+    returns the dissipated energy [J]."""
+    d, e = friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out,
+                              np.zeros(0))
+    return d
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out, c_share):
     """Fiber–fiber friction forces, accumulated into ``f_out``; returns the dissipated energy [J].
 
     Parameters
@@ -75,16 +84,26 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
         this step (normal force N, unit normal from the second segment to the first, contact
         parameters on the two segments).
     mu : Coulomb coefficient. k_t : N/m, tangential penalty stiffness. dt : s.
-    hist : (C, 3) float64, N — elastic tangential force per pair (in/out), aligned with ``pairs``.
+    hist : (C, 3) or (C, 4) float64 — elastic tangential force per pair [N] (in/out), aligned with
+        ``pairs``; a 4th column holds the pair's k_t at its last update (N/m; with ``c_share``).
     f_out : (N, 3) float64 — accumulated into; +f_t on the first segment, −f_t on the second.
+    c_share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact.contact_forces_ex`);
+        the pair's tangential stiffness is ``k_t × share`` (size 0: ``k_t``). Without it a contact
+        split over several segment pairs (parallel fibres: each segment touches 2–3 of the other
+        fibre) gets ``k_t`` per pair, so a node's tangential stiffness grew with the number of pairs
+        and the tangential springs went unstable at ``dt_safety`` 0.9 (energy gain, tens of m/s).
+
+    Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J]).
     """
     diss = 0.0
+    espring = 0.0
+    use_share = c_share.shape[0] > 0
+    keep_k = use_share and hist.shape[1] > 3  # column 3: the pair's k_t at its last update
     for k in range(n_pairs):
         fn = c_fn[k]
         if fn <= 0.0:
-            hist[k, 0] = 0.0
-            hist[k, 1] = 0.0
-            hist[k, 2] = 0.0
+            for c in range(hist.shape[1]):
+                hist[k, c] = 0.0
             continue
         i = pairs[k, 0]
         j = pairs[k, 1]
@@ -97,8 +116,30 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
         du0 = ((1.0 - s) * v[a0, 0] + s * v[a1, 0] - (1.0 - t) * v[b0, 0] - t * v[b1, 0]) * dt
         du1 = ((1.0 - s) * v[a0, 1] + s * v[a1, 1] - (1.0 - t) * v[b0, 1] - t * v[b1, 1]) * dt
         du2 = ((1.0 - s) * v[a0, 2] + s * v[a1, 2] - (1.0 - t) * v[b0, 2] - t * v[b1, 2]) * dt
-        f0, f1, f2, d = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, k_t)
+        ktp = k_t * c_share[k] if use_share else k_t
+        if not ktp > 0.0:
+            hist[k, 0] = 0.0
+            hist[k, 1] = 0.0
+            hist[k, 2] = 0.0
+            continue
+        if keep_k:
+            # the pair's stiffness changed since its last update (the contact moved/grew/shrank):
+            # keep the stored energy ½|f_t|²/k from growing — softer: scale f_t by √(k_new/k_old)
+            # (energy kept); stiffer: keep f_t (the energy difference is released: dissipation)
+            k_old = hist[k, 3]
+            if k_old > 0.0:
+                e2 = hist[k, 0] * hist[k, 0] + hist[k, 1] * hist[k, 1] + hist[k, 2] * hist[k, 2]
+                if ktp < k_old:
+                    sc = math.sqrt(ktp / k_old)
+                    hist[k, 0] *= sc
+                    hist[k, 1] *= sc
+                    hist[k, 2] *= sc
+                elif ktp > k_old:
+                    diss += 0.5 * e2 * (1.0 / k_old - 1.0 / ktp)
+            hist[k, 3] = ktp
+        f0, f1, f2, d = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, ktp)
         diss += d
+        espring += 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
         f_out[a0, 0] += (1.0 - s) * f0
         f_out[a0, 1] += (1.0 - s) * f1
         f_out[a0, 2] += (1.0 - s) * f2
@@ -111,7 +152,7 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
         f_out[b1, 0] -= t * f0
         f_out[b1, 1] -= t * f1
         f_out[b1, 2] -= t * f2
-    return diss
+    return diss, espring
 
 
 @njit(cache=True, error_model="numpy")
@@ -127,14 +168,12 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
     for k in range(new_n):
         m = np.searchsorted(ok, new_keys[k])
         if m < old_n and ok[m] == new_keys[k]:
-            new_hist[k, 0] = old_hist[m, 0]
-            new_hist[k, 1] = old_hist[m, 1]
-            new_hist[k, 2] = old_hist[m, 2]
+            for c in range(new_hist.shape[1]):
+                new_hist[k, c] = old_hist[m, c]
             kept += 1
         else:
-            new_hist[k, 0] = 0.0
-            new_hist[k, 1] = 0.0
-            new_hist[k, 2] = 0.0
+            for c in range(new_hist.shape[1]):
+                new_hist[k, c] = 0.0
     return kept
 
 
