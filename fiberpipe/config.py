@@ -266,6 +266,9 @@ class ContactConfig(Section):
     d: Optional[Length] = None
     angle: Optional[Angle] = None
     skin: Optional[Length] = None
+    overlap_release: Optional[Time] = Field(
+        None, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time (default 1e-4 s)"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -279,6 +282,7 @@ class ContactConfig(Section):
             _positive("contact.stiffness", self.stiffness)
         if self.angle is not None and not (0 <= self.angle <= math.pi / 2 + 1e-12):
             raise ValueError("contact.angle must be between 0 and 90 deg")
+        _positive("contact.overlap_release", self.overlap_release)
         return self
 
 
