@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -114,36 +114,14 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         gamma_rest[e, 2] = r02 * dx + r12 * dy + r22 * dz
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                record, beta_over_dt, strain_prev):
-    """Add the internal forces and moments of all elements to ``f`` and ``mom``.
-
-    Parameters
-    ----------
-    x : (N, 3) float64, m — node positions.
-    q : (N, 4) float64 — node quaternions (unit).
-    el_n1 : (E,) int64 — first node of each element (second is ``el_n1 + 1``).
-    el_invL0 : (E,) float64, 1/m — inverse rest lengths.
-    el_C : (E, 3) float64, N — ``(k_s G A, k_s G A, E A)``.
-    el_Dk : (E, 3) float64, N·m/rad — ``(E I, E I, G J) / L_0``.
-    gamma_rest, theta_rest : (E, 3) float64 — rest strains (see :func:`element_rest_strains`).
-    f : (N, 3) float64, N — forces, accumulated into.
-    mom : (N, 3) float64, N·m — spatial moments, accumulated into.
-    record : bool — return the strain energy (J) if true (else 0).
-    beta_over_dt : float, 1 — stiffness-proportional damping β/Δt (0: off).
-    strain_prev : (E, 6) float64 — previous ``(Γ, θ)`` per element (only read/written if
-        ``beta_over_dt > 0``); the damping stress is ``β C Γ̇`` and ``β D κ̇`` (backward difference).
-
-    Returns
-    -------
-    (strain_energy_J, damping_energy_J) : the stored energy if ``record``; the energy dissipated
-    in this step by the stiffness-proportional damping stress (0 if off).
-    """
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                record, beta_over_dt, strain_prev, e_lo, e_hi):
+    """:func:`beam_forces` over the elements ``e_lo … e_hi − 1`` (returns their two energies)."""
     se = 0.0
     pd = 0.0
     use_beta = beta_over_dt > 0.0
-    for e in range(el_n1.shape[0]):
+    for e in range(e_lo, e_hi):
         a = el_n1[e]
         b = a + 1
         w1, x1, y1, z1 = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
@@ -232,4 +210,63 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
         mom[b, 0] += h0 - m0
         mom[b, 1] += h1 - m1
         mom[b, 2] += h2 - m2
+    return se, pd
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                record, beta_over_dt, strain_prev):
+    """Add the internal forces and moments of all elements to ``f`` and ``mom``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    q : (N, 4) float64 — node quaternions (unit).
+    el_n1 : (E,) int64 — first node of each element (second is ``el_n1 + 1``).
+    el_invL0 : (E,) float64, 1/m — inverse rest lengths.
+    el_C : (E, 3) float64, N — ``(k_s G A, k_s G A, E A)``.
+    el_Dk : (E, 3) float64, N·m/rad — ``(E I, E I, G J) / L_0``.
+    gamma_rest, theta_rest : (E, 3) float64 — rest strains (see :func:`element_rest_strains`).
+    f : (N, 3) float64, N — forces, accumulated into.
+    mom : (N, 3) float64, N·m — spatial moments, accumulated into.
+    record : bool — return the strain energy (J) if true (else 0).
+    beta_over_dt : float, 1 — stiffness-proportional damping β/Δt (0: off).
+    strain_prev : (E, 6) float64 — previous ``(Γ, θ)`` per element (only read/written if
+        ``beta_over_dt > 0``); the damping stress is ``β C Γ̇`` and ``β D κ̇`` (backward difference).
+
+    Returns
+    -------
+    (strain_energy_J, damping_energy_J) : the stored energy if ``record``; the energy dissipated
+    in this step by the stiffness-proportional damping stress (0 if off).
+    """
+    return _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                       record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
+def beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                       record, beta_over_dt, strain_prev, node_offsets):
+    """:func:`beam_forces` with one ``prange`` task per fiber (``solver.threads`` > 1).
+
+    Needs the CSR element order of :class:`~fiberpipe.solver.model.Model` (fiber ``k`` owns the
+    elements ``node_offsets[k] − k … node_offsets[k+1] − k − 2``), so each task writes only its own
+    fiber's nodes: no race, and every node's ``f`` and ``mom`` get the same additions in the same
+    order as in the serial kernel (bit-identical); the energies are summed per fiber, then in fiber
+    order (last bits only).
+    """
+    nf = node_offsets.shape[0] - 1
+    se_f = np.zeros(nf)
+    pd_f = np.zeros(nf)
+    for k in prange(nf):
+        e_lo = node_offsets[k] - k
+        e_hi = node_offsets[k + 1] - k - 1
+        s, d = _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                           record, beta_over_dt, strain_prev, e_lo, e_hi)
+        se_f[k] = s
+        pd_f[k] = d
+    se = 0.0
+    pd = 0.0
+    for k in range(nf):
+        se += se_f[k]
+        pd += pd_f[k]
     return se, pd

@@ -30,7 +30,7 @@ import types
 import numpy as np
 from numba import njit
 
-from ._kernels_beam import beam_forces, quat_to_matrix
+from ._kernels_beam import beam_forces, beam_forces_fibers, quat_to_matrix
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
 
 # accumulator slots (float64 array ``acc``)
@@ -99,6 +99,8 @@ def _advance_template(
     hist, h_row, history_every,
     # checks
     v_limit, x_limit, e_ref,
+    # threads: > 1 runs the beam pass per fiber in a prange (``node_offsets``: CSR fiber offsets)
+    threads, node_offsets,
 ):
     """Advance the state by up to ``n_steps`` steps of ``dt`` (s).
 
@@ -135,8 +137,12 @@ def _advance_template(
         else:
             f[:, :] = 0.0
         mom[:, :] = 0.0
-        se, vd_beta = beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-                                  f, mom, record, beta_over_dt, strain_prev)
+        if threads > 1:
+            se, vd_beta = beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
+                                             f, mom, record, beta_over_dt, strain_prev, node_offsets)
+        else:
+            se, vd_beta = beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
+                                      f, mom, record, beta_over_dt, strain_prev)
         acc[ACC_VD] += vd_beta
         n_pen = 0
         if P > 0:

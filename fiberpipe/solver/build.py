@@ -167,5 +167,6 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
         dt_safety=float(s.dt_safety), dt_s=getattr(s, "dt", None), end_time_s=s.end_time,
         output_frames=int(s.output_frames), history_every=getattr(s, "history_every", None),
         checkpoint_every=getattr(s, "checkpoint_every", None),
+        threads=int(getattr(s, "threads", 1) or 1),
     )
     return model, effects, settings

@@ -55,6 +55,8 @@ class SimulationSettings:
     penetration_limit : float — a node deeper than this fraction of its radius into a plate or wall
         is a runaway penetration (default 0.5); more than 2 radii (centre a radius beyond the
         plane) is a fiber leaving the box.
+    threads : int — ``solver.threads``: > 1 runs the beam pass with one ``prange`` task per fiber on
+        up to this many numba threads (bit-identical forces; default 1, serial).
     """
 
     dt_safety: float = 0.9
@@ -69,6 +71,7 @@ class SimulationSettings:
     checkpoint_every: int | None = None
     chunk_steps: int | None = None
     penetration_limit: float = 0.5
+    threads: int = 1
 
     def __post_init__(self):
         if not 0.0 < self.dt_safety <= 1.0:
@@ -147,7 +150,7 @@ class Integrator:
 
     def __init__(self, model: Model, effects: Sequence[Effect], dt: float, *, history_rows: int = 1,
                  history_every: int = 1, speed_limit_m_s: float | None = None,
-                 runaway_m: float | None = None, e_ref_J: float = 1e-12):
+                 runaway_m: float | None = None, e_ref_J: float = 1e-12, threads: int = 1):
         names = [e.name for e in effects]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
@@ -184,10 +187,20 @@ class Integrator:
         # gives from rest (at the first history row the loads' work f·(x_n − x_0) is still 0)
         one_step = float(np.sum(np.sum(sc.f_ext**2, axis=1) * self.dt**2 / model.mass)) if sc.f_ext.size else 0.0
         self.e_ref = max(float(e_ref_J), one_step)
+        # solver.threads > 1: the beam pass runs one prange task per fiber; needs the CSR element order
+        self.threads = max(1, int(threads))
+        self.node_offsets = np.ascontiguousarray(model.node_offsets, dtype=np.int64)
+        if self.threads > 1:
+            k = np.repeat(np.arange(model.n_fibers), np.diff(self.node_offsets) - 1)
+            if k.size != model.n_elements or not np.array_equal(model.el_n1, np.arange(k.size) + k):
+                self.threads = 1  # not the CSR layout: the serial beam pass
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
         m, sc = self.model, self.scene
+        if self.threads > 1:
+            import numba
+            numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
         status, done, self.h_row, bad = self._loop(
             m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
             m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
@@ -200,6 +213,7 @@ class Integrator:
             sc.contact_on, sc.contact_data,
             self.hist, self.h_row, self.history_every,
             self.v_limit, self.x_limit, self.e_ref,
+            self.threads, self.node_offsets,
         )
         state.step += int(done)
         state.t = state.step * self.dt
@@ -443,7 +457,7 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
         wall_before = 0.0
     integ = Integrator(model, effects, dt, history_rows=rows, history_every=every,
                        speed_limit_m_s=settings.speed_limit_m_s, runaway_m=settings.runaway_m,
-                       e_ref_J=max(ke0 + se0, 1e-12))
+                       e_ref_J=max(ke0 + se0, 1e-12), threads=settings.threads)
     sc = integ.scene
     frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
     frame_set = {int(k) for k in frame_steps}
