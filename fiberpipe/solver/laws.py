@@ -370,7 +370,7 @@ def _table_lookup(params, phi_eq):
         u = 0.0
     else:
         u = (math.log(phi_eq) - params[P_LNPHI0]) / params[P_DLNPHI]
-    if u <= 0.0:
+    if not (u == u) or u <= 0.0:  # NaN (a degenerate or diverging geometry) reads the first row
         i = 0
         t = 0.0
     elif u >= nt - 1:

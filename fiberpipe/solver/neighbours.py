@@ -81,6 +81,16 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
             hi[c] = max(hi[c], m)
         lmax = max(lmax, math.sqrt(l2))
         rmax = max(rmax, seg_radius[e])
+    # A diverging step can leave non-finite positions: the cell indices below would then be
+    # garbage (and the writes into the cell arrays out of bounds). Build no pairs; the step loop's
+    # divergence check reports the run with its diagnosis.
+    finite = math.isfinite(lmax)
+    for e in range(ne):
+        for c in range(3):
+            if not math.isfinite(mid[e, c]):
+                finite = False
+    if not finite:
+        return 0
     h = lmax + 2.0 * rmax + skin
     nc = np.empty(3, np.int64)
     while True:
@@ -95,9 +105,9 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     cell_of = np.empty(ne, np.int64)
     start = np.zeros(tot + 1, np.int64)
     for e in range(ne):
-        ix = min(int((mid[e, 0] - lo[0]) / h), nc[0] - 1)
-        iy = min(int((mid[e, 1] - lo[1]) / h), nc[1] - 1)
-        iz = min(int((mid[e, 2] - lo[2]) / h), nc[2] - 1)
+        ix = max(0, min(int((mid[e, 0] - lo[0]) / h), nc[0] - 1))
+        iy = max(0, min(int((mid[e, 1] - lo[1]) / h), nc[1] - 1))
+        iz = max(0, min(int((mid[e, 2] - lo[2]) / h), nc[2] - 1))
         cid = (ix * nc[1] + iy) * nc[2] + iz
         cell_of[e] = cid
         start[cid + 1] += 1
