@@ -23,6 +23,11 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
         d = Path(d)
         sim_path = d / "simulation.h5"
         if not sim_path.exists():
+            if (d / "simulation_diverged.h5").exists():
+                rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
+                             "peak_ke_over_se": float("nan"), "energy_residual": float("nan"), "steps": 0,
+                             "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
+                continue
             raise InputError(f"{d} has no simulation.h5: run it first")
         sim = load_simulation(sim_path)
         name = d.name
@@ -45,6 +50,7 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
                 "energy_residual": summary.get("energy_balance_residual_max", float("nan")),
                 "steps": int(sim.attrs.get("steps", 0)),
                 "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
+                "note": "",
             }
         )
     if curves:
