@@ -262,7 +262,9 @@ def _line_lnx(u):
     lam = math.log(u)
     v = (lam - _LT_LAM0) * _LT_INVH
     if v >= 0.0 and v < _LT_N - 1:
-        i = int(v)
+        # the integer clamp keeps the read inside the table even for a NaN v: under fastmath the
+        # compiler may assume no NaN and let it through the float test above
+        i = min(max(int(v), 0), _LT_N - 2)
         t = v - i
         g0 = _LINE_TABLE[i, 0]
         m0 = _LINE_TABLE[i, 1]
@@ -377,7 +379,7 @@ def _table_lookup(params, phi_eq):
         i = nt - 2
         t = 1.0
     else:
-        i = int(u)
+        i = min(max(int(u), 0), nt - 2)  # integer clamp: NaN-safe even under fastmath
         t = u - i
     lk = params[N_HEADER + i] * (1.0 - t) + params[N_HEADER + i + 1] * t
     la = params[N_HEADER + nt + i] * (1.0 - t) + params[N_HEADER + nt + i + 1] * t
