@@ -44,7 +44,7 @@ READING = """## Reading (measured 2026-11-22; these are what the runs gave, not 
   up to U ≈ 2.3 mm, a transition, then a steeply rising load (≈ 4 N final, 15 N peak at v_f ≈ 0.64).
 - **The study's scaled-stiffness laws**: the identified preset completes but its load is dominated
   by contact chatter (peaks of hundreds of N between history samples, a stiff exponential law hit at
-  1e4 mm/min); the parallel and oblique (6°) presets diverge near U ≈ 1.1 mm (stopped with a
+  1e4 mm/min); the parallel and oblique (6°) presets diverge near U ≈ 1 mm (stopped with a
   diagnosis, last good frames kept). So the study's ordering "parallel above oblique" could not be
   measured here. Runs with α ≤ 1e4 1/s diverge as well (see below): on this specimen the explicit
   contact-friction system needs the study's damping. These are open defects (issue 4/5 notes).
