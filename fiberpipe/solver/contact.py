@@ -295,26 +295,9 @@ def contact_forces(
     c_phi,
     c_delta,
 ):
-    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
-
-    Parameters
-    ----------
-    x : (N, 3) float64, m — node positions.
-    seg_nodes : (E, 2) int64 — node indices of each segment.
-    seg_radius : (E,) float64, m.
-    pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
-    law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
-    gxi, gw : Gauss nodes on (0, 1) and weights summing to 1 (:func:`gauss_points`).
-    f_out : (N, 3) float64, N — accumulated into (not zeroed).
-    c_fn, c_s, c_t, c_phi, c_delta : (P,) float64 — out, per pair; c_n : (P, 3) float64 — out.
-
-    Returns
-    -------
-    (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
-    constant blend weight), number of pairs in contact.
-
-    See :func:`contact_forces_ex` for the variant with per-pair overlap offsets and contact shares.
-    """
+    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``:
+    :func:`contact_forces_ex` without initial-overlap offsets and contact shares (same
+    parameters, same returns ``(energy, n_active)``)."""
     empty = np.zeros(0)
     return contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
                              c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty)
