@@ -147,12 +147,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
         loads["contact"] = load()
         sec += ["## Contact pass", "",
                 f"`benchmarks/bench_contact.py` (40 fibers × 50 elements, hex bundle, 2 Gauss points; {loads['contact']}).", "",
-                "| gap | law | candidate pairs | in contact | µs per pass | ns per pair | ns per pair in contact | ns per element | friction µs |",
-                "|---|---|---|---|---|---|---|---|---|"]
-        for r in rows:
-            per_active = f"{r['ns_per_active']:.0f}" if r["active"] else "—"
-            sec.append(f"| {r['gap_nm']:.0f} nm | {r['law']} | {r['pairs']} | {r['active']} | {r['us_contact']:.0f} | "
-                       f"{r['ns_per_pair']:.1f} | {per_active} | {r['ns_per_element']:.0f} | {r['us_friction']:.0f} |")
+                *bc.table_lines(rows)]
         sec.append("")
     if "pyelastica" not in skip:
         echo("bench: PyElastica ...")

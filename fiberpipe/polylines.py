@@ -12,6 +12,33 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+def resample_arclength(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Resample a polyline at a constant arc-length ``spacing``, both ends kept.
+
+    Parameters
+    ----------
+    points : (n, d) float64 ndarray
+    spacing : float, same unit as ``points``
+
+    Returns
+    -------
+    (k, d) float64 ndarray, k = max(2, round(length / spacing) + 1) equally spaced points along the
+    line (zero-length segments are ignored; a polyline of zero length gives its first point).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) < 2:
+        return p.copy()
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return p[:1].copy()
+    n = max(2, int(round(s[-1] / spacing)) + 1)
+    t = np.linspace(0.0, s[-1], n)
+    keep = np.concatenate([[True], seg > 0])
+    s, p = s[keep], p[keep]
+    return np.stack([np.interp(t, s, p[:, k]) for k in range(p.shape[1])], axis=1)
+
+
 @dataclass
 class Polylines:
     """Fiber mid-lines.

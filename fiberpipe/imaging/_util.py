@@ -33,19 +33,11 @@ def xyz_m_to_voxel(xyz_m: np.ndarray, voxel_size_m) -> np.ndarray:
 
 
 def resample_polyline(p: np.ndarray, spacing: float) -> np.ndarray:
-    """Resample a polyline (n, d) at a constant arc-length ``spacing`` (same unit), ends kept."""
-    p = np.asarray(p, dtype=np.float64)
-    if len(p) < 2:
-        return p.copy()
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] <= 0:
-        return p[:1].copy()
-    n = max(2, int(round(s[-1] / spacing)) + 1)
-    t = np.linspace(0.0, s[-1], n)
-    keep = np.concatenate([[True], seg > 0])
-    s, p = s[keep], p[keep]
-    return np.stack([np.interp(t, s, p[:, k]) for k in range(p.shape[1])], axis=1)
+    """Resample a polyline (n, d) at a constant arc-length ``spacing`` (same unit), ends kept
+    (:func:`fiberpipe.polylines.resample_arclength`)."""
+    from fiberpipe.polylines import resample_arclength
+
+    return resample_arclength(p, spacing)
 
 
 def smooth_polyline(p: np.ndarray, sigma: float) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from fiberpipe.errors import InputError
-from fiberpipe.polylines import Polylines
+from fiberpipe.polylines import Polylines, resample_arclength
 
 
 @dataclass
@@ -139,22 +139,14 @@ def resample_polyline(points_m: np.ndarray, element_length_m: float, *, smooth_s
     (k + 1, 3) float64 ndarray, m
     """
     pts = np.asarray(points_m, dtype=np.float64)
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    total = s[-1]
     if smooth_sigma_m > 0 and len(pts) > 4:
-        mean_step = total / (len(pts) - 1)
+        mean_step = np.linalg.norm(np.diff(pts, axis=0), axis=1).sum() / (len(pts) - 1)
         sigma = smooth_sigma_m / mean_step
         if sigma > 0.3:
             inner = gaussian_filter1d(pts, sigma, axis=0, mode="nearest")
             inner[0], inner[-1] = pts[0], pts[-1]
             pts = inner
-            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-            s = np.concatenate([[0.0], np.cumsum(seg)])
-            total = s[-1]
-    n = max(1, int(round(total / element_length_m)))
-    target = np.linspace(0.0, total, n + 1)
-    return np.stack([np.interp(target, s, pts[:, k]) for k in range(3)], axis=1)
+    return resample_arclength(pts, element_length_m)
 
 
 def mesh_polylines(

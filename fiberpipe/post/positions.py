@@ -6,13 +6,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
-
-def _densify(points: np.ndarray, step: float) -> np.ndarray:
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    s = np.concatenate([[0], np.cumsum(seg)])
-    n = max(2, int(np.ceil(s[-1] / step)) + 1)
-    t = np.linspace(0, s[-1], n)
-    return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], axis=1)
+from fiberpipe.polylines import resample_arclength
 
 
 def position_error(sim_points, sim_offsets, ref_points, ref_offsets, *, step_m: float | None = None) -> dict:
@@ -30,7 +24,7 @@ def position_error(sim_points, sim_offsets, ref_points, ref_offsets, *, step_m: 
     if step_m is None:
         seg = np.linalg.norm(np.diff(ref_points, axis=0), axis=1)
         step_m = max(float(np.median(seg)) / 10, 1e-9)
-    trees = [cKDTree(_densify(ref_points[ref_offsets[j] : ref_offsets[j + 1]], step_m)) for j in range(n_ref)]
+    trees = [cKDTree(resample_arclength(ref_points[ref_offsets[j] : ref_offsets[j + 1]], step_m)) for j in range(n_ref)]
     cost = np.full((n_sim, n_ref), np.inf)
     for i in range(n_sim):
         p = sim_points[sim_offsets[i] : sim_offsets[i + 1]]

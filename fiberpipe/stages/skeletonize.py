@@ -32,9 +32,9 @@ def run_skeletonize(cfg: Config, mask_path: Path, out: Path, *, config_sha256: s
 
 
 def eval_list(v):
-    """Voxel size attribute (stored as JSON text or array) -> list of 3 floats."""
+    """Voxel size attribute (stored as JSON text or array) -> list of 3 floats (dz, dy, dx), m."""
     import json
 
-    if isinstance(v, str):
-        v = json.loads(v)
-    return [float(x) for x in np.broadcast_to(np.asarray(v, float), (3,))]
+    from fiberpipe.imaging._util import voxel_size_zyx
+
+    return [float(x) for x in voxel_size_zyx(json.loads(v) if isinstance(v, str) else v)]
