@@ -78,20 +78,23 @@ def _joint_share(x, seg_nodes, e, s, d_own, o0, o1, to, rr, c0, c1, tc):
     (both pairs evaluate the same two distances with the same arguments) and equal distances give
     ½ each: a crossing exactly on a straight joint, or on a kinked joint (convex: both line
     closest points fall outside the segments; concave: both inside), is counted once. A fibre's
-    free end has no competitor: the segment owns its clamped closest point if the line closest
-    point is inside it, otherwise nothing (the crossing passes beyond the fibre's end).
+    free end has no competitor: the end segment always owns its clamped closest point, i.e. the
+    hemispherical end cap is a contact surface. (Owning it only while the line closest point was
+    inside the segment made the force appear or vanish at full penetration when that point crossed
+    the end; in undamped bundles this pumped energy until they diverged:
+    tests/solver/test_contact_ends.py.)
     """
     E = seg_nodes.shape[0]
     if s > 0.5:
         nj = seg_nodes[e, 1]
         if e + 1 >= E or seg_nodes[e + 1, 0] != nj:
-            return 1.0 if s <= 1.0 else 0.0
+            return 1.0
         n0 = nj
         n1 = seg_nodes[e + 1, 1]
     else:
         nj = seg_nodes[e, 0]
         if e - 1 < 0 or seg_nodes[e - 1, 1] != nj:
-            return 1.0 if s >= 0.0 else 0.0
+            return 1.0
         n0 = seg_nodes[e - 1, 0]
         n1 = nj
     for k in range(3):
