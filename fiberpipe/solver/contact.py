@@ -303,7 +303,7 @@ def contact_forces(
     parameters, same returns ``(energy, n_active)``)."""
     empty = np.zeros(0)
     return contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
-                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty)
+                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty, empty, 0.0)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -327,6 +327,8 @@ def contact_forces_ex(
     c_off,
     c_share,
     c_fsum,
+    c_gap,
+    reach,
 ):
     """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
 
@@ -351,7 +353,14 @@ def contact_forces_ex(
         size > 0: the pair's contact share (point part: its blend weight × joint share; line part:
         the fraction of the segment length in contact, halves averaged; a full-length parallel
         contact or a crossing counts 1) and Σ|f| of its contact points [N].
+    c_gap : (P,) float64, m — each pair's clamped centre-line distance minus r_i + r_j at the last
+        neighbour-list build (size 0: not used); reach : float, m — twice the largest node
+        displacement since that build. A pair with ``c_gap > reach`` is skipped: every point of a
+        segment is a convex combination of its nodes, so neither moved more than half the reach and
+        the distance cannot have closed the gap (Verlet-list reasoning, one comparison per pair
+        instead of a segment–segment distance).
     """
+    use_gap = c_gap.shape[0] > 0
     use_off = c_off.shape[0] > 0
     use_share = c_share.shape[0] > 0
     energy = 0.0
@@ -377,6 +386,8 @@ def contact_forces_ex(
         rb = seg_radius[j]
         rr = ra + rb
         c_fn[k] = 0.0
+        if use_gap and c_gap[k] > reach:
+            continue
         off = c_off[k] if use_off else 0.0
         # reject path on scalars (the common case: a Verlet candidate not touching)
         xa0 = x[na0, 0]

@@ -34,10 +34,10 @@ from numba.typed import List
 from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
 from ._kernels_integrate import ACC_FD, ACC_PW, ACC_WK
-from .contact import contact_forces_ex, gauss_points
+from .contact import _segment_distance2_s, contact_forces_ex, gauss_points
 from .friction import friction_forces_ex, plane_friction, remap_history
 from .laws import make_law
-from .neighbours import build_pairs, max_displacement_exceeds
+from .neighbours import build_pairs, max_displacement2
 
 # integer state slots (data[I_STATE])
 IS_LAW = 0
@@ -117,6 +117,21 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
     istate[IS_NPAIRS] = n
     istate[IS_NBUILDS] += 1
     x_ref[:, :] = x
+    # each pair's gap at this build (clamped segment distance − r_i − r_j): the contact pass skips
+    # a pair while the gap exceeds twice the largest node displacement since
+    pairs = L_pairs[0]
+    gap = L_h1[7]
+    for k in range(n):
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        a0 = seg_nodes[i, 0]
+        a1 = seg_nodes[i, 1]
+        b0 = seg_nodes[j, 0]
+        b1 = seg_nodes[j, 1]
+        d2, s_, t_ = _segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
+                                          x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
+                                          x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
+        gap[k] = math.sqrt(d2) - seg_radius[i] - seg_radius[j]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -127,8 +142,13 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
      radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
      pl_hist, pl_tforce) = data
     N = x.shape[0]
-    if istate[IS_NBUILDS] == 0 or max_displacement_exceeds(x, x_ref, 0.5 * fstate[FS_SKIN]):
+    dm2 = max_displacement2(x, x_ref)
+    half_skin = 0.5 * fstate[FS_SKIN]
+    if istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin:
         _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1)
+        dm2 = 0.0
+    reach = 2.0 * math.sqrt(dm2)
+    c_gap = L_h1[7]
     pairs = L_pairs[0]
     hist = L_h2[0]
     c_n = L_h2[2]
@@ -146,7 +166,8 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     if istate[IS_OVERLAP] == 0:
         istate[IS_OVERLAP] = 1
         contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
-                          gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, np.zeros(0), c_share, c_fsum)
+                          gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, np.zeros(0), c_share, c_fsum,
+                          c_gap, reach)
         omax = 0.0
         for k in range(n_pairs):
             i = pairs[k, 0]
@@ -177,7 +198,8 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
             use_off = False
     # fc is all zeros here: the work loop at the end of the previous call cleared it (fused loops)
     energy, n_active = contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
-                                         gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, off, c_share, c_fsum)
+                                         gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, off, c_share, c_fsum,
+                                         c_gap, reach)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
     # grows by Σ|f|·Δoff); a prescribed "motion", booked as external work (ALLWK)
     if use_off and rel_prev > rel:
@@ -363,7 +385,7 @@ def make_contact_hook(model, *, law=None, contact: bool = True, friction: bool =
         L_keys = List([np.zeros(cap, np.int64), np.zeros(cap, np.int64)])
         L_h2 = List([np.zeros((cap, 4)), np.zeros((cap, 4)), np.zeros((cap, 3)), np.zeros((cap, 1)),
                      np.zeros((cap, 1))])
-        L_h1 = List([np.zeros(cap) for _ in range(7)])
+        L_h1 = List([np.zeros(cap) for _ in range(8)])
         k_pen = scene.k_pen() if P > 0 else np.zeros(0)
         seg_nodes_u = seg_nodes if contact else seg_nodes[:0]
         data = (istate, fstate, seg_nodes_u, seg_radius[: len(seg_nodes_u)], seg_fiber[: len(seg_nodes_u)],

@@ -45,6 +45,25 @@ def max_displacement_exceeds(x, x_ref, limit):
     return False
 
 
+@njit(cache=True, fastmath=True, error_model="numpy")
+def max_displacement2(x, x_ref):
+    """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build).
+
+    One pass without early exit: the contact pass uses the value itself (a pair whose gap at the
+    build exceeds twice the largest displacement since cannot touch, see
+    :func:`fiberpipe.solver.contact.contact_forces_ex`), not only the rebuild test.
+    """
+    m = 0.0
+    for i in range(x.shape[0]):
+        d0 = x[i, 0] - x_ref[i, 0]
+        d1 = x[i, 1] - x_ref[i, 1]
+        d2 = x[i, 2] - x_ref[i, 2]
+        q = d0 * d0 + d1 * d1 + d2 * d2
+        if q > m:
+            m = q
+    return m
+
+
 @njit(cache=True, error_model="numpy")
 def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
     """Build the Verlet list of candidate segment pairs.
