@@ -181,7 +181,7 @@ class TraceConfig(Section):
 class MeshConfig(Section):
     element_length: Length = 0.3e-3
     smooth_sigma: Length = 0.0
-    resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input (strain-free adjustment)")
+    resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input, and out of the scene's plates and walls (strain-free adjustment)")
     max_overlap_shift: Length = Field(0.1e-3, description="refuse inputs whose overlaps need larger node shifts")
 
     @field_validator("element_length")
@@ -466,8 +466,14 @@ class Config(Section):
     source_path: Optional[str] = Field(None, exclude=True)
 
     def section_sha256(self, *names: str) -> str:
-        """Content hash of the validated (SI) sections ``names``, for stage cache keys."""
-        data = {n: getattr(self, n).model_dump(mode="json") for n in names}
+        """Content hash of the validated (SI) sections ``names``, for stage cache keys; a dotted name
+        (``scene.plates``) hashes that sub-section only."""
+        data = {}
+        for n in names:
+            v = self
+            for part in n.split("."):
+                v = getattr(v, part)
+            data[n] = v.model_dump(mode="json") if hasattr(v, "model_dump") else v
         blob = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(blob.encode()).hexdigest()
 
