@@ -166,26 +166,41 @@ def test_sliding_across_element_joints_keeps_the_normal_force():
     assert math.isfinite(row.measured) and row.error < row.tolerance, row
 
 
-@pytest.mark.xfail(strict=True, reason="energy balance residual 11.7 (max |ΔETOTAL| / max energy) when a driven fiber "
-                   "slides over a fully clamped one under a line load with contact: the drive/clamp reaction work "
-                   "(ALLWK) and the contact work (ALLPW) do not balance (fiberpipe/solver/integrator.py energy "
-                   "bookkeeping of Drives with a ContactHook); kinematics and penetration are fine")
-def test_crossing_fiber_dragged_across_joints_does_not_snag():
-    """A fiber crossing another at 90°, resting on it under a point-like line load, dragged along the
-    lower fiber's axis across several element joints: it follows the drive, the contact force does not
-    jump (no snag), nothing penetrates."""
+@pytest.mark.parametrize("pressed", [False, True], ids=["touching", "pressed"])
+def test_crossing_fiber_dragged_across_joints_does_not_snag(pressed):
+    """A fiber crossing another at 90°, dragged by a drive along the lower fiber's axis across
+    several element joints (damped, α = 2e4): it follows the drive, nothing penetrates, the energy
+    balance closes.
+
+    touching: the issue-6 scene, the upper fiber just touching the fully clamped lower one (the
+    drive prescribes all its translations, so its line load acts on the drive only and the contact
+    stays inactive). Energy residual was 11.7: the damping dissipation of the driven nodes
+    (α m v² t, ALLVD) had no counterpart in the drive's reaction work (ALLWK); now 2.8e-7.
+    pressed: the upper fiber 0.02 r into the lower one, which is clamped at its ends only and bends
+    under the contact: the contact stays active along the whole drag (no snag, no loss of contact);
+    residual 2.3e-3 (the ½ m v̄² kinetic-energy measure of the stiff contact, not a bookkeeping gap).
+    """
     L, n = 3e-3, 10
+    z1 = (2.0 - 0.02) * R if pressed else 2 * R
     m = fibers_model([((0, 0, 0), (L, 0, 0), n),
-                      ((0.6e-3, -L / 2, 2 * R), (0.6e-3, L / 2, 2 * R), n)])
-    clamps = Clamps([Clamp(0, k) for k in range(n + 1)])
+                      ((0.6e-3, -L / 2, z1), (0.6e-3, L / 2, z1), n)])
+    if pressed:
+        clamps = Clamps([Clamp(0, "start"), Clamp(0, "end")])
+        contact = make_contact_hook(m, law=make_law(LAW, E_pa=15e9, nu=0.3), overlap_release_s=0.0)
+    else:
+        clamps = Clamps([Clamp(0, k) for k in range(n + 1)])
+        contact = hook(m)
     eff = [clamps, Loads([LineLoad(1, [0, 0, -1.0])]), Damping(2e4),
-           Drives([Drive(1, [1.5e-3, 0, 0], 5.0)]), hook(m)]
-    frames = []
+           Drives([Drive(1, [1.5e-3, 0, 0], 5.0)]), contact]
     res = simulate(m, eff, SimulationSettings(output_frames=31))
     assert res.completed
     x = res.frames_positions[-1]
     assert abs(np.mean(x[m.node_fiber == 1, 0]) - 2.1e-3) < 1e-5
-    assert_bounded(res, m, residual=0.1, pen=0.02)
+    if pressed:
+        assert np.min(res.history["contacts"]) > 0
+        assert_bounded(res, m, residual=1e-2, pen=0.03)
+    else:
+        assert_bounded(res, m, residual=1e-3, pen=0.02)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -17,7 +17,10 @@ velocities (so it never destabilises the step); its dissipation ``α m |v̄|² �
 
 Energy bookkeeping (Abaqus names): ALLKE and ALLSE at t_n from ``v̄`` and the element strains;
 ALLWK = constant loads' work ``f_ext · (x_n − x_0)`` plus the reactions of prescribed motions
-(plates, drives, clamps) times their displacement increments; ALLPW = work of the plane penalties
+(plates, drives, clamps) times their displacement increments, the reaction of a prescribed node
+being the whole force that imposes its motion, ``m (v_{n+½} − v_{n−½})/Δt − f_n + α m v̄`` (the
+damping force acts on the absolute velocity of every node, driven ones included, and its
+dissipation there is in ALLVD); ALLPW = work of the plane penalties
 on the fibers minus the plates' prescribed work (plus whatever the contact hook adds); ALLFD from
 the contact hook only. Works over a step use ``f_n · v̄ Δt`` (trapezoid, second order).
 """
@@ -230,15 +233,21 @@ def _advance_template(
                     fx = mask & FIX_X
                     fy = mask & FIX_Y
                     fz = mask & FIX_Z
+                # reaction = the force that imposes the motion: m (v1 − v0)/Δt − f_n + α m v̄ (the
+                # damping force −α m v̄ acts on prescribed nodes too and is booked in ALLVD, so the
+                # reaction overcoming it must be in ALLWK); its work over the step is R · v̄ Δt
                 if fx:
                     v1x = px
-                    wk_fix += (m * (v1x - v0x) / dt - f[i, 0]) * 0.5 * (v1x + v0x) * dt
+                    vb = 0.5 * (v1x + v0x)
+                    wk_fix += (m * (v1x - v0x) / dt - f[i, 0] + alpha * m * vb) * vb * dt
                 if fy:
                     v1y = py
-                    wk_fix += (m * (v1y - v0y) / dt - f[i, 1]) * 0.5 * (v1y + v0y) * dt
+                    vb = 0.5 * (v1y + v0y)
+                    wk_fix += (m * (v1y - v0y) / dt - f[i, 1] + alpha * m * vb) * vb * dt
                 if fz:
                     v1z = pz
-                    wk_fix += (m * (v1z - v0z) / dt - f[i, 2]) * 0.5 * (v1z + v0z) * dt
+                    vb = 0.5 * (v1z + v0z)
+                    wk_fix += (m * (v1z - v0z) / dt - f[i, 2] + alpha * m * vb) * vb * dt
                 if mask & (FIX_ROT | DRIVEN):
                     w1x = 0.0
                     w1y = 0.0

@@ -138,6 +138,11 @@ class Damping(Effect):
     uses 1e5). Stiffness-proportional: an extra stress ``β C Γ̇`` and moment ``β D κ̇``
     (``beta_s``, s; lowers the stable step by (√(1+ξ²) − ξ), ξ = βω_max/2). The dissipated
     energy is ALLVD.
+
+    The mass-proportional force acts on the absolute velocity of every node, prescribed ones
+    included (Abaqus: as if the model moved through a viscous fluid): a fiber translated rigidly
+    at speed v by a :class:`Drive` dissipates ``α m v²`` per unit time (ALLVD), which the drive's
+    reaction supplies (ALLWK).
     """
 
     alpha_per_s: float = 0.0
@@ -374,7 +379,9 @@ class Drive:
 @dataclass
 class Drives(Effect):
     """Prescribed rigid motions of whole fibers (the study's rearrangement case); the reactions'
-    work goes to ALLWK."""
+    work goes to ALLWK. A node's reaction is the whole force that imposes its motion: inertia minus
+    the beam, load and contact forces on it, plus the mass-proportional damping force it overcomes
+    (see :class:`Damping`)."""
 
     drives: Sequence[Drive] = field(default_factory=list)
     name = "drives"
