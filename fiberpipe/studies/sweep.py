@@ -18,7 +18,9 @@ A study file::
     # measures: curve (F(U) of the plates, relative L2), final_load, positions (mean node distance
     # at the end / fiber diameter), rearrangement (u_y(u_z) of the study's 3-beam case: max error
     # / max u_y,ref, driven fiber 0 against the mean outward motion of the others)
-    workers: 2                                # local processes (or Dask with --scheduler)
+    workers: 2                                # points in parallel: a local Dask cluster of that many
+                                              # processes (fiberpipe[dask]), else a local process pool;
+                                              # --scheduler ADDRESS: an existing Dask cluster instead
 
 # Strategy: each point is the base config with its overrides applied, validated up front (so a
 # typo fails before anything runs), and run by the ordinary cached runner into
@@ -256,49 +258,78 @@ def _errors(measures, ref, sim_path: Path) -> dict:
 def observed_order(h: list[float], f: list[np.ndarray]) -> float:
     """Observed order of convergence from three solutions ``f`` at ``h`` (finest first), by the
     fixed-point iteration of Celik et al. (J. Fluids Eng. 130, 2008, the GCI procedure), which allows
-    unequal refinement ratios; clamped to [0.5, 4]."""
+    unequal refinement ratios; clamped to [0.5, 4]. Returns 2 if two solutions coincide."""
     r21, r32 = h[1] / h[0], h[2] / h[1]
-    e21 = float(np.linalg.norm(f[1] - f[0]))
-    e32 = float(np.linalg.norm(f[2] - f[1]))
+    e21 = float(np.linalg.norm(np.asarray(f[1]) - np.asarray(f[0])))
+    e32 = float(np.linalg.norm(np.asarray(f[2]) - np.asarray(f[1])))
     if e21 <= 0 or e32 <= 0:
         return 2.0
     sgn = 1.0  # norms: monotone convergence assumed
     p = 2.0
-    for _ in range(50):
+    for _ in range(100):
         q = np.log((r21**p - sgn) / (r32**p - sgn))
-        p_new = abs(np.log(e32 / e21) + q) / np.log(r21)
-        if abs(p_new - p) < 1e-6:
+        p_new = float(np.clip(abs(np.log(e32 / e21) + q) / np.log(r21), 0.5, 4.0))
+        done = abs(p_new - p) <= 1e-13 * max(1.0, p)
+        p = p_new
+        if done:
             break
-        p = float(np.clip(p_new, 0.5, 4.0))
-    return float(np.clip(p, 0.5, 4.0))
+    return p
 
 
-def richardson_limit(spec: StudySpec, points: list[dict], out: Path, where: str) -> dict:
-    """The converged limit of F(U) by Richardson extrapolation over ``reference.extrapolate.key``:
-    F_lim = F_1 + (F_1 − F_2)/(r^p − 1) on the finest run's U (F_1 finest, r = h_2/h_1)."""
-    from fiberpipe.post.curves import force_displacement
-    from fiberpipe.post.history import load_simulation
-
-    ex = spec.reference.extrapolate
-    if list(spec.sweep) != [ex.key]:
-        raise ConfigError(f"reference.extrapolate over {ex.key!r} needs a sweep of that key only", where=where)
-    hs = [(_key_value(p["raw"], ex.key, where), p) for p in points]
-    hs.sort(key=lambda t: t[0])
-    need = 3 if ex.order == "auto" else 2
-    if len(hs) < need:
-        raise ConfigError(f"reference.extrapolate needs at least {need} values of {ex.key}", where=where)
-    sims = [load_simulation(out / "points" / p["id"] / "simulation.h5") for _, p in hs[:need]]
-    U1, F1 = force_displacement(sims[0])
+def richardson_extrapolate(h: list[float], curves: list[tuple[np.ndarray, np.ndarray]], order: Union[float, str] = 2.0) -> dict:
+    """The converged limit of F(U) by Richardson extrapolation from curves ``(U, F)`` at mesh sizes
+    ``h`` (finest first; two for a given ``order``, three for ``order="auto"``, which estimates it by
+    :func:`observed_order`): F_lim = F_1 + (F_1 − F_2)/(r^p − 1) on the finest curve's U, with
+    r = h_2/h_1 and the coarser curves interpolated linearly in U onto it.
+    Returns ``{"U", "F", "order", "h"}``."""
+    need = 3 if order == "auto" else 2
+    if len(h) < need or len(curves) < need:
+        raise ValueError(f"Richardson extrapolation with order {order!r} needs {need} solutions")
+    h = [float(v) for v in h[:need]]
+    if any(b <= a * (1 + 1e-9) for a, b in zip(h, h[1:])):
+        raise ValueError(f"Richardson extrapolation needs distinct sizes, finest first, got {h}")
+    U1, F1 = (np.asarray(a, dtype=float) for a in curves[0])
     Fs = [F1]
-    for sim in sims[1:]:
-        U, F = force_displacement(sim)
+    for U, F in curves[1:need]:
+        U, F = np.asarray(U, dtype=float), np.asarray(F, dtype=float)
         o = np.argsort(U)
         Fs.append(np.interp(U1, U[o], F[o]))
-    h = [t[0] for t in hs[:need]]
-    p = observed_order(h, Fs) if ex.order == "auto" else float(ex.order)
+    p = observed_order(h, Fs) if order == "auto" else float(order)
     r = h[1] / h[0]
     F_lim = Fs[0] + (Fs[0] - Fs[1]) / (r**p - 1.0)
     return {"U": U1, "F": F_lim, "order": p, "h": h}
+
+
+def _extrapolation_points(spec: StudySpec, points: list[dict], where: str) -> list[tuple[float, dict]]:
+    """The points ``reference.extrapolate`` uses, ``(h, point)`` finest first; checked before any
+    point runs (a sweep of the key only, enough distinct values, no per-node measure)."""
+    ex = spec.reference.extrapolate
+    if list(spec.sweep) != [ex.key]:
+        raise ConfigError(f"reference.extrapolate over {ex.key!r} needs a sweep of that key only", where=where)
+    if "rearrangement" in spec.measures:
+        raise ConfigError("the rearrangement measure needs a reference run, not an extrapolated limit", where=where)
+    hs = sorted(((_key_value(p["raw"], ex.key, where), p) for p in points), key=lambda t: t[0])
+    need = 3 if ex.order == "auto" else 2
+
+    def distinct(vals):  # "0.3 mm" and "0.0003 m" are one size (to rounding of the unit conversion)
+        return sum(1 for i, v in enumerate(vals) if i == 0 or not np.isclose(v, vals[i - 1], rtol=1e-9, atol=0.0))
+
+    if distinct([h for h, _ in hs]) < need:
+        raise ConfigError(f"reference.extrapolate needs at least {need} distinct values of {ex.key}", where=where)
+    if distinct([h for h, _ in hs[:need]]) < need:
+        raise ConfigError(f"reference.extrapolate: the {need} finest values of {ex.key} must be distinct", where=where)
+    return hs[:need]
+
+
+def richardson_limit(spec: StudySpec, points: list[dict], out: Path, where: str) -> dict:
+    """The converged limit of F(U) by Richardson extrapolation over ``reference.extrapolate.key``
+    from the study's finest runs in ``out`` (:func:`richardson_extrapolate`)."""
+    from fiberpipe.post.curves import force_displacement
+    from fiberpipe.post.history import load_simulation
+
+    hs = _extrapolation_points(spec, points, where)
+    curves = [force_displacement(load_simulation(out / "points" / p["id"] / "simulation.h5")) for _, p in hs]
+    return richardson_extrapolate([h for h, _ in hs], curves, spec.reference.extrapolate.order)
 
 
 def digit_cost(rows: list[dict], err_col: str) -> Optional[dict]:
@@ -330,6 +361,8 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     points = study_points(spec, base, str(path))
     use_ref_run = spec.reference.run is None and spec.reference.extrapolate is None
     ref = _point(base, spec.reference.overrides, str(path)) if use_ref_run else None
+    if spec.reference.extrapolate is not None:
+        _extrapolation_points(spec, points, str(path))  # fail before running anything
     out = Path(out)
     (out / "points").mkdir(parents=True, exist_ok=True)
     jobs = []
@@ -369,32 +402,39 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
 
 
 def _execute(jobs, nworkers, scheduler, where, echo) -> dict:
-    results = {}
+    """Run ``jobs`` ``(id, raw, run_dir)``: on the Dask scheduler at ``scheduler``; else, with more
+    than one worker, on a local Dask cluster of ``nworkers`` processes (a local process pool without
+    Dask); else one after the other in this process. Returns ``{id: _run_point result}``."""
     if scheduler or nworkers > 1:
         try:
             from dask.distributed import Client, LocalCluster  # optional extra: fiberpipe[dask]
-
-            if scheduler:
-                client = Client(scheduler)
-            else:
-                client = Client(LocalCluster(n_workers=nworkers, threads_per_worker=1, processes=True, env={"NUMBA_NUM_THREADS": "1"}))
-            with client:
-                futures = {jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}
-                for jid, fut in futures.items():
-                    results[jid] = fut.result()
-                    echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
-            return results
         except ImportError:
             if scheduler:
                 raise ConfigError("--scheduler needs Dask: pip install 'fiberpipe[dask]'") from None
-        with ProcessPoolExecutor(max_workers=nworkers) as pool:
-            futures = {jid: pool.submit(_run_point, raw, d, where) for jid, raw, d in jobs}
-            for jid, fut in futures.items():
-                results[jid] = fut.result()
-                echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
-        return results
+            echo(f"  on a local process pool ({nworkers} processes; Dask not installed)")
+            with ProcessPoolExecutor(max_workers=nworkers) as pool:
+                return _collect({jid: pool.submit(_run_point, raw, d, where) for jid, raw, d in jobs}, echo)
+        if scheduler:
+            echo(f"  on the Dask scheduler {scheduler}")
+            with Client(scheduler) as client:
+                return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
+        echo(f"  on a local Dask cluster ({nworkers} worker processes)")
+        # the cluster in its own context: a Client given a cluster does not close it
+        with LocalCluster(n_workers=nworkers, threads_per_worker=1, processes=True, env={"NUMBA_NUM_THREADS": "1"}) as cluster, \
+                Client(cluster) as client:
+            return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
+    results = {}
     for jid, raw, d in jobs:
         results[jid] = _run_point(raw, d, where)
+        echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
+    return results
+
+
+def _collect(futures: dict, echo) -> dict:
+    """Wait for ``{id: future}`` (concurrent.futures or Dask), in submission order."""
+    results = {}
+    for jid, fut in futures.items():
+        results[jid] = fut.result()
         echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
     return results
 
