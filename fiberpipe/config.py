@@ -181,7 +181,7 @@ class TraceConfig(Section):
 class MeshConfig(Section):
     element_length: Length = 0.3e-3
     smooth_sigma: Length = 0.0
-    resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input, and out of the scene's plates and walls (strain-free adjustment)")
+    resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input (strain-free adjustment; the simulate stage also moves surfaces up to 5 % of r inside a plate or wall back out)")
     max_overlap_shift: Length = Field(0.1e-3, description="refuse inputs whose overlaps need larger node shifts")
 
     @field_validator("element_length")

@@ -149,7 +149,7 @@ STAGES: dict[str, Stage] = {
     ),
     "mesh": Stage(
         "mesh",
-        ("mesh", "material", "fiber", "scene.effects", "scene.plates", "scene.walls"),
+        ("mesh", "material", "fiber"),
         lambda c, d: {"fibers": _fibers_path(c, d)},
         lambda c, d: [d / "mesh.h5", d / "mesh.vtu", d / "model.inp"],
         _do_mesh,

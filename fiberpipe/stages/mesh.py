@@ -12,29 +12,6 @@ from fiberpipe.model.mesh import mesh_polylines, resolve_overlaps
 from fiberpipe.stages._common import input_hashes
 
 
-def scene_planes(cfg: Config) -> list[tuple[int, float, float]]:
-    """The scene's rigid planes at t = 0 as ``(axis, position_m, sign)`` (sign +1: lower plane),
-    for :func:`fiberpipe.model.mesh.resolve_overlaps`; plates without a set position are placed
-    on the fibers by the solver, so they cannot overlap and are left out."""
-    sc = cfg.scene
-    effects = set(sc.effects or ())
-    axes = {"x": 0, "y": 1, "z": 2}
-    planes = []
-    if "plates" in effects and sc.plates is not None:
-        p = sc.plates
-        if p.lower != "none" and p.lower_position is not None:
-            planes.append((axes[p.axis], float(p.lower_position), 1.0))
-        if p.upper != "none" and p.upper_position is not None:
-            planes.append((axes[p.axis], float(p.upper_position), -1.0))
-    if "walls" in effects and sc.walls is not None:
-        for name, ax in axes.items():
-            w = getattr(sc.walls, name)
-            if w is not None:
-                planes.append((ax, float(w[0]), 1.0))
-                planes.append((ax, float(w[1]), -1.0))
-    return planes
-
-
 def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = "") -> dict:
     polylines = read_fibers(fibers_path)
     mesh = mesh_polylines(
@@ -43,8 +20,7 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
         smooth_sigma_m=cfg.mesh.smooth_sigma,
         radius_m=cfg.fiber.radius,
     )
-    overlaps = (resolve_overlaps(mesh, max_shift_m=cfg.mesh.max_overlap_shift, planes=scene_planes(cfg))
-                if cfg.mesh.resolve_overlaps else None)
+    overlaps = resolve_overlaps(mesh, max_shift_m=cfg.mesh.max_overlap_shift) if cfg.mesh.resolve_overlaps else None
     m = cfg.material
     write_mesh(
         out,
@@ -67,7 +43,6 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
     figures = {} if overlaps is None else {
         "initial_overlap_max_m": overlaps["max_overlap_before_m"],
         "overlap_adjustment_max_m": overlaps["max_shift_m"],
-        "initial_plane_overlap_max_m": overlaps["plane_overlap_before_m"],
     }
     return {
         **figures,

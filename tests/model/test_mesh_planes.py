@@ -47,3 +47,35 @@ def test_a_plate_far_inside_the_fibers_is_refused():
     m = _mesh([np.column_stack([np.zeros_like(z), np.zeros_like(z), z])])
     with pytest.raises(InputError, match="plates/walls"):
         resolve_overlaps(m, planes=[(1, 0.1e-3, 1.0)], max_shift_m=50e-6)
+
+
+def _cfg(tmp_path, upper_mm):
+    from fiberpipe.config import load_config
+
+    p = tmp_path / "c.yaml"
+    p.write_text(f"""name: t
+input: {{fibers: f.h5}}
+fiber: {{radius: "0.25 mm"}}
+scene:
+  effects: [plates, walls]
+  plates: {{axis: y, lower: moving, upper: fixed, lower_position: "0 mm", upper_position: "{upper_mm} mm"}}
+  walls: {{x: ["-1 mm", "1 mm"]}}
+  loading: {{displacement: "0.1 mm", velocity: "1000 mm/min"}}
+""")
+    return load_config(p)
+
+
+@pytest.mark.parametrize("upper_mm, moved", [(1.0 - 0.3e-3, True), (1.0 - 0.1, False)])
+def test_simulate_stage_clears_only_shallow_plane_overlaps(tmp_path, upper_mm, moved):
+    """0.3 µm inside the upper plate: moved out; 0.1 mm inside: left for the scene check to report."""
+    from fiberpipe.stages.simulate import clear_scene_planes
+
+    z = np.linspace(0, 3e-3, 11)
+    m = _mesh([np.column_stack([np.zeros_like(z), np.full_like(z, 1e-3 - R), z])])
+    x0 = m.nodes_m.copy()
+    depth = clear_scene_planes(m, _cfg(tmp_path, upper_mm))
+    assert depth == pytest.approx(1e-3 - upper_mm * 1e-3, rel=1e-6)
+    if moved:
+        assert np.all(m.nodes_m[:, 1] + R <= upper_mm * 1e-3 + 1e-15)
+    else:
+        assert np.array_equal(m.nodes_m, x0)
