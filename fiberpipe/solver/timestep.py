@@ -4,14 +4,14 @@ Central difference is stable for Δt ≤ 2/ω_max (with a fraction ξ of critica
 mode: Δt ≤ (2/ω_max)(√(1+ξ²) − ξ)); the element-by-element maximum frequency bounds the mesh's
 from above (Abaqus "Definition of the stability limit", Getting Started with Abaqus/Explicit §3.3;
 Belytschko, Liu & Moran 2000, §6.3). For one element of rest length L with lumped translational
-mass ρAL/2 and lumped rotary inertia s·ρ(I, I, J)L/2 per node, the element modes give
-(derivation in docs/solver.md):
+mass ρAL/2 and the isotropic lumped rotary inertia s·ρJ_pL/2 per node (J_p = 2I, see
+:func:`fiberpipe.solver.model.build_model`), the element modes give (derivation in docs/solver.md):
 
 * axial:     ω² = 4E/(ρL²)                   → Δt = L/c,          c = √(E/ρ)
 * torsion:   ω² = 4G/(ρL²s)                  → Δt = √s · L/√(G/ρ)
-* bending (antisymmetric nodal rotations): ω² = 4E/(ρL²s) → Δt = √s · L/c
+* bending (antisymmetric nodal rotations): ω² = 4EI/(ρJ_pL²s) = 2E/(ρL²s) → Δt = √(2s) · L/c
 * shear (symmetric rotations coupled with antisymmetric transverse translation):
-             ω² = 4 k_s G/ρ · (1/L² + A/(4 I s)) = 4 k_s G/ρ · (1/L² + 1/(s r²))
+             ω² = 4 k_s G/ρ · (1/L² + A/(4 J_p s)) = 4 k_s G/ρ · (1/L² + 1/(2 s r²))
 
 With the study's 0.3 mm polyester elements and s = 1 the axial mode governs,
 Δt = 9.1e-8 s (the table in notes/physics.md A3: full 12×12 Timoshenko eigenvalues).
@@ -63,8 +63,8 @@ def stable_time_step(model: Model, *, beta_s: float = 0.0) -> TimeStepReport:
     w2 = {
         "axial": np.full_like(L, 4.0 * E / rho) / L**2,
         "torsion": 4.0 * G / (rho * s) / L**2,
-        "bending": 4.0 * E / (rho * s) / L**2,
-        "shear": 4.0 * ks * G / rho * (1.0 / L**2 + 1.0 / (s * r**2)),
+        "bending": 2.0 * E / (rho * s) / L**2,
+        "shear": 4.0 * ks * G / rho * (1.0 / L**2 + 1.0 / (2.0 * s * r**2)),
     }
     per_mode = {}
     best = (math.inf, "", -1)

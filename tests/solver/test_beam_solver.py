@@ -68,7 +68,7 @@ def test_stable_time_step_matches_notes_table():
     assert rep.governing_mode == "axial"
     assert rep.per_mode_s["torsion"] == pytest.approx(1.47e-7, rel=0.01)
     small = stable_time_step(build_model(straight(), [0, 51], R, MAT, rotary_inertia_scale=0.01))
-    assert small.dt_stable_s == pytest.approx(9.1e-9, rel=0.02)
+    assert small.dt_stable_s == pytest.approx(1.287e-8, rel=0.02)  # bending, √(2s) L/c (isotropic rotary inertia)
 
 
 def test_curved_fiber_is_stress_free_and_objective():
@@ -99,15 +99,18 @@ def test_forces_are_balanced():
 
 
 def test_free_curved_fiber_conserves_energy_3d():
-    # bending, torsion, shear and gyroscopic coupling at once, no damping. The imposed nodal spins
-    # excite the shear mode near 2/Δt, whose leapfrog energy measure oscillates by O((ωΔt)²):
-    # check that the energy error converges at second order in Δt, and the momentum.
+    # bending, torsion and shear at once, no damping. The imposed nodal spins excite the shear
+    # mode near 2/Δt, whose leapfrog energy measure oscillates by O((ωΔt)²): check that the energy
+    # error converges at second order in Δt, and the momentum. Below Δt ≈ 0.1 × the limit the error
+    # levels off at ~1e-3 of the energy (measured down to 0.025 ×, with the old anisotropic and the
+    # isotropic rotary inertia alike): the moment pair is exact only to first order in the element's
+    # relative rotation (docs/solver.md), so the order is checked at 0.4 and 0.2 × the limit.
     x = helix()
     m = build_model(x, [0, len(x)], R, MAT)
     dts = stable_time_step(m).dt_stable_s
     s = np.linspace(0, 1, m.n_nodes)[:, None]
     errs = []
-    for frac in (0.2, 0.1):
+    for frac in (0.4, 0.2):
         st = State.at_rest(m)
         st.v[:] = 0.05 * np.hstack([np.sin(np.pi * s), np.cos(2 * np.pi * s), np.sin(3 * np.pi * s)])
         st.w[:] = 300.0 * np.hstack([np.cos(np.pi * s), np.sin(2 * np.pi * s), np.cos(np.pi * s)])
@@ -118,8 +121,8 @@ def test_free_curved_fiber_conserves_energy_3d():
         errs.append(np.max(np.abs(tot - tot[0])) / e0)
         p = (m.mass[:, None] * res.final_state.v).sum(0)
         assert np.allclose(p, (m.mass[:, None] * st.v).sum(0), atol=1e-12)
-    assert errs[1] < 5e-3
-    assert errs[0] / errs[1] > 2.5
+    assert errs[1] < 1e-2
+    assert errs[0] / errs[1] > 3.0
 
 
 def test_gravity_free_fall_and_external_work():
