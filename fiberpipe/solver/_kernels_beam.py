@@ -243,7 +243,20 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
                        record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
 
 
-@njit(cache=True, fastmath=True, error_model="numpy", parallel=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
+def beam_forces_csr(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                    record, beta_over_dt, strain_prev, node_offsets):
+    """:func:`beam_forces` with the signature of :func:`beam_forces_fibers` (``node_offsets``
+    unused): the serial beam pass of the cached step loops."""
+    return _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                       record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
+
+
+# Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
+# compiled in another process makes that loop's own cache entry crash when it is loaded (numba
+# 0.68; reproduced: cache beam_forces_fibers in process 1, compile the contact loop in 2, load it in
+# 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
+@njit(cache=False, fastmath=True, error_model="numpy", parallel=True)
 def beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
                        record, beta_over_dt, strain_prev, node_offsets):
     """:func:`beam_forces` with one ``prange`` task per fiber (``solver.threads`` > 1).

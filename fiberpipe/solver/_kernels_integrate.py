@@ -33,7 +33,7 @@ import types
 import numpy as np
 from numba import njit
 
-from ._kernels_beam import beam_forces, beam_forces_fibers, quat_to_matrix
+from ._kernels_beam import beam_forces_csr, beam_forces_fibers, quat_to_matrix
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
 
 # accumulator slots (float64 array ``acc``)
@@ -140,12 +140,10 @@ def _advance_template(
         else:
             f[:, :] = 0.0
         mom[:, :] = 0.0
-        if threads > 1:
-            se, vd_beta = beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-                                             f, mom, record, beta_over_dt, strain_prev, node_offsets)
-        else:
-            se, vd_beta = beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-                                      f, mom, record, beta_over_dt, strain_prev)
+        # _beam_pass: beam_forces_csr (serial) or beam_forces_fibers (prange per fiber), bound per
+        # loop variant by _specialise
+        se, vd_beta = _beam_pass(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
+                                 f, mom, record, beta_over_dt, strain_prev, node_offsets)
         acc[ACC_VD] += vd_beta
         n_pen = 0
         if P > 0:
@@ -374,9 +372,10 @@ def _advance_template(
 _contact_hook = no_contact
 
 
-def _specialise(name: str, hook, cache: bool):
+def _specialise(name: str, hook, cache: bool, parallel: bool = False):
     g = dict(globals())
     g["_contact_hook"] = hook
+    g["_beam_pass"] = beam_forces_fibers if parallel else beam_forces_csr
     tmpl = _advance_template
     fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)
     fn.__qualname__ = name
@@ -389,16 +388,22 @@ advance_plain = _specialise("advance_plain", no_contact, True)
 _LOOPS: dict = {}
 
 
-def step_loop_for(hook):
-    """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none)."""
-    if hook is no_contact:
+def step_loop_for(hook, threads: int = 1):
+    """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none).
+
+    ``threads > 1``: the variant whose beam pass runs one prange task per fiber; it is compiled in
+    every process (not cached, see :func:`fiberpipe.solver._kernels_beam.beam_forces_fibers`).
+    """
+    parallel = threads > 1
+    if hook is no_contact and not parallel:
         return advance_plain
-    loop = _LOOPS.get(hook)
+    loop = _LOOPS.get((hook, parallel))
     if loop is None:
         from .contact_effect import contact_step
-        if hook is contact_step:
+        if hook is contact_step and not parallel:
             loop = _specialise("advance_contact", hook, True)
         else:
-            loop = _specialise("advance_hook", hook, False)
-        _LOOPS[hook] = loop
+            name = "advance_plain" if hook is no_contact else "advance_contact" if hook is contact_step else "advance_hook"
+            loop = _specialise(name + ("_threads" if parallel else ""), hook, False, parallel)
+        _LOOPS[(hook, parallel)] = loop
     return loop

@@ -162,7 +162,6 @@ class Integrator:
         for e in self.effects:
             e.setup(model, sc)
         self.scene = sc
-        self._loop = K.step_loop_for(sc.contact_fn if sc.contact_on else K.no_contact)
         n = model.n_nodes
         self.f = np.zeros((n, 3))
         self.mom = np.zeros((n, 3))
@@ -194,6 +193,7 @@ class Integrator:
             k = np.repeat(np.arange(model.n_fibers), np.diff(self.node_offsets) - 1)
             if k.size != model.n_elements or not np.array_equal(model.el_n1, np.arange(k.size) + k):
                 self.threads = 1  # not the CSR layout: the serial beam pass
+        self._loop = K.step_loop_for(sc.contact_fn if sc.contact_on else K.no_contact, self.threads)
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""

@@ -1,5 +1,7 @@
 """The solver's numba cache entries are stamped with the sources of every solver module."""
 
+import pytest
+
 from fiberpipe.solver import _jitcache, _kernels_integrate as K, contact, contact_effect
 
 
@@ -16,3 +18,47 @@ def test_step_loop_specialisations():
     loop = K.step_loop_for(contact_effect.contact_step)
     assert loop is K.step_loop_for(contact_effect.contact_step)
     assert loop._cache._impl is not None  # the built-in contact loop is cached on disk
+
+
+def test_threaded_loops_are_separate_and_not_cached():
+    """The prange beam pass is only in the solver.threads > 1 variants, which are never cached."""
+    from fiberpipe.solver import _kernels_beam as B
+
+    assert type(B.beam_forces_fibers._cache).__name__ == "NullCache"
+    par = K.step_loop_for(K.no_contact, threads=2)
+    assert par is not K.advance_plain and par is K.step_loop_for(K.no_contact, threads=2)
+    assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_forces_csr
+    assert par.py_func.__globals__["_beam_pass"] is B.beam_forces_fibers
+
+
+_PLAIN = """
+import numpy as np
+from fiberpipe.solver import Damping, Material, SimulationSettings, build_model, simulate
+s = np.linspace(0, 1, 11)[:, None]
+m = build_model(s * np.array([3e-3, 0, 0]), np.array([0, 11]), 0.25e-3, Material(15e9, 1380.0, 0.3))
+print(simulate(m, [Damping(1e5)], SimulationSettings(end_time_s=1e-5, output_frames=2)).completed)
+"""
+_CONTACT = """
+import numpy as np
+from fiberpipe.solver import Damping, Material, SimulationSettings, build_model, simulate
+from fiberpipe.solver.contact_effect import make_contact_hook
+s = np.linspace(0, 1, 11)[:, None]
+x = np.vstack([s * np.array([3e-3, 0, 0]), s * np.array([3e-3, 0, 0]) + np.array([0, 0, 0.5e-3 - 1e-7])])
+m = build_model(x, np.array([0, 11, 22]), 0.25e-3, Material(15e9, 1380.0, 0.3))
+print(simulate(m, [Damping(1e5), make_contact_hook(m)], SimulationSettings(end_time_s=1e-5, output_frames=2)).completed)
+"""
+
+
+@pytest.mark.slow
+def test_step_loops_cached_by_different_processes_load_cleanly(tmp_path):
+    """Regression: with the prange beam kernel cached and linked into the loops, a loop compiled in
+    a second process crashed (SIGSEGV) when a third loaded it. Plain, contact, contact, plain in
+    four processes sharing one fresh cache directory must all succeed."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    for name, code in (("plain", _PLAIN), ("contact", _CONTACT), ("contact", _CONTACT), ("plain", _PLAIN)):
+        r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0 and r.stdout.strip() == "True", (name, r.returncode, r.stderr[-2000:])
