@@ -65,6 +65,20 @@ def max_displacement2(x, x_ref):
 
 
 @njit(cache=True, error_model="numpy")
+def _all_finite_bits(x):
+    """True if no entry of ``x`` (N, 3) is NaN or ±inf, decided on the IEEE-754 exponent bits (an
+    integer test that fastmath cannot assume away)."""
+    buf = np.empty(1)
+    bits = buf.view(np.int64)
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            buf[0] = x[i, c]
+            if (bits[0] >> 52) & 0x7FF == 0x7FF:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
     """Build the Verlet list of candidate segment pairs.
 
@@ -102,13 +116,10 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
         rmax = max(rmax, seg_radius[e])
     # A diverging step can leave non-finite positions: the cell indices below would then be
     # garbage (and the writes into the cell arrays out of bounds). Build no pairs; the step loop's
-    # divergence check reports the run with its diagnosis.
-    finite = math.isfinite(lmax)
-    for e in range(ne):
-        for c in range(3):
-            if not math.isfinite(mid[e, c]):
-                finite = False
-    if not finite:
+    # divergence check reports the run with its diagnosis. The test reads the bits: this function
+    # is inlined into the fastmath step loop, where LLVM may assume floats are never NaN and drop a
+    # float test (it did: the guard passed alone and failed inside the solver batch).
+    if not _all_finite_bits(x):
         return 0
     h = lmax + 2.0 * rmax + skin
     nc = np.empty(3, np.int64)

@@ -29,3 +29,27 @@ def test_crossed_law_with_a_nan_angle_reads_inside_its_table():
     law = make_law("hertz_oriented", E_pa=15e9, nu=0.3)
     f, e = law_point(law.law_id, law.params(), 1e-8, 0.25e-3, 0.25e-3, np.nan)
     assert np.isfinite(f) or np.isnan(f)  # no out-of-bounds read; the value itself is irrelevant
+
+
+def test_guard_holds_when_called_from_a_fastmath_kernel():
+    """The hook calls build_pairs from fastmath code, where a float NaN test may be optimised away
+    once inlined; the guard reads the IEEE bits instead."""
+    from numba import njit
+
+    @njit(fastmath=True)
+    def from_fastmath(x, seg, radius, fib, arc, pairs, keys):
+        return build_pairs(x, seg, radius, fib, arc, 5e-5, 5e-4, pairs, keys)
+
+    n = 11
+    x = np.c_[np.zeros(2 * n), np.repeat([0.0, 0.5e-3], n), np.tile(np.linspace(0, 3e-3, n), 2)]
+    seg = np.array([[i, i + 1] for f in range(2) for i in range(f * n, f * n + n - 1)], np.int64)
+    fib = np.repeat([0, 1], n - 1)
+    arc = segment_arclength(seg, fib, x)
+    pairs = np.zeros((64, 2), np.int64)
+    keys = np.zeros(64, np.int64)
+    radius = np.full(len(seg), 0.25e-3)
+    assert from_fastmath(x, seg, radius, fib, arc, pairs, keys) > 0
+    for bad in (np.nan, np.inf, -np.inf):
+        y = x.copy()
+        y[3, 1] = bad
+        assert from_fastmath(y, seg, radius, fib, arc, pairs, keys) == 0
