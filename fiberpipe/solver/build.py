@@ -77,6 +77,7 @@ def check_scene_geometry(model: Model, effects) -> list[str]:
                 gap = (ext - float(pos)) if low_side else (float(pos) - ext)
                 if gap > 0:
                     gaps += gap
+                if gap > 0.01 * float(np.min(r)):  # below 1 % of r: touching (e.g. after the plane clearance)
                     warnings.append(f"{key}: the {kind} plate starts {_mm(gap)} away from the bundle "
                                     f"(nothing is compressed until it has travelled that far)")
             if "moving" in (e.lower, e.upper) and gaps > 0 and gaps >= travel:
