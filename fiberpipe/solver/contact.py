@@ -165,6 +165,21 @@ def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def pair_gap(x, seg_nodes, seg_radius, pairs, k):
+    """Gap [m] of candidate pair ``k``: clamped segment–segment centre-line distance − r_i − r_j."""
+    i = pairs[k, 0]
+    j = pairs[k, 1]
+    a0 = seg_nodes[i, 0]
+    a1 = seg_nodes[i, 1]
+    b0 = seg_nodes[j, 0]
+    b1 = seg_nodes[j, 1]
+    d2, s, t = _segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
+                                    x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
+                                    x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
+    return math.sqrt(d2) - seg_radius[i] - seg_radius[j]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _line_half(
     x, na0, na1, nb0, nb1, ra, rb, law_id, law_params, gxi, gw, scale, f_out, rec, sign, off=0.0
 ):

@@ -34,7 +34,7 @@ from numba.typed import List
 from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
 from ._kernels_integrate import ACC_FD, ACC_PW, ACC_WK
-from .contact import _segment_distance2_s, contact_forces_ex, gauss_points
+from .contact import contact_forces_ex, gauss_points, pair_gap
 from .friction import friction_forces_ex, plane_friction, remap_history
 from .laws import make_law
 from .neighbours import build_pairs, max_displacement2
@@ -122,16 +122,7 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
     pairs = L_pairs[0]
     gap = L_h1[7]
     for k in range(n):
-        i = pairs[k, 0]
-        j = pairs[k, 1]
-        a0 = seg_nodes[i, 0]
-        a1 = seg_nodes[i, 1]
-        b0 = seg_nodes[j, 0]
-        b1 = seg_nodes[j, 1]
-        d2, s_, t_ = _segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
-                                          x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
-                                          x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
-        gap[k] = math.sqrt(d2) - seg_radius[i] - seg_radius[j]
+        gap[k] = pair_gap(x, seg_nodes, seg_radius, pairs, k)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")

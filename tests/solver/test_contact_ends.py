@@ -13,21 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from fiberpipe.solver import Material, SimulationSettings, State, build_model, simulate
+from fiberpipe.solver import SimulationSettings, State, simulate
 from fiberpipe.solver.contact_effect import make_contact_hook
 from fiberpipe.solver.laws import make_law
 
-R = 0.25e-3
-MAT = Material(15e9, 1380.0, 0.3)
-
-
-def _model(polys):
-    xs = []
-    for a, b, n in polys:
-        s = np.linspace(0.0, 1.0, n + 1)[:, None]
-        xs.append(np.asarray(a, float) + s * (np.asarray(b, float) - np.asarray(a, float)))
-    off = np.cumsum([0] + [len(x) for x in xs])
-    return build_model(np.vstack(xs), off, R, MAT)
+from test_contact_dynamics import R, _model  # noqa: E402  (same folder, on sys.path under pytest)
 
 
 def _mechanical_energy(res, k):

@@ -7,15 +7,19 @@ from fiberpipe.solver.laws import make_law
 from fiberpipe.solver.neighbours import build_pairs, segment_arclength
 
 
-def test_non_finite_positions_build_no_pairs():
-    n = 11
+def _two_fibres(n=11):
+    """Two parallel 10-element fibres 0.5 mm apart: positions, segments, radii, fibre ids, arc
+    lengths and the pair/key output buffers of build_pairs."""
     x = np.c_[np.zeros(2 * n), np.repeat([0.0, 0.5e-3], n), np.tile(np.linspace(0, 3e-3, n), 2)]
     seg = np.array([[i, i + 1] for f in range(2) for i in range(f * n, f * n + n - 1)], np.int64)
     fib = np.repeat([0, 1], n - 1)
     arc = segment_arclength(seg, fib, x)
-    pairs = np.zeros((64, 2), np.int64)
-    keys = np.zeros(64, np.int64)
     radius = np.full(len(seg), 0.25e-3)
+    return x, seg, radius, fib, arc, np.zeros((64, 2), np.int64), np.zeros(64, np.int64)
+
+
+def test_non_finite_positions_build_no_pairs():
+    x, seg, radius, fib, arc, pairs, keys = _two_fibres()
     assert build_pairs(x, seg, radius, fib, arc, 5e-5, 5e-4, pairs, keys) > 0
     for bad in (np.nan, np.inf, -np.inf):
         y = x.copy()
@@ -40,14 +44,7 @@ def test_guard_holds_when_called_from_a_fastmath_kernel():
     def from_fastmath(x, seg, radius, fib, arc, pairs, keys):
         return build_pairs(x, seg, radius, fib, arc, 5e-5, 5e-4, pairs, keys)
 
-    n = 11
-    x = np.c_[np.zeros(2 * n), np.repeat([0.0, 0.5e-3], n), np.tile(np.linspace(0, 3e-3, n), 2)]
-    seg = np.array([[i, i + 1] for f in range(2) for i in range(f * n, f * n + n - 1)], np.int64)
-    fib = np.repeat([0, 1], n - 1)
-    arc = segment_arclength(seg, fib, x)
-    pairs = np.zeros((64, 2), np.int64)
-    keys = np.zeros(64, np.int64)
-    radius = np.full(len(seg), 0.25e-3)
+    x, seg, radius, fib, arc, pairs, keys = _two_fibres()
     assert from_fastmath(x, seg, radius, fib, arc, pairs, keys) > 0
     for bad in (np.nan, np.inf, -np.inf):
         y = x.copy()

@@ -17,32 +17,10 @@ from fiberpipe.studies.sweep import run_study
 
 distributed = pytest.importorskip("dask.distributed")
 
-# the cheapest scene: one 12-element cantilever, 0.5 ms (same as test_sweep.py)
-BASE = """
-name: tiny-cantilever
-input:
-  polylines:
-    - [[0, 0, 0], ["6 mm", 0, 0]]
-mesh: {element_length: "0.5 mm"}
-fiber: {radius: "0.25 mm"}
-scene:
-  effects: [clamps, loads, damping]
-  clamps: [{fiber: 0, at: start}]
-  loads: [{fiber: 0, at: end, force: [0, 0, "-1 mN"]}]
-  damping: {alpha: "2e4 1/s"}
-solver: {end_time: "0.5 ms", output_frames: 3}
-"""
+# the cheapest scene and study of test_sweep.py, with two workers
+from test_sweep import BASE, STUDY as _STUDY  # noqa: E402  (same folder, on sys.path under pytest)
 
-STUDY = """
-name: dt-safety
-base: base.yaml
-sweep:
-  solver.dt_safety: [0.5, 0.9]
-reference:
-  overrides: {solver.dt_safety: 0.25}
-measures: [positions]
-workers: 2
-"""
+STUDY = _STUDY + "workers: 2\n"
 
 TIMING = {"wall_time_s", "element_steps_per_s"}  # differ from run to run
 
