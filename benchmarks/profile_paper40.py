@@ -1,0 +1,51 @@
+"""Per-step cost of the paper-40 scene with subsets of its effects (docs/benchmarks.md, "Round 3").
+
+Builds the mesh of ``configs/paper-40.yaml`` (or the config given), then for each effect set times
+``Integrator.advance`` after 20 000 settling steps: best of 3 × 10 000 steps, one thread.
+
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/profile_paper40.py [CONFIG]
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from fiberpipe.artifacts import read_fibers
+from fiberpipe.config import load_config
+from fiberpipe.model.mesh import mesh_polylines, resolve_overlaps
+from fiberpipe.solver.build import build_simulation
+from fiberpipe.solver.integrator import Integrator, choose_time_step
+from fiberpipe.solver.state import State
+
+EFFECT_SETS = (
+    ["gravity", "damping"],
+    ["gravity", "damping", "plates", "walls"],
+    ["gravity", "damping", "contact", "plates", "walls"],
+    ["gravity", "damping", "contact", "friction", "plates", "walls"],
+)
+
+
+def main(config: str = "configs/paper-40.yaml") -> None:
+    base = load_config(Path(config))
+    mesh = mesh_polylines(read_fibers(base.input.fibers), base.mesh.element_length, radius_m=base.fiber.radius)
+    resolve_overlaps(mesh)
+    print("| effects | µs/step |\n|---|---|")
+    for eff in EFFECT_SETS:
+        cfg = load_config(Path(config), overrides={"scene.effects": eff})
+        model, effects, settings = build_simulation(mesh, cfg)
+        dt, _ = choose_time_step(model, effects, settings)
+        integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+        st = State.at_rest(model)
+        integ.advance(st, 20000)
+        best = float("inf")
+        for _ in range(3):
+            t0 = time.perf_counter()
+            integ.advance(st, 10000)
+            best = min(best, (time.perf_counter() - t0) / 10000)
+        print(f"| {', '.join(eff)} | {best * 1e6:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
