@@ -305,6 +305,9 @@ def _advance_template(
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
             acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
+        if contact_on:
+            # second half of the hook's contact work of this step, at v_{n+½} (see contact_power)
+            acc[ACC_PW] += 0.5 * dt * _contact_power(v, contact_data)
         done = it + 1
         # ---- history and checks ---------------------------------------------------------
         if record:
@@ -372,9 +375,23 @@ def _advance_template(
 _contact_hook = no_contact
 
 
+@njit(cache=True)
+def no_contact_power(v, data):
+    """The contact power of a hook that books all its work itself (``_contact_power`` default)."""
+    return 0.0
+
+
+_contact_power = no_contact_power
+
+
 def _specialise(name: str, hook, cache: bool, parallel: bool = False):
     g = dict(globals())
     g["_contact_hook"] = hook
+    g["_contact_power"] = no_contact_power
+    if hook is not no_contact:
+        from .contact_effect import contact_power, contact_step
+        if hook is contact_step:
+            g["_contact_power"] = contact_power
     g["_beam_pass"] = beam_forces_fibers if parallel else beam_forces_csr
     tmpl = _advance_template
     fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)
