@@ -427,7 +427,8 @@ class SolverConfig(Section):
     checkpoint_every: Optional[int] = Field(None, ge=1, description="steps between checkpoints")
     rotational_inertia_scaling: float = 1.0
     mass_scaling: float = 1.0
-    threads: int = Field(1, ge=1)
+    threads: int = Field(1, ge=1, description="numba threads for the beam pass (one prange task per fiber); "
+                         "> 1 uses a step loop that is compiled in every process (not cached), no net gain measured on 2 cores")
     settle_time: Time = 0.0
 
     @model_validator(mode="after")
