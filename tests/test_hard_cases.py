@@ -261,10 +261,6 @@ def test_dense_bundle_compacted_to_vf_07():
     assert_bounded(res, m, box=([-w / 2, U, 0], [w / 2, y_top, 3e-3]), residual=0.05, pen=0.05)
 
 
-@pytest.mark.xfail(strict=True, reason="energy balance residual 0.057 (> 0.05; 0.146 before the contact work was "
-                   "booked in phase with the kinetic energy, 2026-11-22) in an undamped compaction at 1 m/s with "
-                   "friction: transient, during fiber-wall bounces resolved in ~4 steps (K_e drops 2.2e-4 -> 1.8e-5 J "
-                   "and back), the balance closes again afterwards; bounded otherwise (no NaN, no escape)")
 def test_high_loading_velocity_without_damping():
     """Compaction at 6e4 mm/min (1 m/s) with no damping at all: stays bounded (no NaN, no divergence,
     energy balanced within 5 %), no fiber escapes the cassette."""

