@@ -36,25 +36,28 @@ What was shortened to fit a few minutes per study:
 
 NOTES = {
     "rearrangement-velocity-alpha": """**Reading (the study's Table 2 / Fig. 10).** At 1e3 mm/min the damped runs reproduce the slow
-reference to 1e-5 or better, the undamped one departs by 2 % (the study's Abaqus run lost contact;
+reference to 2e-5 or better, the undamped one departs by 2.1 % (the study's Abaqus run lost contact;
 ours has no rolling, docs/contact.md §10). At 1e4 mm/min (10× cheaper) α = 0 is wrong (error
 > 100 %), α = 1e4 gives 0.3 % and α = 1e5 gives 0.02 %: damping is what buys the speed-up, as the
 study found. Like the study's Table 2 (27, 30, 34 s for α = 0, 1e4, 1e5) damping costs wall time at
-equal steps here too (more contacts stay active while the beams are held together).""",
+equal steps here too (1.5 s against 6.0–6.1 s at 1e3 mm/min: more contacts stay active while the
+beams are held together).""",
     "mesh-convergence": """**Reading.** The curve error against the Richardson limit (order 2 assumed; the observed order
-from the three finest meshes was 0.5, not yet asymptotic) stays at 3–4 % from 0.6 to 0.3 mm and
-drops to 1.3 % at 0.2 mm; the final load varies by 1–4 % with no monotone trend. On this
+from the three finest meshes is not yet asymptotic) stays at 3.3–3.7 % from 0.6 to 0.3 mm and
+drops to 1.4 % at 0.2 mm; the final load varies by 3–9 % with no monotone trend. On this
 rearrangement-dominated curve the mesh is not the main error source: a digit costs ~50× in wall
-time by the fit, i.e. refining below the study's 0.3 mm is not worth it for the curve.""",
-    "dt-safety": """**Reading.** The curve error against dt_safety = 0.2 is 3.4–3.6 % for every factor from 0.4 to
+time by the fit, i.e. refining below the study's 0.3 mm is not worth it for the curve. (Since the
+rotary inertia became isotropic, 2026-11-22, the coarse meshes take fewer steps: the axial mode
+governs them too.)""",
+    "dt-safety": """**Reading.** The curve error against dt_safety = 0.2 is 2.2–2.8 % for every factor from 0.4 to
 0.99: it is the path-to-path scatter of a frictional rearrangement (a floor), not a time-step
-error, so the fitted "cost per digit" of the curve is meaningless (slope ≈ 0). The final-node
-positions converge (1.3e-4 → 4e-5 diameters, ×7 per digit). Use the largest stable factor
-(0.9–0.99): smaller steps buy nothing measurable here.""",
+error, so the curve has no cost per digit (no Pareto trade-off). The final-node positions stay
+within 2e-5–5e-5 of the reference. Use the largest stable factor (0.9–0.99): smaller steps buy
+nothing measurable here.""",
     "rotational-inertia": """**Reading.** Scaling the rotary inertia does not enlarge the step (the axial mode governs the
 B31-like element at s = 1: the step count is the same for every s), so it can only cost accuracy:
-2.6 % (s = 10), 3.4 % (100), 12 % (1000) curve error. Our runs at s > 1 were even slower per step
-(fewer contacts settle). Do not use it with this element.""",
+2.4 % (s = 10), 3.6 % (100), 34 % (1000) curve error, at the same wall time. Do not use it with
+this element.""",
 }
 
 
