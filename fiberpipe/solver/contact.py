@@ -164,15 +164,18 @@ def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
     return d0 * d0 + d1 * d1 + d2 * d2, s, t
 
 
+@njit(cache=True, inline="always")
+def pair_nodes(pairs, seg_nodes, k):
+    """Segments ``(i, j)`` of candidate pair ``k`` and their node indices ``(a0, a1, b0, b1)``."""
+    i = pairs[k, 0]
+    j = pairs[k, 1]
+    return i, j, seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1]
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def pair_gap(x, seg_nodes, seg_radius, pairs, k):
     """Gap [m] of candidate pair ``k``: clamped segment–segment centre-line distance − r_i − r_j."""
-    i = pairs[k, 0]
-    j = pairs[k, 1]
-    a0 = seg_nodes[i, 0]
-    a1 = seg_nodes[i, 1]
-    b0 = seg_nodes[j, 0]
-    b1 = seg_nodes[j, 1]
+    i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
     d2, s, t = _segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
                                     x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
                                     x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])

@@ -25,6 +25,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .contact import pair_nodes
+
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
@@ -105,12 +107,7 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_
             for c in range(hist.shape[1]):
                 hist[k, c] = 0.0
             continue
-        i = pairs[k, 0]
-        j = pairs[k, 1]
-        a0 = seg_nodes[i, 0]
-        a1 = seg_nodes[i, 1]
-        b0 = seg_nodes[j, 0]
-        b1 = seg_nodes[j, 1]
+        i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
         s = c_s[k]
         t = c_t[k]
         du0 = ((1.0 - s) * v[a0, 0] + s * v[a1, 0] - (1.0 - t) * v[b0, 0] - t * v[b1, 0]) * dt
