@@ -1,7 +1,9 @@
 """The runner: which stages a config asks for, in order, skipping those that are up to date.
 
 # Strategy: every stage has a cache key, sha256 of (stage name, artifact schema version, the
-# validated SI config sections the stage reads, the sha256 of each input artifact). The key is
+# validated SI config sections the stage reads, the sha256 of each input artifact, the sha256 of
+# the package sources the stage runs, so that an upgrade or a fix of, say, the solver reruns
+# simulate and post but keeps the traced fibers and the mesh). The key is
 # stored in ``<run>/fiberpipe.lock.json`` beside the outputs; a stage whose key matches and whose
 # outputs exist is skipped (``--force`` reruns). Since artifacts are written atomically and their
 # hashes feed the next key, a rerun upstream invalidates exactly what depends on it.
@@ -9,6 +11,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -38,6 +41,8 @@ class Stage:
     outputs: Callable[[Config, Path], list[Path]]
     func: Callable[[Config, Path, dict[str, Path], str], dict]
     artifact_kind: str | None = None
+    #: package files and folders (relative to ``fiberpipe/``) whose sources are part of the key
+    code: tuple[str, ...] = ()
 
 
 def _volume_path(cfg: Config, run_dir: Path) -> Path:
@@ -130,14 +135,18 @@ def _has_module(name: str) -> bool:
 
 STAGES: dict[str, Stage] = {
     "phantom": Stage(
-        "phantom", ("input",), lambda c, d: {}, lambda c, d: [d / "phantom" / "volume.tif", d / "phantom" / "truth.h5"], _do_phantom
+        "phantom", ("input",), lambda c, d: {}, lambda c, d: [d / "phantom" / "volume.tif", d / "phantom" / "truth.h5"], _do_phantom,
+        code=("imaging", "stages/phantom.py")
     ),
-    "input": Stage("input", ("input",), lambda c, d: {}, lambda c, d: [d / "fibers.h5"], _do_input, "fibers"),
+    "input": Stage("input", ("input",), lambda c, d: {}, lambda c, d: [d / "fibers.h5"], _do_input, "fibers",
+                   code=("polylines.py", "stages/polylines.py")),
     "segment": Stage(
-        "segment", ("input", "segment"), lambda c, d: {"volume": _volume_path(c, d)}, lambda c, d: [d / "mask.h5"], _do_segment, "mask"
+        "segment", ("input", "segment"), lambda c, d: {"volume": _volume_path(c, d)}, lambda c, d: [d / "mask.h5"], _do_segment, "mask",
+        code=("imaging", "stages/segment.py")
     ),
     "skeletonize": Stage(
-        "skeletonize", ("skeletonize",), lambda c, d: {"mask": d / "mask.h5"}, lambda c, d: [d / "skeleton.h5"], _do_skeletonize, "skeleton"
+        "skeletonize", ("skeletonize",), lambda c, d: {"mask": d / "mask.h5"}, lambda c, d: [d / "skeleton.h5"], _do_skeletonize, "skeleton",
+        code=("imaging", "stages/skeletonize.py")
     ),
     "trace": Stage(
         "trace",
@@ -146,6 +155,7 @@ STAGES: dict[str, Stage] = {
         lambda c, d: [d / "fibers.h5"],
         _do_trace,
         "fibers",
+        code=("imaging", "polylines.py", "stages/trace.py"),
     ),
     "mesh": Stage(
         "mesh",
@@ -154,6 +164,7 @@ STAGES: dict[str, Stage] = {
         lambda c, d: [d / "mesh.h5", d / "mesh.vtu", d / "model.inp"],
         _do_mesh,
         "mesh",
+        code=("model", "polylines.py", "io", "stages/mesh.py"),
     ),
     "simulate": Stage(
         "simulate",
@@ -162,9 +173,11 @@ STAGES: dict[str, Stage] = {
         lambda c, d: [d / "simulation.h5"],
         _do_simulate,
         "simulation",
+        code=("solver", "model", "post/contact_field.py", "stages/simulate.py"),
     ),
     "post": Stage(
-        "post", ("post",), lambda c, d: {"simulation": d / "simulation.h5"}, lambda c, d: [d / "post" / "summary.json"], _do_post
+        "post", ("post",), lambda c, d: {"simulation": d / "simulation.h5"}, lambda c, d: [d / "post" / "summary.json"], _do_post,
+        code=("post", "stages/post.py")
     ),
 }
 
@@ -192,9 +205,25 @@ def available(name: str) -> bool:
     return mod is None or _has_module(mod)
 
 
+@functools.lru_cache(maxsize=None)
+def code_sha256(paths: tuple[str, ...]) -> str:
+    """sha256 of the ``*.py`` sources under ``paths`` (relative to the package folder), in path order."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for rel in paths:
+        p = root / rel
+        files = sorted(p.rglob("*.py")) if p.is_dir() else [p]
+        for f in files:
+            if f.is_file():
+                h.update(str(f.relative_to(root)).encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def stage_key(stage: Stage, cfg: Config, inputs: dict[str, Path]) -> str:
     h = hashlib.sha256()
     h.update(stage.name.encode())
+    h.update(code_sha256(stage.code).encode())
     h.update(str(SCHEMA_VERSIONS.get(stage.artifact_kind or "", 0)).encode())
     h.update(cfg.section_sha256(*stage.sections).encode())
     for name in sorted(inputs):

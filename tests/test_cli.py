@@ -77,3 +77,34 @@ def test_bad_input_is_one_line_and_keeps_earlier_results(tmp_path, write_yaml, t
 def test_missing_config_file(tmp_path):
     r = _run("run", str(tmp_path / "nope.yaml"))
     assert r.exit_code != 0 and "config file not found" in r.output
+
+
+def test_changed_stage_code_reruns_that_stage_and_what_follows(tmp_path, write_yaml, monkeypatch):
+    """A fix of the mesh code (its sources' digest changes) reruns mesh but keeps the fibers: the
+    stage key includes the sha256 of the sources each stage runs."""
+    import fiberpipe.pipeline as P
+
+    cfg = write_yaml(TIP)
+    out = tmp_path / "run"
+    assert _run("run", str(cfg), "--out", str(out)).exit_code == 0
+    real = P.code_sha256
+
+    def patched(paths):
+        return real(paths) + ("-fixed" if "model" in paths else "")
+
+    monkeypatch.setattr(P, "code_sha256", patched)
+    r = _run("run", str(cfg), "--out", str(out))
+    assert r.exit_code == 0, r.output
+    assert "input        up to date" in r.output and "mesh         done" in r.output
+
+
+def test_every_stage_hashes_existing_sources():
+    from pathlib import Path
+
+    import fiberpipe.pipeline as P
+
+    root = Path(P.__file__).resolve().parent
+    for name, stage in P.STAGES.items():
+        assert stage.code, name
+        for rel in stage.code:
+            assert (root / rel).exists(), (name, rel)
