@@ -213,9 +213,9 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
     a = art.attrs
     if config_sha256 is not None and a.get("config_sha256") != config_sha256:
         raise ArtifactError(
-            "was written for a different config or mesh (the material, scene, solver sections or mesh.h5 "
-            "changed since), so the run cannot be resumed from it; rerun with --force to discard it and "
-            "start over", where=str(path))
+            "was written for a different config or mesh (the material, scene, solver sections, mesh.h5 or "
+            "the solver's code changed since), so the run cannot be resumed from it; rerun with --force to "
+            "discard it and start over", where=str(path))
     try:
         spec = json.loads(a.get("contact_spec", "null"))
         contact = _unflatten(spec, art.data) if spec is not None else None
