@@ -467,14 +467,8 @@ class Config(Section):
     source_path: Optional[str] = Field(None, exclude=True)
 
     def section_sha256(self, *names: str) -> str:
-        """Content hash of the validated (SI) sections ``names``, for stage cache keys; a dotted name
-        (``scene.plates``) hashes that sub-section only."""
-        data = {}
-        for n in names:
-            v = self
-            for part in n.split("."):
-                v = getattr(v, part)
-            data[n] = v.model_dump(mode="json") if hasattr(v, "model_dump") else v
+        """Content hash of the validated (SI) sections ``names``, for stage cache keys."""
+        data = {n: getattr(self, n).model_dump(mode="json") for n in names}
         blob = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(blob.encode()).hexdigest()
 

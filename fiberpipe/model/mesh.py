@@ -214,6 +214,15 @@ def mesh_polylines(
     return Mesh(np.concatenate(nodes), np.asarray(offsets, dtype=np.int64), radius)
 
 
+def plane_penetration(x_m, radius_m, axis: int, position_m: float, sign: float) -> np.ndarray:
+    """How far each node's fiber surface reaches past a rigid plane, m (> 0: inside it).
+
+    ``sign = +1`` a lower plane (the fibers belong above ``position_m`` along ``axis``), ``−1`` an
+    upper one. ``x_m`` (N, 3) node positions, ``radius_m`` (N,) their fibers' radii.
+    """
+    return radius_m - sign * (x_m[:, axis] - position_m)
+
+
 def resolve_overlaps(mesh: Mesh, *, tolerance_m: float = 1e-7, max_iterations: int = 200, max_shift_m: float | None = None,
                      planes: tuple = ()) -> dict:
     """Push apart fibers that overlap in the rest geometry, in place (a strain-free adjustment).
@@ -261,7 +270,7 @@ def resolve_overlaps(mesh: Mesh, *, tolerance_m: float = 1e-7, max_iterations: i
     def clear_planes(x):
         worst = 0.0
         for axis, pos, sign in planes:
-            pen = r - sign * (x[:, axis] - pos)
+            pen = plane_penetration(x, r, axis, pos, sign)
             worst = max(worst, float(pen.max()) if len(pen) else 0.0)
             over = pen > 0.0
             x[over, axis] += sign * (pen[over] + tolerance_m)

@@ -13,6 +13,7 @@ import logging
 import numpy as np
 
 from ..errors import FiberpipeError
+from ..model.mesh import plane_penetration
 from .effects import (SceneArrays, Clamp, Clamps, Damping, Drive, Drives, Effect, Gravity, LineLoad, Loads, Plates,
                       PointLoad, Walls)
 from .integrator import SimulationSettings
@@ -42,7 +43,7 @@ def check_scene_geometry(model: Model, effects) -> list[str]:
     axes = {"x": 0, "y": 1, "z": 2}
 
     def cut(key: str, ax: int, pos: float, low_side: bool) -> None:
-        depth = (pos - (x[:, ax] - r)) if low_side else ((x[:, ax] + r) - pos)
+        depth = plane_penetration(x, r, ax, pos, 1.0 if low_side else -1.0)
         i = int(np.argmax(depth / r))
         if depth[i] > CUT_TOLERANCE * r[i]:
             ext = float(np.min(x[:, ax] - r)) if low_side else float(np.max(x[:, ax] + r))

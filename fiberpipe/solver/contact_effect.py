@@ -63,6 +63,7 @@ FS_E_CONTACT = 8     # stored normal contact energy at the last step, J
 FS_E_SPRING = 9      # elastic energy of the fiber–fiber tangential springs at the last step, J
 FS_OFF_MAX = 10      # largest initial-overlap offset still applied, m
 FS_SIZE = 12
+D_FC_PREV = 15       # data slot of fc_prev, the contact forces applied at the last step (N, 3), N
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -133,7 +134,7 @@ def contact_power(v, data):
     of step n is Δt f_n·v̄_n, in phase with the kinetic energy and the plane work of the history row
     at t_n (the old trapezoid ½Δt(f_{n−1} + f_n)·v_{n−½} lagged half a step: during an undamped
     impact the balance swung by ±2e-5 J per row, a residual of 0.15)."""
-    fc_prev = data[15]
+    fc_prev = data[D_FC_PREV]
     s = 0.0
     for i in range(v.shape[0]):
         s += fc_prev[i, 0] * v[i, 0] + fc_prev[i, 1] * v[i, 1] + fc_prev[i, 2] * v[i, 2]

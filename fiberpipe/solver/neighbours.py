@@ -33,19 +33,6 @@ from fiberpipe.solver.contact import segment_distance2
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def max_displacement_exceeds(x, x_ref, limit):
-    """True if any node moved more than ``limit`` [m] from ``x_ref`` (the positions at the last build)."""
-    l2 = limit * limit
-    for i in range(x.shape[0]):
-        d0 = x[i, 0] - x_ref[i, 0]
-        d1 = x[i, 1] - x_ref[i, 1]
-        d2 = x[i, 2] - x_ref[i, 2]
-        if d0 * d0 + d1 * d1 + d2 * d2 > l2:
-            return True
-    return False
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
 def max_displacement2(x, x_ref):
     """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build).
 
@@ -62,6 +49,12 @@ def max_displacement2(x, x_ref):
         if q > m:
             m = q
     return m
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def max_displacement_exceeds(x, x_ref, limit):
+    """True if any node moved more than ``limit`` [m] from ``x_ref`` (the positions at the last build)."""
+    return max_displacement2(x, x_ref) > limit * limit
 
 
 @njit(cache=True, error_model="numpy")

@@ -196,13 +196,13 @@ def clear_scene_planes(mesh, cfg: Config) -> float:
     penetration (m); nothing is moved when it is 0 or deeper than ``PLANE_CLEARANCE_MAX_FRACTION`` r
     (then :func:`fiberpipe.solver.build.check_scene_geometry` names the plane that cuts the bundle).
     """
-    from fiberpipe.model.mesh import resolve_overlaps
+    from fiberpipe.model.mesh import plane_penetration, resolve_overlaps
 
     planes = scene_planes(cfg)
     if not planes or not cfg.mesh.resolve_overlaps:
         return 0.0
     r = np.asarray(mesh.radius_m)[mesh.node_fiber()]
-    depth = max(float(np.max(r - sign * (mesh.nodes_m[:, ax] - pos))) for ax, pos, sign in planes)
+    depth = max(float(np.max(plane_penetration(mesh.nodes_m, r, ax, pos, sign))) for ax, pos, sign in planes)
     if depth <= 0.0 or depth > PLANE_CLEARANCE_MAX_FRACTION * float(np.min(mesh.radius_m)):
         return max(depth, 0.0)
     resolve_overlaps(mesh, planes=planes)
