@@ -22,6 +22,13 @@ generator's parameters and the measured statistics). The original specimen (up t
 ``placement="push"``, tilt 0.03 rad, sine waviness 5 µm, seed 0) is ``--original``; the
 lattice specimen matched to the statistics but with no contacts (``placement="rigid"``) is ``--rigid``.
 ``--phi-mean-deg 10 --out DIR`` makes the variant at the study's upper bound, for comparison.
+
+``--settle`` lets the deposited pile settle in the solver itself (:func:`settle_pile`): meshed as
+the paper-40 scene, lower plate and walls fixed, no upper plate, gravity, contact, Coulomb
+friction μ = 0.2, damping α = ``--settle-alpha`` (``--settle-lock`` adds the axial lock,
+``scene.constraints``), run for ``--settle-time``; the settled node positions become the
+mid-lines (rest shape) and the upper plate is put on the settled pile's top (+1 µm). The solver
+runs on one thread and is deterministic.
 """
 
 import argparse
@@ -39,6 +46,10 @@ PHI_MEAN_DEG = 6.0  # the study's Φ_average (section 3.2)
 CURVATURE_PER_M = float(np.pi / 2 * (STUDY_CURVATURE_XZ_PER_M + STUDY_CURVATURE_YZ_PER_M) / 2)
 
 
+REPO = Path(__file__).resolve().parents[1]
+SETTLE_ALPHA_PER_S = 300.0
+SETTLE_TIME_S = 0.04
+SETTLE_FRAMES = 9
 DEPOSIT_CANDIDATES = 2  # trial drops per fiber, the lowest kept: 1 gives v_f0 ≈ 30 %, 2 ≈ 38 %, 4 ≈ 48 %
 
 
@@ -57,6 +68,97 @@ def parameters(phi_mean_deg: float = PHI_MEAN_DEG, seed: int = 0, original: bool
     return params
 
 
+def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_TIME_S, mu=0.2, lock=None,
+                frames=SETTLE_FRAMES, gap_m=1e-6):
+    """Settle ``fibers`` (a deposited pile) in the solver under gravity with friction; returns the
+    settled Polylines (the node positions of the last frame, per fiber) and ``info`` updated to
+    the settled pile (height = its top + ``gap_m``, v_f0, contacts, the settling figures).
+
+    The scene is configs/paper-40.yaml's (material, radius, contact law, walls, mesh) with the
+    lower plate fixed at y = 0, no upper plate, μ = ``mu``, α = ``alpha_per_s`` and, with
+    ``lock`` = "all" | "ends", the axial lock (``scene.constraints``).
+    """
+    import time as _time
+
+    from fiberpipe.config import load_raw, validate_config
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.polylines import Polylines
+    from fiberpipe.solver import simulate
+    from fiberpipe.solver.build import build_simulation
+
+    raw = load_raw(REPO / "configs" / "paper-40.yaml")
+    sc = raw["scene"]
+    sc["effects"] = [e for e in sc["effects"] if e != "plates"] + ["plates"] + (["constraints"] if lock else [])
+    sc["plates"] = {"axis": "y", "lower": "fixed", "upper": "none", "lower_position": 0.0}
+    sc["loading"] = {"displacement": 0.0}
+    sc["damping"] = {"alpha": float(alpha_per_s), "beta": 0.0}
+    sc["friction"] = {"mu": float(mu)}
+    if lock:
+        sc["constraints"] = {"lock_axial": lock}
+    raw["solver"] = {**raw.get("solver", {}), "end_time": float(time_s), "output_frames": int(frames)}
+    cfg = validate_config(raw, where="settle_pile")
+    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
+    model, effects, settings = build_simulation(mesh, cfg)
+    t0 = _time.perf_counter()
+    res = simulate(model, effects, settings)
+    wall = _time.perf_counter() - t0
+    X = np.asarray(res.frames_positions)
+    off = np.asarray(mesh.node_offsets)
+    r = float(cfg.fiber.radius)
+    x = X[-1]
+    settled = Polylines.from_list([x[off[i]:off[i + 1]] for i in range(len(off) - 1)], r)
+    moved = np.linalg.norm(x - mesh.nodes_m, axis=1)
+    dtf = float(res.frames_time[-1] - res.frames_time[-2])
+    last = np.linalg.norm(X[-1] - X[-2], axis=1)
+    h = res.history
+    top = float(np.max(x[:, 1] + r))
+    height = top + gap_m
+    width, length = float(info["width_m"]), float(info["length_m"])
+    out = {k: v for k, v in info.items() if k != "deposit"}
+    out.update(height_m=height, volume_fraction=float(len(off) - 1) * np.pi * r**2 * length / (width * height * length),
+               box_max_m=[width / 2, height, length])
+    out["deposit"] = {k: v for k, v in info["deposit"].items() if k != "supports"}
+    out["settle"] = {
+        "alpha_per_s": float(alpha_per_s), "time_s": float(time_s), "mu": float(mu), "lock_axial": lock,
+        "dt_s": float(res.dt_s), "steps": int(res.steps), "wall_time_s": wall,
+        "max_displacement_m": float(moved.max()), "median_fiber_max_displacement_m":
+            float(np.median([moved[off[i]:off[i + 1]].max() for i in range(len(off) - 1)])),
+        "last_frame_interval_s": dtf, "max_speed_last_interval_m_s": float(last.max() / dtf),
+        "kinetic_energy_end_J": float(h["energy/kinetic"][-1]), "strain_energy_end_J": float(h["energy/strain"][-1]),
+        "kinetic_energy_max_J": float(np.max(h["energy/kinetic"])),
+        "frame_times_s": [float(t) for t in res.frames_time],
+        "kinetic_energy_at_frames_J": [float(np.interp(t, h["time"], h["energy/kinetic"])) for t in res.frames_time],
+        "max_speed_per_frame_interval_m_s": [float(v) for v in np.max(np.linalg.norm(np.diff(X, axis=0), axis=2), axis=1)
+                                             / np.diff(res.frames_time)],
+        "contacts_end": int(h["contacts"][-1]) if "contacts" in h and len(h["contacts"]) else None,
+        "pile_top_before_m": float(info["deposit"]["pile_top_m"]), "pile_top_m": top,
+        "top_clearance_m": gap_m,
+        "fiber_contacts": fiber_contacts(x, off, r),
+        "lowest_surface_m": float(np.min(x[:, 1] - r)),
+        "fibers_on_lower_plate": int(sum(np.min(x[off[i]:off[i + 1], 1]) - r <= 1e-7 for i in range(len(off) - 1))),
+    }
+    return settled, out
+
+
+def fiber_contacts(x, off, r, tol_m=1e-7) -> int:
+    """Fiber pairs whose centre lines (node-to-node segments) come within 2r + ``tol_m``."""
+    from scipy.spatial import cKDTree
+
+    from fiberpipe.model.specimen_stats import segment_distances
+
+    fib = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    seg = np.flatnonzero(np.r_[fib[1:] == fib[:-1], False])  # segment k: nodes k, k+1
+    mid = 0.5 * (x[seg] + x[seg + 1])
+    half = float(np.max(np.linalg.norm(x[seg + 1] - x[seg], axis=1)))
+    pairs = cKDTree(mid).query_pairs(2 * r + half + tol_m, output_type="ndarray")
+    a, b = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    keep = fib[a] != fib[b]
+    a, b = a[keep], b[keep]
+    d, _, _ = segment_distances(x[a], x[a + 1], x[b], x[b + 1])
+    hit = d <= 2 * r + tol_m
+    return len({(min(i, j), max(i, j)) for i, j in zip(fib[a[hit]], fib[b[hit]])})
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=OUT)
@@ -65,9 +167,21 @@ def main(argv=None):
     ap.add_argument("--original", action="store_true", help="the specimen before the statistics were matched")
     ap.add_argument("--rigid", action="store_true",
                     help="the lattice specimen of issue #5's first round (placement='rigid': no contacts at U = 0)")
+    ap.add_argument("--settle", action="store_true",
+                    help="settle the deposited pile in the solver under gravity with friction (settle_pile)")
+    ap.add_argument("--settle-alpha", type=float, default=SETTLE_ALPHA_PER_S, help="damping alpha while settling, 1/s")
+    ap.add_argument("--settle-time", type=float, default=SETTLE_TIME_S, help="settling time, s")
+    ap.add_argument("--settle-lock", choices=["all", "ends"], default=None,
+                    help="lock the fibers' z translation while settling (scene.constraints.lock_axial)")
     args = ap.parse_args(argv)
     params = parameters(args.phi_mean_deg, args.seed, args.original, args.rigid)
     fibers, info = cassette_specimen(**params)
+    if args.settle:
+        if params.get("placement") != "deposit":
+            ap.error("--settle needs the deposited pile (not --original or --rigid)")
+        fibers, info = settle_pile(fibers, info, alpha_per_s=args.settle_alpha, time_s=args.settle_time,
+                                   lock=args.settle_lock)
+        params["settle"] = {k: info["settle"][k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial")}
     stats = specimen_statistics(fibers, box_min_m=info["box_min_m"], box_max_m=info["box_max_m"])
     info["generator"] = {"function": "fiberpipe.model.specimen.cassette_specimen", **params}
     if not args.original:
@@ -78,7 +192,15 @@ def main(argv=None):
     (args.out / "specimen.json").write_text(json.dumps(info, indent=2) + "\n")
     print(f"wrote {args.out}/fibers.h5 ({fibers.n_fibers} fibers), height {info['height_m'] * 1e3:.4f} mm, "
           f"v_f0 {info['volume_fraction']:.4f}")
-    if "deposit" in info:
+    if "settle" in info:
+        d = info["settle"]
+        print(f"  settled {d['time_s'] * 1e3:.3g} ms at alpha {d['alpha_per_s']:.4g} 1/s (lock {d['lock_axial']}): "
+              f"moved up to {d['max_displacement_m'] * 1e6:.1f} um (median fiber {d['median_fiber_max_displacement_m'] * 1e6:.1f}), "
+              f"last-interval max speed {d['max_speed_last_interval_m_s'] * 1e3:.3g} mm/s, KE end {d['kinetic_energy_end_J']:.3g} J "
+              f"(max {d['kinetic_energy_max_J']:.3g}); pile top {d['pile_top_m'] * 1e3:.4f} mm "
+              f"(was {d['pile_top_before_m'] * 1e3:.4f}); {d['fiber_contacts']} fiber-fiber contacts, "
+              f"{d['fibers_on_lower_plate']} fibers on the lower plate; {d['wall_time_s']:.0f} s wall")
+    elif "deposit" in info:
         d = info["deposit"]
         print(f"  pile top {d['pile_top_m'] * 1e3:.4f} mm; {d['contacts']} fiber-fiber contacts, "
               f"{d['fibers_on_lower_plate']} fibers on the lower plate")

@@ -1,0 +1,54 @@
+"""data-samples/make_paper40.py --settle: the deposited pile settled in the solver under gravity
+with friction (issue #5), its settled mid-lines taken as the specimen and the upper plate put on
+the settled top."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fiberpipe.model.specimen import cassette_specimen
+
+R = 0.25e-3
+SCRIPT = Path(__file__).resolve().parents[2] / "data-samples" / "make_paper40.py"
+
+
+def _make_paper40():
+    spec = importlib.util.spec_from_file_location("make_paper40", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def small():
+    return cassette_specimen(n_fibers=12, width_m=1.5e-3, length_m=6e-3, points_per_fiber=25, seed=1,
+                             placement="deposit", tilt_rad=float(np.deg2rad(6.0) / np.sqrt(np.pi)),
+                             curvature_per_m=0.384, candidates=2, top="pile")
+
+
+def test_settle_pile_is_deterministic_and_puts_the_plate_on_the_settled_top(small):
+    mp = _make_paper40()
+    fibers, info = small
+    a, ia = mp.settle_pile(fibers, info, time_s=1e-3, frames=3, lock="all")
+    b, _ = mp.settle_pile(fibers, info, time_s=1e-3, frames=3, lock="all")
+    assert np.array_equal(a.points_m, b.points_m)  # one thread: bit for bit
+    pts = a.points_m
+    assert ia["height_m"] == pytest.approx(float(np.max(pts[:, 1] + R)) + 1e-6, abs=1e-12)
+    n, w, L = 12, 1.5e-3, 6e-3
+    assert ia["volume_fraction"] == pytest.approx(n * np.pi * R**2 / (w * ia["height_m"]))
+    s = ia["settle"]
+    assert s["lock_axial"] == "all" and s["mu"] == 0.2 and s["steps"] > 0
+    assert 0 < s["max_displacement_m"] < 0.5 * R  # 1 ms of falling at most ≈ 5 µm
+    assert ia["height_m"] <= info["height_m"] + 1e-9  # the pile sinks, never rises
+    assert s["fiber_contacts"] >= 1
+
+
+def test_fiber_contacts_counts_touching_pairs_once():
+    mp = _make_paper40()
+    z = np.linspace(0, 3e-3, 11)
+    x = np.concatenate([np.c_[0 * z, 0 * z + R, z], np.c_[0 * z, 0 * z + 3 * R - 1e-8, z],
+                        np.c_[0 * z + 5 * R, 0 * z + R, z]])
+    off = np.array([0, 11, 22, 33])
+    assert mp.fiber_contacts(x, off, R) == 1  # 0–1 touch (10 nm overlap), 2 is 0.75 mm away
