@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fiberpipe.solver.laws import law_line, law_point, law_weight
+from fiberpipe.solver.laws import law_line, law_point, law_weight_point
 
 # Gauss–Legendre nodes on [0, 1] and weights (sum 1), orders 1…6
 _GL = {
@@ -446,7 +446,8 @@ def contact_forces_ex(
             cphi = 1.0
         phi = math.acos(cphi)
         delta_c = rr - math.sqrt(dist2)
-        w = law_weight(law_id, law_params, delta_c, ra, rb, phi)
+        # the point force at δ_c comes with the weight (one Hertz evaluation for both)
+        w, fp_c, ep_c = law_weight_point(law_id, law_params, delta_c, ra, rb, phi)
         den = aa * bb - ab * ab
         if w > 0.0 and den > 1e-10 * aa * bb:
             # closest points of the infinite lines
@@ -486,7 +487,10 @@ def contact_forces_ex(
                         n0 *= inv
                         n1 *= inv
                         n2 *= inv
-                    fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+                    if use_off and off != 0.0:
+                        fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+                    else:  # δ = δ_c: the same closest points (sc, tc) as dist2
+                        fp, ep = fp_c, ep_c
                     fm = w * wst * fp
                     energy += w * wst * ep
                     f0 = fm * n0

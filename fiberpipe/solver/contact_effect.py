@@ -13,10 +13,10 @@ step (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
    rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
-4. Energies: ALLPW += work of all contact forces on the fibers, ``Δt f_n·v̄_n`` (half here at
-   ``v_{n−½}``, half by the step loop after the update through :func:`contact_power`) + the friction
-   dissipation; ALLFD += friction
-   dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
+4. The contact and friction forces stay in the hook's force array (:func:`contact_forces_of`): the
+   step loop's update adds them to the nodes, books their work ``Δt f_n·v̄_n`` to ALLPW and clears
+   the array, in the same pass over the nodes. Energies: ALLPW += that work + the friction
+   dissipation; ALLFD += friction dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
    elastic contact energy and the friction loss, as Abaqus' ALLPW includes penalty friction).
 
 Returns the number of fiber–fiber segment pairs in contact (history column ``contacts``).
@@ -65,7 +65,7 @@ FS_E_SPRING = 9      # elastic energy of the fiber–fiber tangential springs at
 FS_OFF_MAX = 10      # largest initial-overlap offset still applied, m
 FS_PATH = 11         # bound on the path of any node since the last build, Σ Δt max|v|, m
 FS_SIZE = 12
-D_FC_PREV = 15       # data slot of fc_prev, the contact forces applied at the last step (N, 3), N
+D_FC = 14            # data slot of fc, this step's contact and friction forces (N, 3), N
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -132,25 +132,20 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
         gap[k] = pair_gap(x, seg_nodes, seg_radius, pairs, k)
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def contact_power(v, data):
-    """Σ f_n·v [W] of the contact forces of the last :func:`contact_step` (``fc_prev``) at the
-    velocities ``v``; the step loop books ½Δt × this after its velocity update, so the contact work
-    of step n is Δt f_n·v̄_n, in phase with the kinetic energy and the plane work of the history row
-    at t_n (the old trapezoid ½Δt(f_{n−1} + f_n)·v_{n−½} lagged half a step: during an undamped
-    impact the balance swung by ±2e-5 J per row, a residual of 0.15)."""
-    fc_prev = data[D_FC_PREV]
-    s = 0.0
-    for i in range(v.shape[0]):
-        s += fc_prev[i, 0] * v[i, 0] + fc_prev[i, 1] * v[i, 1] + fc_prev[i, 2] * v[i, 2]
-    return s
+@njit(cache=True, error_model="numpy")
+def contact_forces_of(data):
+    """The force array (N, 3) [N] :func:`contact_step` leaves its forces in: the step loop adds it to
+    the nodes in its update, books its work ``Δt f_n·v̄_n`` (``v̄_n`` the mean of the two half-step
+    velocities, in phase with the kinetic energy and the plate work of the history row at t_n) and
+    clears it (one pass over the nodes instead of three: add, power before, power after)."""
+    return data[D_FC]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring."""
     (istate, fstate, seg_nodes, seg_radius, seg_fiber, seg_arc, law_params, gxi, gw, x_ref,
-     L_pairs, L_keys, L_h2, L_h1, fc, fc_prev,
+     L_pairs, L_keys, L_h2, L_h1, fc,
      radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
      pl_hist, pl_tforce, L_active) = data
     step = istate[IS_STEP]
@@ -216,7 +211,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
         else:
             fstate[FS_OFF_MAX] = 0.0  # released: no offsets any more (new pairs get none either)
             use_off = False
-    # fc is all zeros here: the work loop at the end of the previous call cleared it (fused loops)
+    # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
     energy, n_active = contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
                                          gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, off, c_share, c_fsum,
                                          c_gap, reach, c_active)
@@ -249,25 +244,8 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
             pl_vel[p, pl_axis[p]] = vel
         diss += plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, kt, dt, pl_hist, fc,
                                pl_tforce, step)
-    # work of the contact forces on the fibers over step n is Δt f_n·v̄_n, v̄_n = (v_{n−½} + v_{n+½})/2,
-    # booked in two halves like the plane penalty's: ½Δt f_n·v_{n−½} here, ½Δt f_n·v_{n+½} by the
-    # step loop after the velocity update (contact_power); add to f; keep f_n
-    pw = 0.0
-    for i in range(N):
-        a0 = fc[i, 0]
-        a1 = fc[i, 1]
-        a2 = fc[i, 2]
-        pw += a0 * v[i, 0] + a1 * v[i, 1] + a2 * v[i, 2]
-        f[i, 0] += a0
-        f[i, 1] += a1
-        f[i, 2] += a2
-        fc_prev[i, 0] = a0
-        fc_prev[i, 1] = a1
-        fc_prev[i, 2] = a2
-        fc[i, 0] = 0.0
-        fc[i, 1] = 0.0
-        fc[i, 2] = 0.0
-    acc[ACC_PW] += 0.5 * dt * pw + diss
+    # the forces stay in fc: the step loop's update applies them, books their work and clears fc
+    acc[ACC_PW] += diss
     acc[ACC_FD] += diss
     # statistics of this step
     fsum = 0.0
@@ -412,7 +390,7 @@ def make_contact_hook(model, *, law=None, contact: bool = True, friction: bool =
         seg_nodes_u = seg_nodes if contact else seg_nodes[:0]
         data = (istate, fstate, seg_nodes_u, seg_radius[: len(seg_nodes_u)], seg_fiber[: len(seg_nodes_u)],
                 arc[: len(seg_nodes_u)], law.params(), gxi, gw, np.array(model_.nodes_m, dtype=np.float64),
-                L_pairs, L_keys, L_h2, L_h1, np.zeros((N, 3)), np.zeros((N, 3)),
+                L_pairs, L_keys, L_h2, L_h1, np.zeros((N, 3)),
                 np.ascontiguousarray(model_.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
                 scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), scene.pl_pos0.astype(np.float64),
                 scene.pl_move.astype(np.float64), scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64),
