@@ -235,8 +235,9 @@ class FiberConfig(Section):
 # ----------------------------------------------------------------------------------------------
 # scene (SPEC section 3.1)
 
-EFFECTS = ("gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives")
-Effect = Literal["gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives"]
+EFFECTS = ("gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives", "constraints")
+Effect = Literal["gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives",
+                 "constraints"]
 
 
 class GravityConfig(Section):
@@ -341,6 +342,14 @@ class LoadingConfig(Section):
 Anchor = Union[Literal["start", "end"], int]
 
 
+class ConstraintsConfig(Section):
+    lock_axial: Literal["all", "ends"] = Field(
+        "all", description="the study's boundary condition (\"the movement is locked in the fiber orientation\"): "
+        "the translation along `axis` of every node (all) or of each fiber's two end nodes (ends) is fixed at its "
+        "initial value; rotations and the other translations stay free")
+    axis: Literal["x", "y", "z"] = Field("z", description="the fibers' orientation (the bundle's axis)")
+
+
 class ClampConfig(Section):
     fiber: int = Field(ge=0)
     at: Anchor = "start"
@@ -384,6 +393,7 @@ class SceneConfig(Section):
     clamps: list[ClampConfig] = Field(default_factory=list)
     loads: list[LoadConfig] = Field(default_factory=list)
     drives: list[DriveConfig] = Field(default_factory=list)
+    constraints: Optional[ConstraintsConfig] = None
 
     @model_validator(mode="after")
     def _defaults_for_effects(self):
@@ -397,6 +407,7 @@ class SceneConfig(Section):
             "friction": FrictionConfig,
             "plates": PlatesConfig,
             "walls": WallsConfig,
+            "constraints": ConstraintsConfig,
         }
         for name, cls in defaults.items():
             if name in self.effects and getattr(self, name) is None:
@@ -413,7 +424,7 @@ class SceneConfig(Section):
         out = []
         if "friction" in self.effects and "contact" not in self.effects and "plates" not in self.effects and "walls" not in self.effects:
             out.append("scene.effects has friction but no contact, plates or walls: friction cannot act")
-        for name in ("gravity", "damping", "contact", "friction", "plates", "walls"):
+        for name in ("gravity", "damping", "contact", "friction", "plates", "walls", "constraints"):
             if getattr(self, name) is not None and name not in self.effects:
                 out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
         for name in ("clamps", "loads", "drives"):

@@ -93,3 +93,68 @@ def test_stage_hash_tracks_only_its_sections(write_yaml, tmp_path):
     b = load_config(write_yaml(TIP.replace('"2000 1/s"', '"3000 1/s"'), "b.yaml"))
     assert a.section_sha256("mesh", "material") == b.section_sha256("mesh", "material")
     assert a.section_sha256("scene") != b.section_sha256("scene")
+
+
+AXIAL = """
+name: axial
+input:
+  polylines:
+    - [[0, "0.25 mm", 0], [0, "0.25 mm", "3 mm"]]
+fiber: {radius: "0.25 mm"}
+mesh: {element_length: "0.3 mm"}
+scene:
+  effects: [gravity, damping, constraints]
+  gravity: {acceleration: [0, "-9.81 m/s^2", "-2000 m/s^2"]}
+  damping: {alpha: "3000 1/s"}
+  constraints: {lock_axial: LOCK}
+solver: {end_time: "2 ms", output_frames: 2}
+"""
+
+
+def test_constraints_round_trip_and_validation(write_yaml):
+    from fiberpipe.config import validate_config
+
+    cfg = load_config(write_yaml(AXIAL.replace("LOCK", "ends")))
+    assert cfg.scene.constraints.lock_axial == "ends" and cfg.scene.constraints.axis == "z"
+    again = validate_config(cfg.model_dump(mode="json"))
+    assert again.scene.constraints == cfg.scene.constraints and again.sha256() == cfg.sha256()
+    # listed without a block: the defaults (every node, along z)
+    bare = load_config(write_yaml(AXIAL.replace("  constraints: {lock_axial: LOCK}\n", ""), "bare.yaml"))
+    assert bare.scene.constraints.lock_axial == "all"
+    with pytest.raises(ConfigError, match="scene.constraints.lock_axial"):
+        load_config(write_yaml(AXIAL.replace("LOCK", "middle"), "bad.yaml"))
+    with pytest.raises(ConfigError, match="unknown key 'scene.constraints.lock'"):
+        load_config(write_yaml(AXIAL.replace("lock_axial: LOCK", "lock: all"), "bad2.yaml"))
+    unlisted = load_config(write_yaml(AXIAL.replace("gravity, damping, constraints", "gravity, damping")
+                                      .replace("LOCK", "all"), "unlisted.yaml"))
+    assert any("scene.constraints is configured but not listed" in w for w in unlisted.scene.warnings())
+
+
+@pytest.mark.parametrize("lock", ["all", "ends", None])
+def test_axial_lock_holds_a_fiber_under_an_axial_load(write_yaml, lock):
+    """A fiber along z pulled along z by a body force: locked (every node, or its two ends) it does
+    not move along z, while it still sags under the y load; unlocked it slides."""
+    import numpy as np
+
+    from fiberpipe.model.mesh import Mesh
+    from fiberpipe.solver import simulate
+    from fiberpipe.solver.build import build_simulation
+
+    text = AXIAL.replace("LOCK", lock or "all")
+    if lock is None:
+        text = text.replace("gravity, damping, constraints", "gravity, damping")
+    cfg = load_config(write_yaml(text))
+    x = np.zeros((11, 3))
+    x[:, 1] = 0.25e-3
+    x[:, 2] = np.linspace(0, 3e-3, 11)
+    model, effects, settings = build_simulation(Mesh(x, np.array([0, 11]), np.array([0.25e-3])), cfg)
+    res = simulate(model, effects, settings)
+    d = np.asarray(res.frames_positions[-1]) - x
+    assert np.all(d[:, 1] < -1e-9)  # falls along y (free)
+    if lock is None:
+        assert np.all(d[:, 2] < -1e-4)  # slides about 2000 m/s² / α × 2 ms ≈ 1.3 mm
+    elif lock == "all":
+        assert np.max(np.abs(d[:, 2])) == 0.0
+    else:
+        assert d[0, 2] == 0.0 and d[-1, 2] == 0.0
+        assert np.max(np.abs(d[:, 2])) < 1e-9  # the fiber's axial stiffness holds the rest

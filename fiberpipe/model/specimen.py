@@ -30,6 +30,11 @@ def cassette_specimen(
     curvature_per_m: float = 0.0,
     gap_m: float = 1e-6,
     max_iterations: int = 5000,
+    y_tilt_scale: float = 1.0,
+    top: str = "plate",
+    settle: str = "slide",
+    slide_cost: float = 1e-3,
+    candidates: int = 1,
 ) -> tuple[Polylines, dict]:
     """Quasi-parallel fibers along z in a box of ``width_m`` (x) × height (y) × ``length_m`` (z).
 
@@ -61,11 +66,20 @@ def cassette_specimen(
     Polylines, and a dict with ``height_m``, ``width_m``, ``volume_fraction`` and the box bounds
     (with ``placement="rigid"`` also ``relaxation``: sweeps, closest centre lines, largest move).
     """
-    if placement not in ("push", "rigid"):
-        raise ValueError(f"placement must be 'push' or 'rigid', got {placement!r}")
+    if placement not in ("push", "rigid", "deposit"):
+        raise ValueError(f"placement must be 'push', 'rigid' or 'deposit', got {placement!r}")
+    if top not in ("plate", "pile"):
+        raise ValueError(f"top must be 'plate' or 'pile', got {top!r}")
     rng = np.random.default_rng(seed)
     area = n_fibers * np.pi * radius_m**2
     height = area / (volume_fraction * width_m)
+    if placement == "deposit":
+        return _deposit_specimen(
+            rng, n=n_fibers, width_m=width_m, height_m=height, length_m=length_m, radius_m=radius_m,
+            tilt_rad=tilt_rad, curvature_per_m=curvature_per_m,
+            z=np.linspace(0.0, length_m, points_per_fiber), gap_m=gap_m, y_tilt_scale=y_tilt_scale, top=top,
+            settle=settle, slide_cost=slide_cost, candidates=candidates,
+        )
     rows = int(np.ceil(n_fibers / columns))
     px, py = width_m / columns, height / rows
     z = np.linspace(0.0, length_m, points_per_fiber)
@@ -269,3 +283,266 @@ def _relax_rigid(ends, bows, z, lo, hi, min_distance, *, max_iterations, coarse=
             "or volume_fraction, or raise max_iterations"
         )
     return e, report
+
+
+def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad, curvature_per_m,
+                      z, gap_m, y_tilt_scale, top="plate", settle="slide", slide_cost=1e-3, candidates=1):
+    """``placement="deposit"`` of :func:`cassette_specimen`: a gravity-deposited loose pile.
+
+    # Strategy: random sequential deposition of rigid fibers, each the smooth arc of the
+    # ``"rigid"`` placement (chord of random tilt plus a circular bow in a random plane). A fiber's
+    # x-path is drawn and kept (x centre uniform over where it fits between the walls); its
+    # vertical pose is its height h (of the chord's midpoint) and y-slope s. For a slope s it is
+    # dropped straight down from above the pile until first contact (:func:`_drop_height`, exact
+    # conservative advancement), which gives the lowest reachable height h_min(s); it then turns
+    # about that contact in its y-z plane, which walks h_min(s) downhill (the centre of mass of a
+    # symmetric arc is at z = L/2, so dh/ds = L/2 − z_contact) until a local minimum: a kink where
+    # the touching point passes from one side of the centre of mass to the other, i.e. the fiber
+    # rests on two points on either side of it (or on the plate). Contacts touch at ``gap_m``
+    # clearance (no initial overlap: the solver's contact starts at zero force). The y-tilt drawn
+    # for the drop is σ·``y_tilt_scale``: steeper drops land on fewer, higher supports and leave
+    # a looser pile. ``top="plate"`` keeps the nominal cassette height (from ``volume_fraction``);
+    # ``top="pile"`` sets it to the pile's top (+ ``gap_m``), so the upper plate touches it.
+    """
+    r, need = radius_m, 2 * radius_m + gap_m
+    sigma = np.broadcast_to(np.asarray(tilt_rad, float), (2,))
+    zc = z - length_m / 2
+    if curvature_per_m > 0:
+        rr = 1.0 / curvature_per_m
+        sag = (rr - np.sqrt(rr**2 - zc**2)) - (rr - np.sqrt(rr**2 - (length_m / 2) ** 2))
+    else:
+        sag = np.zeros_like(zc)
+    planes = 2 * np.pi * (rng.permutation(n) + rng.uniform(0, 1, n)) / max(n, 1)
+    xlo, xhi = -width_m / 2 + r + gap_m, width_m / 2 - r - gap_m
+    X = np.zeros((n, len(z)))
+    Y = np.zeros((n, len(z)))
+    supports = []
+    for k in range(n):
+        bow = sag[:, None] * np.array([np.cos(planes[k]), np.sin(planes[k])])
+        best = None
+        for _c in range(candidates):  # keep the lowest of a few trial drops ("careful placement")
+            for _ in range(1000):
+                a = rng.normal(0, 1, 2) * sigma * np.array([1.0, y_tilt_scale])
+                xs = a[0] * zc + bow[:, 0]
+                if xs.max() - xs.min() <= 0.9 * (xhi - xlo):
+                    break
+            else:  # pragma: no cover - only for absurd tilts
+                raise ValueError(f"tilt_rad={tilt_rad!r}: a fiber does not fit the cassette")
+            x0 = rng.uniform(xlo - xs.min(), xhi - xs.max()) + xs
+            if settle == "slide":
+                xk, yk, contact = _settle(x0, bow[:, 1], a[1], X[:k], Y[:k], z, r, need, gap_m, xlo, xhi,
+                                          slide_cost=slide_cost)
+            else:
+                h, s, contact = _rest(x0, bow[:, 1], a[1], X[:k], Y[:k], z, r, need, gap_m)
+                xk, yk = x0, h + s * zc + bow[:, 1]
+            if best is None or yk.mean() < best[1].mean():
+                best = (xk, yk, contact)
+        X[k], Y[k], contact = best
+        supports.append(contact)
+    pts = np.stack([X, Y, np.broadcast_to(z, X.shape)], axis=2)
+    top_m = float((Y + r).max())
+    if top == "pile":
+        height_m = top_m + gap_m
+    fibers = Polylines.from_list(list(pts), radius_m)
+    info = _box_info(width_m, height_m, length_m, n * np.pi * radius_m**2 * length_m)
+    touching = set()
+    for k in range(1, n):  # fiber pairs within 0.1 µm of touching (at the ``gap_m`` clearance)
+        g, _, _, which = _pair_gaps(X[k], Y[k], X[:k], Y[:k], z, need)
+        touching.update((int(j), k) for j in np.unique(which[g <= 1e-7]))
+    info["deposit"] = {
+        "candidates": candidates,
+        "slide_cost": slide_cost,
+        "pile_top_m": top_m,
+        "top_clearance_m": float(height_m - top_m),
+        "contacts": len(touching),
+        "fibers_on_lower_plate": int(np.sum((Y - r).min(axis=1) <= gap_m + 1e-7)),
+        "fibers_at_upper_plate": int(np.sum((Y + r).max(axis=1) >= height_m - gap_m - 1e-7)),
+        "supports": supports,
+    }
+    return fibers, info
+
+
+def _pair_gaps(x, y, X, Y, z, need, reach=2):
+    """Closest distances (minus ``need``) between the new fiber (x, y)(z) and placed fibers
+    (X, Y)(z), over segment pairs at most ``reach`` segments apart, and the vertical component of
+    their unit separation (new minus placed); also the z of the closest point on the new fiber."""
+    from fiberpipe.model.specimen_stats import segment_distances
+
+    m, ns = len(X), len(z) - 1
+    p = np.stack([x, y, z], axis=1)
+    q = np.stack([X, Y, np.broadcast_to(z, X.shape)], axis=2)
+    i = np.repeat(np.arange(ns), 2 * reach + 1)
+    kk = i + np.tile(np.arange(-reach, reach + 1), ns)
+    ok = (kk >= 0) & (kk < ns)
+    i, kk = i[ok], kk[ok]
+    a0, a1 = p[i][None], p[i + 1][None]
+    b0, b1 = q[:, kk], q[:, kk + 1]
+    d, s, t = segment_distances(a0, a1, b0, b1)
+    pa = a0 + s[..., None] * (a1 - a0)
+    pb = b0 + t[..., None] * (b1 - b0)
+    uy = (pa[..., 1] - pb[..., 1]) / np.maximum(d, 1e-300)
+    return (d - need).ravel(), uy.ravel(), pa[..., 2].ravel(), np.repeat(np.arange(m), len(i))
+
+
+def _drop_height(ys, x, X, Y, z, r, need, gap_m, tol=2e-9):
+    """Lowest height h reached by the fiber (x, h + ys)(z) dropped straight down from above the
+    pile: returns h, the z of the touching point(s) and what it touches (fiber index or -1: plate).
+
+    Conservative advancement: the distance between two segments, one translated by h along y, is
+    convex in h, so a pair at gap g whose separation has vertical component u_y > 0 allows a drop of
+    g / u_y and no more; the fiber moves by the smallest such step until a gap closes to ``tol``.
+    """
+    h_plate = float(np.max(r + gap_m - ys))
+    near = np.flatnonzero(np.min(np.abs(X - x), axis=1) < need + 1e-9) if len(X) else np.zeros(0, int)
+    Xn, Yn = X[near], Y[near]
+    if len(near) == 0:
+        return h_plate, z[np.argmax(r + gap_m - ys)], -1
+    h = max(h_plate, float(np.max(Yn - ys))) + 2 * need  # above every fiber in reach
+    for _ in range(10000):
+        g, uy, zc, which = _pair_gaps(x, h + ys, Xn, Yn, z, need)
+        down = uy > 0
+        step = np.min(g[down] / uy[down]) if down.any() else np.inf
+        if g.min() < -tol:  # pragma: no cover - guarded by the advancement
+            raise RuntimeError("deposit: a dropped fiber overlaps the pile")
+        if h - h_plate <= step:  # the plate comes first
+            h = h_plate
+            break
+        if step <= tol:
+            hit = g <= tol
+            return h, zc[hit], near[which[hit]]
+        h -= step
+    g, uy, zc, which = _pair_gaps(x, h + ys, Xn, Yn, z, need)
+    hit = g <= tol
+    if hit.any():
+        return h, np.r_[zc[hit], z[np.argmax(r + gap_m - ys)]], np.r_[near[which[hit]], -1]
+    return h, z[np.argmax(r + gap_m - ys)], -1
+
+
+def _rest(x, bow_y, s0, X, Y, z, r, need, gap_m, ds0=2e-3, ds_min=1e-7, support_tol=2e-8):
+    """Height h and y-slope s at which the fiber (x, h + s (z − L/2) + bow_y)(z), dropped at slope
+    ``s0``, comes to rest by turning about its contact; and its supports (JSON-ready dict)."""
+    zmid = 0.5 * (z[0] + z[-1])
+    zc = z - zmid
+
+    def drop(s):
+        return _drop_height(s * zc + bow_y, x, X, Y, z, r, need, gap_m)
+
+    s = s0
+    h, zt, _ = drop(s)
+    ds = ds0
+    while ds > ds_min:
+        zt = np.atleast_1d(zt) - zmid  # the touching points, from the centre of mass
+        if zt.min() <= 0 <= zt.max():  # supported on both sides (or right under it)
+            break
+        step = -ds if zt.max() < 0 else ds  # turn the free side down
+        h2, zt2, _ = drop(s + step)
+        if h2 < h:
+            s, h, zt, ds = s + step, h2, zt2, min(2 * ds, ds0)
+        else:
+            ds /= 2
+    # what it rests on, within support_tol of touching
+    ys = s * zc + bow_y
+    pts = []
+    plate = r + gap_m - (h + ys)
+    for i in np.flatnonzero(plate >= -support_tol):
+        pts.append({"on": "plate", "z_m": float(z[i])})
+    if len(X):
+        g, uy, zp, which = _pair_gaps(x, h + ys, X, Y, z, need)
+        for f in np.unique(which[g <= support_tol]):
+            sel = (which == f) & (g <= support_tol)
+            pts.append({"on": int(f), "z_m": float(np.mean(zp[sel])), "gap_m": float(g[sel].min() + gap_m)})
+    return float(h), float(s), pts
+
+
+def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3, trust0=5e-5,
+            trust_max=2e-4, margin=5e-9, max_steps=400):
+    """Rest pose of a fiber dropped at slope ``s0``: it may sink, turn in its y-z plane and slide
+    sideways (x) as a whole, its x-tilt and shape kept; returns its points' x, y and supports.
+
+    # Strategy: the pose is (Δx, y_A, y_B): a sideways shift and the heights of the chord's ends
+    # (z = 0 and L). After a straight drop to first contact (:func:`_drop_height`), a sequence of
+    # small linear programs lowers the centre of mass (y_A + y_B)/2 within a trust region, each
+    # fiber pair near contact linearised (gap + n·∂p/∂q Δq ≥ ``margin``, n the unit separation at
+    # the closest points), the plate and walls exact. A step is kept if the true gaps stay ≥ 0,
+    # otherwise the trust region halves. ``slide_cost`` per metre of |Δx|, |Δy_A|, |Δy_B| (a
+    # small fraction of the height gained) stops zero-cost drifts; it acts like a tiny friction.
+    # Converged, the fiber rests in a frictionless equilibrium: on the plate, or on ≥ 2 points
+    # on either side of its centre of mass and, in x, in a groove.
+    """
+    from scipy.optimize import linprog
+
+    length = z[-1] - z[0]
+    u = (z - z[0]) / length
+    zmid = 0.5 * (z[0] + z[-1])
+    h, _, _ = _drop_height(s0 * (z - zmid) + bow_y, x, X, Y, z, r, need, gap_m)
+    yA, yB, dx = h - s0 * length / 2, h + s0 * length / 2, 0.0
+    near = np.flatnonzero(np.min(np.abs(X - x), axis=1) < need + 2 * (xhi - xlo)) if len(X) else np.zeros(0, int)
+
+    def ycurve(a, b):
+        return a * (1 - u) + b * u + bow_y
+
+    def gaps(dx_, a, b):
+        if len(near) == 0:
+            return np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0, int)
+        from fiberpipe.model.specimen_stats import segment_distances
+
+        p = np.stack([x + dx_, ycurve(a, b), z], axis=1)
+        Xn, Yn = X[near], Y[near]
+        q = np.stack([Xn, Yn, np.broadcast_to(z, Xn.shape)], axis=2)
+        ns = len(z) - 1
+        i = np.repeat(np.arange(ns), 5)
+        kk = i + np.tile(np.arange(-2, 3), ns)
+        ok = (kk >= 0) & (kk < ns)
+        i, kk = i[ok], kk[ok]
+        a0, a1 = p[i][None], p[i + 1][None]
+        d, s, t = segment_distances(a0, a1, q[:, kk], q[:, kk + 1])
+        pa = a0 + s[..., None] * (a1 - a0)
+        pb = q[:, kk] + t[..., None] * (q[:, kk + 1] - q[:, kk])
+        nvec = (pa - pb) / np.maximum(d, 1e-300)[..., None]
+        return (d - need).ravel(), nvec.reshape(-1, 3), ((pa[..., 2] - z[0]) / length).ravel(), np.repeat(near, len(i))
+
+    trust = trust0
+    c = np.r_[slide_cost, slide_cost, 0.5 + slide_cost, -0.5 + slide_cost, 0.5 + slide_cost, -0.5 + slide_cost]
+    # variables: Δx⁺, Δx⁻, ΔyA⁺, ΔyA⁻, ΔyB⁺, ΔyB⁻ (all ≥ 0)
+    for _ in range(max_steps):
+        g, n, up, _w = gaps(dx, yA, yB)
+        sel = g < 3 * trust
+        # linearised pair gaps: g + n_x Δx + n_y ((1−u) ΔyA + u ΔyB) ≥ margin
+        rows = np.c_[n[sel, 0], -n[sel, 0], n[sel, 1] * (1 - up[sel]), -n[sel, 1] * (1 - up[sel]),
+                     n[sel, 1] * up[sel], -n[sel, 1] * up[sel]]
+        A = [-rows]
+        bub = [g[sel] - margin]
+        # plate: y(z) − r − gap ≥ 0 at every point (exact)
+        yc = ycurve(yA, yB)
+        A.append(-np.c_[np.zeros((len(u), 2)), 1 - u, -(1 - u), u, -u])
+        bub.append(yc - r - gap_m)
+        # walls, exact: xlo ≤ x + dx + Δx ≤ xhi
+        lo_x, hi_x = xlo - (x.min() + dx), xhi - (x.max() + dx)
+        A.append(np.array([[1.0, -1.0, 0, 0, 0, 0], [-1.0, 1.0, 0, 0, 0, 0]]))
+        bub.append(np.array([max(hi_x, 0.0), max(-lo_x, 0.0)]))
+        # in µm, so that HiGHS' feasibility tolerance (1e-7) is far below the clearance
+        res = linprog(c, A_ub=np.vstack(A), b_ub=np.concatenate(bub) * 1e6, bounds=[(0, trust * 1e6)] * 6,
+                      method="highs")
+        if res.status != 0:
+            break
+        v = res.x * 1e-6
+        ddx, dA, dB = v[0] - v[1], v[2] - v[3], v[4] - v[5]
+        drop_ = -(dA + dB) / 2
+        if drop_ < 1e-10:
+            if trust <= 1e-7:
+                break
+            trust /= 4
+            continue
+        g2 = gaps(dx + ddx, yA + dA, yB + dB)[0]
+        if g2.size and g2.min() < 0:
+            trust /= 2
+            continue
+        dx, yA, yB = dx + ddx, yA + dA, yB + dB
+        trust = min(trust * 1.5, trust_max)
+    xs, ys = x + dx, ycurve(yA, yB)
+    pts = [{"on": "plate", "z_m": float(z[i])} for i in np.flatnonzero(ys - r - gap_m <= 2e-8)]
+    g, n, up, w = gaps(dx, yA, yB)
+    for f in np.unique(w[g <= 2e-8]):
+        s_ = (w == f) & (g <= 2e-8)
+        pts.append({"on": int(f), "z_m": float(z[0] + length * np.mean(up[s_])), "gap_m": float(g[s_].min() + gap_m)})
+    return xs, ys, pts

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import FiberpipeError
 from ..model.mesh import plane_penetration
-from .effects import (SceneArrays, Clamp, Clamps, Damping, Drive, Drives, Effect, Gravity, LineLoad, Loads, Plates,
+from .effects import (SceneArrays, AxialLock, Clamp, Clamps, Damping, Drive, Drives, Effect, Gravity, LineLoad, Loads, Plates,
                       PointLoad, Walls)
 from .integrator import SimulationSettings
 from .model import Material, Model, build_model
@@ -160,6 +160,8 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
             effects.append(Walls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None}))
         elif name == "drives":
             effects.append(Drives([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in sc.drives]))
+        elif name == "constraints":
+            effects.append(AxialLock(axis=sc.constraints.axis, nodes=sc.constraints.lock_axial))
     if "contact" in names or "friction" in names:
         effects.extend(_contact_effects(model, cfg))
     for e in effects:

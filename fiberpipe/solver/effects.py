@@ -201,6 +201,36 @@ class Clamps(Effect):
 
 
 @dataclass
+class AxialLock(Effect):
+    """The study's boundary condition, "the movement is locked in the fiber orientation": the
+    translation along ``axis`` of every node (``nodes="all"``) or of each fiber's first and last
+    node (``"ends"``) is fixed at its initial value; rotations and the other translations are free."""
+
+    axis: str = "z"
+    nodes: str = "all"
+    name = "constraints"
+
+    def __post_init__(self):
+        if self.axis not in _AXES:
+            raise FiberpipeError(f"constraints axis must be x, y or z, got {self.axis!r}")
+        if self.nodes not in ("all", "ends"):
+            raise FiberpipeError(f"constraints lock_axial must be all or ends, got {self.nodes!r}")
+
+    def setup(self, model, scene):
+        m = scene.mask()
+        bit = {"x": FIX_X, "y": FIX_Y, "z": FIX_Z}[self.axis]
+        if self.nodes == "all":
+            m |= np.uint8(bit)
+        else:
+            off = np.asarray(model.node_offsets, dtype=np.int64)
+            m[off[:-1]] |= np.uint8(bit)
+            m[off[1:] - 1] |= np.uint8(bit)
+
+    def describe(self) -> str:
+        return f"constraints: {self.axis} translation of {self.nodes} nodes fixed"
+
+
+@dataclass
 class PointLoad:
     """A constant force (N) on one node of a fiber (``at`` = start | end | node index)."""
 

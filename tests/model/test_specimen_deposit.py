@@ -1,0 +1,121 @@
+"""placement="deposit" of fiberpipe.model.specimen.cassette_specimen: a gravity-deposited loose
+pile (issue #5): no overlaps, inside the cassette, every fiber supported on both sides of its
+centre of mass (or on the plate), the upper plate touching the top, the study's statistics; and
+the shipped data-samples/paper-40 specimen, which is made with it."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fiberpipe.model.specimen import cassette_specimen
+from fiberpipe.model.specimen_stats import segment_distances, specimen_statistics
+
+R = 0.25e-3
+GAP = 1e-6
+SAMPLE = Path(__file__).resolve().parents[2] / "data-samples" / "paper-40"
+SIGMA = float(np.deg2rad(6.0) / np.sqrt(np.pi))
+
+
+def _supports(pts, z_tol=0.3e-3, touch=GAP + 0.1e-6):
+    """For each fiber (F, n, 3, all on the same z grid): the z of the points where it touches a
+    fiber below it or the lower plate (y = 0), and whether they straddle its centre of mass."""
+    n_f, n = pts.shape[:2]
+    zmid = 0.5 * (pts[0, 0, 2] + pts[0, -1, 2])
+    out = []
+    for k in range(n_f):
+        zs = list(pts[k, pts[k, :, 1] - R <= touch, 2])  # on the plate
+        for j in range(n_f):
+            if j == k:
+                continue
+            a0, a1 = pts[k, :-1][:, None], pts[k, 1:][:, None]
+            b0, b1 = pts[j, :-1][None], pts[j, 1:][None]
+            d, s, t = segment_distances(a0, a1, b0, b1)
+            hit = d - 2 * R <= touch
+            if not hit.any():
+                continue
+            pa = a0 + s[..., None] * (a1 - a0)
+            pb = b0 + t[..., None] * (b1 - b0)
+            below = hit & (pb[..., 1] < pa[..., 1])  # j holds k up
+            zs += list(pa[below][:, 2])
+        zs = np.asarray(zs)
+        ok = zs.size > 0 and zs.min() <= zmid + z_tol and zs.max() >= zmid - z_tol
+        out.append((zs, bool(ok)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def small():
+    return cassette_specimen(n_fibers=12, width_m=1.5e-3, length_m=6e-3, points_per_fiber=25, seed=1,
+                             placement="deposit", tilt_rad=SIGMA, curvature_per_m=0.384, candidates=2, top="pile")
+
+
+def test_small_deposit_is_a_supported_pile_without_overlaps(small):
+    fibers, info = small
+    pts = fibers.points_m.reshape(12, 25, 3)
+    st = specimen_statistics(fibers, box_min_m=info["box_min_m"], box_max_m=info["box_max_m"])
+    assert st["min_gap_m"] >= GAP - 1e-9  # no overlap: closest centre lines ≥ 2r + 1 µm
+    assert st["min_gap_m"] <= GAP + 0.1e-6  # and some fibers touch (at the clearance)
+    assert st["max_outside_m"] <= 1e-12  # inside the cassette (walls, plates)
+    assert pts[:, :, 1].min() - R >= GAP - 1e-12
+    top = (pts[:, :, 1] + R).max()
+    assert info["height_m"] - top == pytest.approx(GAP, abs=1e-12)  # the upper plate touches the top
+    assert info["deposit"]["fibers_at_upper_plate"] >= 1
+    assert info["deposit"]["fibers_on_lower_plate"] >= 1
+    assert info["deposit"]["contacts"] >= 12  # a contact network, not a lattice of free fibers
+    for k, (zs, ok) in enumerate(_supports(pts)):
+        assert ok, f"fiber {k} is not supported on both sides of its centre of mass: {zs}"
+
+
+def test_deposit_is_deterministic_and_other_placements_unchanged(small):
+    fibers, _ = small
+    again, _ = cassette_specimen(n_fibers=12, width_m=1.5e-3, length_m=6e-3, points_per_fiber=25, seed=1,
+                                 placement="deposit", tilt_rad=SIGMA, curvature_per_m=0.384, candidates=2,
+                                 top="pile")
+    assert np.array_equal(fibers.points_m, again.points_m)
+    with pytest.raises(ValueError):
+        cassette_specimen(placement="deposit", top="ceiling")
+
+
+def test_shipped_paper40_is_the_deposited_pile():
+    from fiberpipe.artifacts import read_fibers
+
+    fibers = read_fibers(SAMPLE / "fibers.h5")
+    info = json.loads((SAMPLE / "specimen.json").read_text())
+    assert info["generator"]["placement"] == "deposit"
+    pts = fibers.points_m.reshape(40, -1, 3)
+    st = specimen_statistics(fibers, box_min_m=info["box_min_m"], box_max_m=info["box_max_m"])
+    assert fibers.n_fibers == 40
+    assert st["min_gap_m"] >= GAP - 1e-9 and st["max_outside_m"] <= 1e-12
+    assert 0.36 < info["volume_fraction"] < 0.40  # the study's 37.7 %: see the sample's README
+    assert info["height_m"] - (pts[:, :, 1] + R).max() == pytest.approx(GAP, abs=1e-9)
+    assert 4.5 < st["phi_mean_deg"] < 7.5  # the study's Φ_average = 6°
+    assert st["curvature_xz_per_m"] == pytest.approx(0.2445, rel=0.15)  # Table 4: 0.241, 0.248
+    assert st["curvature_yz_per_m"] == pytest.approx(0.2445, rel=0.15)
+    assert info["deposit"]["contacts"] >= 40
+    bad = [k for k, (_, ok) in enumerate(_supports(pts)) if not ok]
+    assert not bad, f"fibers not supported on both sides of their centre of mass: {bad}"
+    # the config's upper plate sits on the pile
+    import yaml
+
+    cfg = yaml.safe_load((SAMPLE.parents[1] / "configs" / "paper-40.yaml").read_text())
+    upper = cfg["scene"]["plates"]["upper_position"]
+    assert float(upper.split()[0]) * 1e-3 == pytest.approx(info["height_m"], abs=1e-7)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the deposited pile is not yet stable under gravity in the solver "
+                   "(fibers slide/turn off their crossings): data-samples/paper-40/README.md")
+def test_shipped_paper40_rests_under_gravity():
+    """Meshed and simulated 5 ms under gravity alone (α = 300 1/s, so that a fiber without support
+    falls ≈ 79 µm), no node should move by more than 0.1 r."""
+    from fiberpipe.artifacts import read_fibers
+    from fiberpipe.config import load_config
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.stages.simulate import settle_under_gravity
+
+    cfg = load_config(SAMPLE.parents[1] / "configs" / "paper-40.yaml",
+                      {"solver.settle_time": "5 ms", "scene.damping.alpha": "300 1/s"})
+    mesh = mesh_polylines(read_fibers(SAMPLE / "fibers.h5"), cfg.mesh.element_length, radius_m=cfg.fiber.radius)
+    assert settle_under_gravity(mesh, cfg)["max_displacement_m"] < 0.1 * R
