@@ -328,6 +328,10 @@ class LoadingConfig(Section):
     displacement: Length = 0.0
     velocity: Velocity = 1000e-3 / 60
     ramp: Literal["smooth", "linear"] = "smooth"
+    ramp_fraction: float = Field(
+        0.1, gt=0, lt=0.5,
+        description="smooth ramp: share of the loading time spent accelerating (and again decelerating); "
+                    "the plateau speed is `velocity`, so the loading lasts U/v/(1 − ramp_fraction)")
 
     @model_validator(mode="after")
     def _check(self):

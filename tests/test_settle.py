@@ -33,4 +33,7 @@ def test_settling_then_loading(tmp_path, write_yaml):
     # the upper fiber falls 0.15 mm onto the lower one, which rests on the plate
     assert sim["settle_max_displacement_m"] == pytest.approx(0.15e-3, rel=0.05)
     post = json.loads((out / "post" / "summary.json").read_text())
-    assert post["energy_balance_residual_max"] < 1e-2  # the loaded run's accounts start at the settled state
+    # the loaded run's accounts start at the settled state (were they not reset, the residual would
+    # be O(1)); the bounce of the falling fiber makes the value itself chaotic: 0.0025–0.013 for
+    # gravity perturbed by 1e-8 (measured 2026-11-22), hence the bound
+    assert post["energy_balance_residual_max"] < 3e-2

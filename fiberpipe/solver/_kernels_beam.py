@@ -27,7 +27,8 @@ Manual 3.5):
 * strain energy ``½ L_0 (Γ·CΓ + κ·Dκ)``.
 
 All kernels take flat arrays only (structure of arrays by field, fibers joined in CSR order); the
-element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``.
+element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``. The step loops' beam pass writes one row of
+resultants per element (:func:`beam_resultants`) and the update gathers them per node (no scatter).
 """
 
 from __future__ import annotations
@@ -114,10 +115,24 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         gamma_rest[e, 2] = r02 * dx + r12 * dy + r22 * dz
 
 
+# element resultant buffer columns (``eb``, (E, 9)): the spatial force n, moment m and the lever
+# term h = ½ (x_2 − x_1) × n; node 1 gets (+n, m + h), node 2 (−n, h − m)
+EB_N = 0
+EB_M = 3
+EB_H = 6
+EB_SIZE = 9
+
+
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                record, beta_over_dt, strain_prev, e_lo, e_hi):
-    """:func:`beam_forces` over the elements ``e_lo … e_hi − 1`` (returns their two energies)."""
+def _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                      record, beta_over_dt, strain_prev, e_lo, e_hi):
+    """Stress resultants of the elements ``e_lo … e_hi − 1`` into ``eb`` (returns their two energies).
+
+    # Strategy: no scatter. Each element writes only its own row of ``eb``; the nodes gather
+    # their two elements' rows afterwards (:func:`gather_resultants`, or the step loop's update).
+    # Without the read-modify-write of shared nodes the element loop has no dependence between
+    # iterations, and the per-fiber prange variant needs no care about races.
+    """
     se = 0.0
     pd = 0.0
     use_beta = beta_over_dt > 0.0
@@ -126,15 +141,36 @@ def _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
         b = a + 1
         w1, x1, y1, z1 = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
         w2, x2, y2, z2 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-        if w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2 < 0.0:
+        dot = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+        if dot < 0.0:
             w2, x2, y2, z2 = -w2, -x2, -y2, -z2
+            dot = -dot
         tx, ty, tz = _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2)
+        # midpoint rotation from the unnormalised q1 + q2: R(q) = I + 2/|q|² (...) holds for any
+        # q ≠ 0, and |q1 + q2|² = 2 + 2 q1·q2 for unit q1, q2 (no square root, one division)
         mw = w1 + w2
         mx = x1 + x2
         my = y1 + y2
         mz = z1 + z2
-        inv = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(mw * inv, mx * inv, my * inv, mz * inv)
+        s2 = 2.0 / (2.0 + 2.0 * dot)
+        xx = mx * mx * s2
+        yy = my * my * s2
+        zz = mz * mz * s2
+        xy = mx * my * s2
+        xz = mx * mz * s2
+        yz = my * mz * s2
+        wx = mw * mx * s2
+        wy = mw * my * s2
+        wz = mw * mz * s2
+        r00 = 1.0 - (yy + zz)
+        r01 = xy - wz
+        r02 = xz + wy
+        r10 = xy + wz
+        r11 = 1.0 - (xx + zz)
+        r12 = yz - wx
+        r20 = xz - wy
+        r21 = yz + wx
+        r22 = 1.0 - (xx + yy)
         ex = x[b, 0] - x[a, 0]
         ey = x[b, 1] - x[a, 1]
         ez = x[b, 2] - x[a, 2]
@@ -191,32 +227,23 @@ def _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
         n0 = r00 * nb0 + r01 * nb1 + r02 * nb2
         n1 = r10 * nb0 + r11 * nb1 + r12 * nb2
         n2 = r20 * nb0 + r21 * nb1 + r22 * nb2
-        m0 = r00 * mb0 + r01 * mb1 + r02 * mb2
-        m1 = r10 * mb0 + r11 * mb1 + r12 * mb2
-        m2 = r20 * mb0 + r21 * mb1 + r22 * mb2
+        eb[e, 0] = n0
+        eb[e, 1] = n1
+        eb[e, 2] = n2
+        eb[e, 3] = r00 * mb0 + r01 * mb1 + r02 * mb2
+        eb[e, 4] = r10 * mb0 + r11 * mb1 + r12 * mb2
+        eb[e, 5] = r20 * mb0 + r21 * mb1 + r22 * mb2
         # ½ (x2 − x1) × n
-        h0 = 0.5 * (ey * n2 - ez * n1)
-        h1 = 0.5 * (ez * n0 - ex * n2)
-        h2 = 0.5 * (ex * n1 - ey * n0)
-        f[a, 0] += n0
-        f[a, 1] += n1
-        f[a, 2] += n2
-        f[b, 0] -= n0
-        f[b, 1] -= n1
-        f[b, 2] -= n2
-        mom[a, 0] += m0 + h0
-        mom[a, 1] += m1 + h1
-        mom[a, 2] += m2 + h2
-        mom[b, 0] += h0 - m0
-        mom[b, 1] += h1 - m1
-        mom[b, 2] += h2 - m2
+        eb[e, 6] = 0.5 * (ey * n2 - ez * n1)
+        eb[e, 7] = 0.5 * (ez * n0 - ex * n2)
+        eb[e, 8] = 0.5 * (ex * n1 - ey * n0)
     return se, pd
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                record, beta_over_dt, strain_prev):
-    """Add the internal forces and moments of all elements to ``f`` and ``mom``.
+def beam_resultants(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                    record, beta_over_dt, strain_prev, node_offsets):
+    """Stress resultants of all elements into ``eb`` (the serial beam pass of the step loops).
 
     Parameters
     ----------
@@ -227,45 +254,37 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
     el_C : (E, 3) float64, N — ``(k_s G A, k_s G A, E A)``.
     el_Dk : (E, 3) float64, N·m/rad — ``(E I, E I, G J) / L_0``.
     gamma_rest, theta_rest : (E, 3) float64 — rest strains (see :func:`element_rest_strains`).
-    f : (N, 3) float64, N — forces, accumulated into.
-    mom : (N, 3) float64, N·m — spatial moments, accumulated into.
+    eb : (E, 9) float64 — out: per element the spatial force ``n`` (N), moment ``m`` (N·m) and
+        ``h = ½ (x_2 − x_1) × n`` (N·m); node 1 of the element gets ``(+n, m + h)``, node 2
+        ``(−n, h − m)`` (:func:`gather_resultants`).
     record : bool — return the strain energy (J) if true (else 0).
     beta_over_dt : float, 1 — stiffness-proportional damping β/Δt (0: off).
     strain_prev : (E, 6) float64 — previous ``(Γ, θ)`` per element (only read/written if
         ``beta_over_dt > 0``); the damping stress is ``β C Γ̇`` and ``β D κ̇`` (backward difference).
+    node_offsets : (F+1,) int64 — unused here (signature of :func:`beam_resultants_fibers`).
 
     Returns
     -------
     (strain_energy_J, damping_energy_J) : the stored energy if ``record``; the energy dissipated
     in this step by the stiffness-proportional damping stress (0 if off).
     """
-    return _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                       record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def beam_forces_csr(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                    record, beta_over_dt, strain_prev, node_offsets):
-    """:func:`beam_forces` with the signature of :func:`beam_forces_fibers` (``node_offsets``
-    unused): the serial beam pass of the cached step loops."""
-    return _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                       record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
+    return _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                             record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
 
 
 # Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
 # compiled in another process makes that loop's own cache entry crash when it is loaded (numba
-# 0.68; reproduced: cache beam_forces_fibers in process 1, compile the contact loop in 2, load it in
-# 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
+# 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2, load it
+# in 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
 @njit(cache=False, fastmath=True, error_model="numpy", parallel=True)
-def beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                       record, beta_over_dt, strain_prev, node_offsets):
-    """:func:`beam_forces` with one ``prange`` task per fiber (``solver.threads`` > 1).
+def beam_resultants_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                           record, beta_over_dt, strain_prev, node_offsets):
+    """:func:`beam_resultants` with one ``prange`` task per fiber (``solver.threads`` > 1).
 
     Needs the CSR element order of :class:`~fiberpipe.solver.model.Model` (fiber ``k`` owns the
-    elements ``node_offsets[k] − k … node_offsets[k+1] − k − 2``), so each task writes only its own
-    fiber's nodes: no race, and every node's ``f`` and ``mom`` get the same additions in the same
-    order as in the serial kernel (bit-identical); the energies are summed per fiber, then in fiber
-    order (last bits only).
+    elements ``node_offsets[k] − k … node_offsets[k+1] − k − 2``). Each element writes its own
+    row of ``eb``, so the rows are bit-identical to the serial pass; the energies are summed per
+    fiber, then in fiber order (last bits only).
     """
     nf = node_offsets.shape[0] - 1
     se_f = np.zeros(nf)
@@ -273,8 +292,8 @@ def beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_res
     for k in prange(nf):
         e_lo = node_offsets[k] - k
         e_hi = node_offsets[k + 1] - k - 1
-        s, d = _beam_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
-                           record, beta_over_dt, strain_prev, e_lo, e_hi)
+        s, d = _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                                 record, beta_over_dt, strain_prev, e_lo, e_hi)
         se_f[k] = s
         pd_f[k] = d
     se = 0.0
@@ -282,4 +301,74 @@ def beam_forces_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_res
     for k in range(nf):
         se += se_f[k]
         pd += pd_f[k]
+    return se, pd
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def node_resultant(eb, node_offsets_k, node_end_k, k, i):
+    """Force and moment (6 scalars) of the beam elements on node ``i`` of fiber ``k``, whose nodes
+    are ``node_offsets_k … node_end_k − 1``: ``(+n, m + h)`` of the element starting at ``i``,
+    ``(−n, h − m)`` of the element ending there."""
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    if i < node_end_k - 1:
+        e = i - k
+        fx = eb[e, 0]
+        fy = eb[e, 1]
+        fz = eb[e, 2]
+        mx = eb[e, 3] + eb[e, 6]
+        my = eb[e, 4] + eb[e, 7]
+        mz = eb[e, 5] + eb[e, 8]
+    if i > node_offsets_k:
+        e = i - k - 1
+        fx -= eb[e, 0]
+        fy -= eb[e, 1]
+        fz -= eb[e, 2]
+        mx += eb[e, 6] - eb[e, 3]
+        my += eb[e, 7] - eb[e, 4]
+        mz += eb[e, 8] - eb[e, 5]
+    return fx, fy, fz, mx, my, mz
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def gather_resultants(eb, node_offsets, f, mom):
+    """Add the element resultants ``eb`` of :func:`beam_resultants` to the nodes' ``f`` and ``mom``."""
+    for k in range(node_offsets.shape[0] - 1):
+        lo = node_offsets[k]
+        hi = node_offsets[k + 1]
+        for i in range(lo, hi):
+            fx, fy, fz, mx, my, mz = node_resultant(eb, lo, hi, k, i)
+            f[i, 0] += fx
+            f[i, 1] += fy
+            f[i, 2] += fz
+            mom[i, 0] += mx
+            mom[i, 1] += my
+            mom[i, 2] += mz
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom,
+                record, beta_over_dt, strain_prev):
+    """Add the internal forces and moments of all elements to ``f`` (N) and ``mom`` (N·m, spatial).
+
+    Same parameters and returns as :func:`beam_resultants` (``f``, ``mom``: (N, 3), accumulated
+    into, instead of ``eb``). For analyses and tests; the step loops gather ``eb`` in their update.
+    """
+    E = el_n1.shape[0]
+    eb = np.empty((E, EB_SIZE))
+    se, pd = _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
+                               record, beta_over_dt, strain_prev, 0, E)
+    # nodes of each element to the nodes' accumulators (any element order)
+    for e in range(E):
+        a = el_n1[e]
+        b = a + 1
+        for c in range(3):
+            f[a, c] += eb[e, c]
+            f[b, c] -= eb[e, c]
+            mom[a, c] += eb[e, 3 + c] + eb[e, 6 + c]
+            mom[b, c] += eb[e, 6 + c] - eb[e, 3 + c]
     return se, pd

@@ -33,7 +33,7 @@ import types
 import numpy as np
 from numba import njit
 
-from ._kernels_beam import beam_forces_csr, beam_forces_fibers, quat_to_matrix
+from ._kernels_beam import EB_SIZE, beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
 
 # accumulator slots (float64 array ``acc``)
@@ -82,8 +82,9 @@ def _advance_template(
     mass, inv_mass, J, inv_J, radius_node, x0,
     # state (in/out)
     x, q, v, w, acc, t_start, step_start,
-    # work arrays
-    f, mom,
+    # work arrays: f, mom (N, 3) for the forces and moments of everything but the beams, eb (E, 9) for
+    # the beams' element resultants (gathered per node in the update)
+    f, mom, eb,
     # step
     dt, n_steps,
     # damping
@@ -119,8 +120,24 @@ def _advance_template(
     a_half = 0.5 * alpha * dt
     c_old = 1.0 - a_half
     c_inv = 1.0 / (1.0 + a_half)
+    # v_{n+½} = c_keep v_{n−½} + (Δt c_inv / m) f: the constant factors folded once per call
+    c_keep = c_old * c_inv
+    dt_c = dt * c_inv if use_damp else dt
+    vd_scale = alpha * dt
     beta_over_dt = beta / dt if beta > 0.0 else 0.0
+    NF = node_offsets.shape[0] - 1
+    # isotropic rotary inertia (build_model's): Ω × JΩ = 0, the gyroscopic term is skipped
+    gyro = False
+    for i in range(N):
+        if J[i, 0] != J[i, 1] or J[i, 0] != J[i, 2]:
+            gyro = True
+            break
     acc_before = np.zeros(ACC_SIZE)
+    # the contact hook's force array (contact_effect: it leaves each step's fiber–fiber contact and
+    # friction forces there instead of adding them to f; the update adds them, books their work
+    # Δt f_n·v̄_n and clears the array, in its own pass over the nodes); (0, 3) for other hooks
+    fc = _contact_forces_of(contact_data)
+    has_fc = fc.shape[0] == N
     status = STATUS_OK
     bad = -1
     done = 0
@@ -140,10 +157,10 @@ def _advance_template(
         else:
             f[:, :] = 0.0
         mom[:, :] = 0.0
-        # _beam_pass: beam_forces_csr (serial) or beam_forces_fibers (prange per fiber), bound per
-        # loop variant by _specialise
+        # _beam_pass: beam_resultants (serial) or beam_resultants_fibers (prange per fiber), bound per
+        # loop variant by _specialise; it fills eb, the update below gathers it
         se, vd_beta = _beam_pass(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-                                 f, mom, record, beta_over_dt, strain_prev, node_offsets)
+                                 eb, record, beta_over_dt, strain_prev, node_offsets)
         acc[ACC_VD] += vd_beta
         n_pen = 0
         if P > 0:
@@ -174,42 +191,80 @@ def _advance_template(
         ke = 0.0
         vd = 0.0
         wk_fix = 0.0
+        pw_c = 0.0
         vmax2 = 0.0
+        # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
+        fib = 0
+        node_lo = 0
+        node_end = node_offsets[1] if NF > 0 else N
         for i in range(N):
+            if i == node_end:
+                fib += 1
+                node_lo = node_end
+                node_end = node_offsets[fib + 1]
+            bfx, bfy, bfz, bmx, bmy, bmz = node_resultant(eb, node_lo, node_end, fib, i)
+            fx_i = f[i, 0] + bfx
+            fy_i = f[i, 1] + bfy
+            fz_i = f[i, 2] + bfz
+            cfx = 0.0
+            cfy = 0.0
+            cfz = 0.0
+            if has_fc:
+                cfx = fc[i, 0]
+                cfy = fc[i, 1]
+                cfz = fc[i, 2]
+                fc[i, 0] = 0.0
+                fc[i, 1] = 0.0
+                fc[i, 2] = 0.0
+                fx_i += cfx
+                fy_i += cfy
+                fz_i += cfz
+            mx_i = mom[i, 0] + bmx
+            my_i = mom[i, 1] + bmy
+            mz_i = mom[i, 2] + bmz
             m = mass[i]
             im = inv_mass[i]
             mask = fix_mask[i] if has_fix else 0
             v0x = v[i, 0]
             v0y = v[i, 1]
             v0z = v[i, 2]
+            b = dt_c * im
             if use_damp:
-                v1x = (c_old * v0x + dt * f[i, 0] * im) * c_inv
-                v1y = (c_old * v0y + dt * f[i, 1] * im) * c_inv
-                v1z = (c_old * v0z + dt * f[i, 2] * im) * c_inv
+                v1x = c_keep * v0x + b * fx_i
+                v1y = c_keep * v0y + b * fy_i
+                v1z = c_keep * v0z + b * fz_i
             else:
-                v1x = v0x + dt * f[i, 0] * im
-                v1y = v0y + dt * f[i, 1] * im
-                v1z = v0z + dt * f[i, 2] * im
+                v1x = v0x + b * fx_i
+                v1y = v0y + b * fy_i
+                v1z = v0z + b * fz_i
             # rotations: body moment
             w0x = w[i, 0]
             w0y = w[i, 1]
             w0z = w[i, 2]
             qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-            r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(qw, qx, qy, qz)
-            mbx = r00 * mom[i, 0] + r10 * mom[i, 1] + r20 * mom[i, 2]
-            mby = r01 * mom[i, 0] + r11 * mom[i, 1] + r21 * mom[i, 2]
-            mbz = r02 * mom[i, 0] + r12 * mom[i, 1] + r22 * mom[i, 2]
+            # body moment Rᵀ M = conj(q) M q, as M + w t + u' × t with u' = −u, t = 2 u' × M
+            # (fewer operations than building R)
+            tx_ = 2.0 * (qz * my_i - qy * mz_i)
+            ty_ = 2.0 * (qx * mz_i - qz * mx_i)
+            tz_ = 2.0 * (qy * mx_i - qx * my_i)
+            mbx = mx_i + qw * tx_ - (qy * tz_ - qz * ty_)
+            mby = my_i + qw * ty_ - (qz * tx_ - qx * tz_)
+            mbz = mz_i + qw * tz_ - (qx * ty_ - qy * tx_)
             jx = J[i, 0]
             jy = J[i, 1]
             jz = J[i, 2]
-            # gyroscopic Ω × JΩ
-            gx = w0y * jz * w0z - w0z * jy * w0y
-            gy = w0z * jx * w0x - w0x * jz * w0z
-            gz = w0x * jy * w0y - w0y * jx * w0x
+            # gyroscopic Ω × JΩ (zero for isotropic J)
+            gx = 0.0
+            gy = 0.0
+            gz = 0.0
+            if gyro:
+                gx = w0y * jz * w0z - w0z * jy * w0y
+                gy = w0z * jx * w0x - w0x * jz * w0z
+                gz = w0x * jy * w0y - w0y * jx * w0x
             if use_damp:
-                w1x = (c_old * w0x + dt * (mbx - gx) * inv_J[i, 0]) * c_inv
-                w1y = (c_old * w0y + dt * (mby - gy) * inv_J[i, 1]) * c_inv
-                w1z = (c_old * w0z + dt * (mbz - gz) * inv_J[i, 2]) * c_inv
+                w1x = c_keep * w0x + dt_c * (mbx - gx) * inv_J[i, 0]
+                w1y = c_keep * w0y + dt_c * (mby - gy) * inv_J[i, 1]
+                w1z = c_keep * w0z + dt_c * (mbz - gz) * inv_J[i, 2]
             else:
                 w1x = w0x + dt * (mbx - gx) * inv_J[i, 0]
                 w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
@@ -237,15 +292,15 @@ def _advance_template(
                 if fx:
                     v1x = px
                     vb = 0.5 * (v1x + v0x)
-                    wk_fix += (m * (v1x - v0x) / dt - f[i, 0] + alpha * m * vb) * vb * dt
+                    wk_fix += (m * (v1x - v0x) / dt - fx_i + alpha * m * vb) * vb * dt
                 if fy:
                     v1y = py
                     vb = 0.5 * (v1y + v0y)
-                    wk_fix += (m * (v1y - v0y) / dt - f[i, 1] + alpha * m * vb) * vb * dt
+                    wk_fix += (m * (v1y - v0y) / dt - fy_i + alpha * m * vb) * vb * dt
                 if fz:
                     v1z = pz
                     vb = 0.5 * (v1z + v0z)
-                    wk_fix += (m * (v1z - v0z) / dt - f[i, 2] + alpha * m * vb) * vb * dt
+                    wk_fix += (m * (v1z - v0z) / dt - fz_i + alpha * m * vb) * vb * dt
                 if mask & (FIX_ROT | DRIVEN):
                     w1x = 0.0
                     w1y = 0.0
@@ -257,9 +312,11 @@ def _advance_template(
             wax = 0.5 * (w0x + w1x)
             way = 0.5 * (w0y + w1y)
             waz = 0.5 * (w0z + w1z)
+            # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
+            pw_c += cfx * vax + cfy * vay + cfz * vaz
             if use_damp:
-                vd += alpha * dt * (m * (vax * vax + vay * vay + vaz * vaz)
-                                    + jx * wax * wax + jy * way * way + jz * waz * waz)
+                vd += (m * (vax * vax + vay * vay + vaz * vaz)
+                       + jx * wax * wax + jy * way * way + jz * waz * waz)
             if record:
                 v2 = v1x * v1x + v1y * v1y + v1z * v1z
                 # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
@@ -300,18 +357,19 @@ def _advance_template(
             nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
             ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
             nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
-            inv = 1.0 / math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+            # renormalise: |q|² = 1 + ε with ε ~ 1e-16 (a product of unit quaternions), so one
+            # Newton step for 1/√(1 + ε), (3 − |q|²)/2, is exact to O(ε²): no square root, no division
+            inv = 0.5 * (3.0 - (nw * nw + nx * nx + ny * ny + nz * nz))
             q[i, 0] = nw * inv
             q[i, 1] = nx * inv
             q[i, 2] = ny * inv
             q[i, 3] = nz * inv
-        acc[ACC_VD] += vd
+        acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
             acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
-        if contact_on:
-            # second half of the hook's contact work of this step, at v_{n+½} (see contact_power)
-            acc[ACC_PW] += 0.5 * dt * _contact_power(v, contact_data)
+        if has_fc:
+            acc[ACC_PW] += dt * pw_c
         done = it + 1
         # ---- history and checks ---------------------------------------------------------
         if record:
@@ -380,23 +438,24 @@ _contact_hook = no_contact
 
 
 @njit(cache=True)
-def no_contact_power(v, data):
-    """The contact power of a hook that books all its work itself (``_contact_power`` default)."""
-    return 0.0
+def no_contact_forces(data):
+    """A hook that adds its forces to ``f`` itself has no force array for the update (the
+    ``_contact_forces_of`` default): an empty (0, 3) array."""
+    return np.zeros((0, 3))
 
 
-_contact_power = no_contact_power
+_contact_forces_of = no_contact_forces
 
 
 def _specialise(name: str, hook, cache: bool, parallel: bool = False):
     g = dict(globals())
     g["_contact_hook"] = hook
-    g["_contact_power"] = no_contact_power
+    g["_contact_forces_of"] = no_contact_forces
     if hook is not no_contact:
-        from .contact_effect import contact_power, contact_step
+        from .contact_effect import contact_forces_of, contact_step
         if hook is contact_step:
-            g["_contact_power"] = contact_power
-    g["_beam_pass"] = beam_forces_fibers if parallel else beam_forces_csr
+            g["_contact_forces_of"] = contact_forces_of
+    g["_beam_pass"] = beam_resultants_fibers if parallel else beam_resultants
     tmpl = _advance_template
     fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)
     fn.__qualname__ = name
@@ -413,7 +472,7 @@ def step_loop_for(hook, threads: int = 1):
     """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none).
 
     ``threads > 1``: the variant whose beam pass runs one prange task per fiber; it is compiled in
-    every process (not cached, see :func:`fiberpipe.solver._kernels_beam.beam_forces_fibers`).
+    every process (not cached, see :func:`fiberpipe.solver._kernels_beam.beam_resultants_fibers`).
     """
     parallel = threads > 1
     if hook is no_contact and not parallel:

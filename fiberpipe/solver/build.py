@@ -152,7 +152,8 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
             p, ld = sc.plates, sc.loading
             effects.append(Plates(axis=p.axis, lower=p.lower, upper=p.upper,
                                   displacement_m=float(ld.displacement), velocity_m_s=float(ld.velocity),
-                                  ramp=ld.ramp, lower_position_m=p.lower_position,
+                                  ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
+                                  lower_position_m=p.lower_position,
                                   upper_position_m=p.upper_position))
         elif name == "walls":
             w = sc.walls

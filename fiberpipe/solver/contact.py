@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fiberpipe.solver.laws import law_line, law_point, law_weight
+from fiberpipe.solver.laws import law_line, law_point, law_weight_point
 
 # Gauss–Legendre nodes on [0, 1] and weights (sum 1), orders 1…6
 _GL = {
@@ -321,7 +321,8 @@ def contact_forces(
     parameters, same returns ``(energy, n_active)``)."""
     empty = np.zeros(0)
     return contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
-                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty, empty, 0.0)
+                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty, empty, 0.0,
+                             np.zeros(0, np.int64))
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -347,6 +348,7 @@ def contact_forces_ex(
     c_fsum,
     c_gap,
     reach,
+    c_active,
 ):
     """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
 
@@ -371,14 +373,20 @@ def contact_forces_ex(
         size > 0: the pair's contact share (point part: its blend weight × joint share; line part:
         the fraction of the segment length in contact, halves averaged; a full-length parallel
         contact or a crossing counts 1) and Σ|f| of its contact points [N].
-    c_gap : (P,) float64, m — each pair's clamped centre-line distance minus r_i + r_j at the last
-        neighbour-list build (size 0: not used); reach : float, m — twice the largest node
-        displacement since that build. A pair with ``c_gap > reach`` is skipped: every point of a
-        segment is a convex combination of its nodes, so neither moved more than half the reach and
-        the distance cannot have closed the gap (Verlet-list reasoning, one comparison per pair
-        instead of a segment–segment distance).
+    c_gap : (P,) float64, m — in/out, each pair's skip threshold (size 0: not used); reach : float,
+        m — twice a bound on the path any node has travelled since the last neighbour-list build
+        (``2 Σ Δt max_i |v_i|``, non-decreasing). A pair with ``c_gap > reach`` is skipped: when it
+        was last evaluated, at reach ``R_c``, its clamped centre-line distance minus ``r_i + r_j``
+        was ``g_c`` and ``c_gap = R_c + g_c``; every point of a segment is a convex combination of
+        its nodes, so since then the gap closed by at most ``reach − R_c`` (Verlet-list reasoning
+        with a per-pair refresh: one comparison per pair instead of a segment–segment distance,
+        and a pair far from touching stays skipped for many steps). The build sets
+        ``c_gap = g_b`` at reach 0; every evaluated pair found apart sets it anew.
+    c_active : (P,) int64 — out if size > 0: the indices of the pairs in contact, in order (the
+        first ``n_active``), so that friction and statistics visit only those.
     """
     use_gap = c_gap.shape[0] > 0
+    use_list = c_active.shape[0] > 0
     use_off = c_off.shape[0] > 0
     use_share = c_share.shape[0] > 0
     energy = 0.0
@@ -394,6 +402,9 @@ def contact_forces_ex(
     w1buf = np.empty(3)
     wtbuf = np.empty(3)
     for k in range(n_pairs):
+        c_fn[k] = 0.0
+        if use_gap and c_gap[k] > reach:
+            continue  # before any gather: most pairs stop here
         i = pairs[k, 0]
         j = pairs[k, 1]
         na0 = seg_nodes[i, 0]
@@ -403,9 +414,6 @@ def contact_forces_ex(
         ra = seg_radius[i]
         rb = seg_radius[j]
         rr = ra + rb
-        c_fn[k] = 0.0
-        if use_gap and c_gap[k] > reach:
-            continue
         off = c_off[k] if use_off else 0.0
         # reject path on scalars (the common case: a Verlet candidate not touching)
         xa0 = x[na0, 0]
@@ -418,6 +426,8 @@ def contact_forces_ex(
                                              x[na1, 0] - xa0, x[na1, 1] - ya0, x[na1, 2] - za0,
                                              x[nb1, 0] - xb0, x[nb1, 1] - yb0, x[nb1, 2] - zb0)
         if dist2 >= rr * rr:
+            if use_gap:
+                c_gap[k] = reach + math.sqrt(dist2) - rr
             continue
         for c in range(3):
             a0[c] = x[na0, c]
@@ -436,7 +446,8 @@ def contact_forces_ex(
             cphi = 1.0
         phi = math.acos(cphi)
         delta_c = rr - math.sqrt(dist2)
-        w = law_weight(law_id, law_params, delta_c, ra, rb, phi)
+        # the point force at δ_c comes with the weight (one Hertz evaluation for both)
+        w, fp_c, ep_c = law_weight_point(law_id, law_params, delta_c, ra, rb, phi)
         den = aa * bb - ab * ab
         if w > 0.0 and den > 1e-10 * aa * bb:
             # closest points of the infinite lines
@@ -476,7 +487,10 @@ def contact_forces_ex(
                         n0 *= inv
                         n1 *= inv
                         n2 *= inv
-                    fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+                    if use_off and off != 0.0:
+                        fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+                    else:  # δ = δ_c: the same closest points (sc, tc) as dist2
+                        fp, ep = fp_c, ep_c
                     fm = w * wst * fp
                     energy += w * wst * ep
                     f0 = fm * n0
@@ -511,6 +525,8 @@ def contact_forces_ex(
                                  off)
         fsum = rec[0]
         if fsum > 0.0:
+            if use_list:
+                c_active[n_active] = k
             n_active += 1
             fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
             c_fn[k] = fv

@@ -13,10 +13,10 @@ step (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
    rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
-4. Energies: ALLPW += work of all contact forces on the fibers, ``Δt f_n·v̄_n`` (half here at
-   ``v_{n−½}``, half by the step loop after the update through :func:`contact_power`) + the friction
-   dissipation; ALLFD += friction
-   dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
+4. The contact and friction forces stay in the hook's force array (:func:`contact_forces_of`): the
+   step loop's update adds them to the nodes, books their work ``Δt f_n·v̄_n`` to ALLPW and clears
+   the array, in the same pass over the nodes. Energies: ALLPW += that work + the friction
+   dissipation; ALLFD += friction dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
    elastic contact energy and the friction loss, as Abaqus' ALLPW includes penalty friction).
 
 Returns the number of fiber–fiber segment pairs in contact (history column ``contacts``).
@@ -38,7 +38,7 @@ from ._kernels_integrate import ACC_FD, ACC_PW, ACC_WK
 from .contact import contact_forces_ex, gauss_points, pair_gap
 from .friction import friction_forces_ex, plane_friction, remap_history
 from .laws import make_law
-from .neighbours import build_pairs, max_displacement2
+from .neighbours import build_pairs, max_displacement2_speed2
 
 # integer state slots (data[I_STATE])
 IS_LAW = 0
@@ -49,7 +49,8 @@ IS_NBUILDS = 4
 IS_NGROW = 5          # times the buffers grew
 IS_NACTIVE = 6
 IS_OVERLAP = 7        # 1: the initial overlaps have been recorded (first call done)
-IS_SIZE = 8
+IS_STEP = 8           # calls so far (the friction histories' time stamps)
+IS_SIZE = 9
 # float state slots (data[F_STATE])
 FS_SKIN = 0
 FS_SEXCL = 1
@@ -62,8 +63,9 @@ FS_RELEASE = 7       # overlap release time, s (0: the initial overlaps are remo
 FS_E_CONTACT = 8     # stored normal contact energy at the last step, J
 FS_E_SPRING = 9      # elastic energy of the fiber–fiber tangential springs at the last step, J
 FS_OFF_MAX = 10      # largest initial-overlap offset still applied, m
+FS_PATH = 11         # bound on the path of any node since the last build, Σ Δt max|v|, m
 FS_SIZE = 12
-D_FC_PREV = 15       # data slot of fc_prev, the contact forces applied at the last step (N, 3), N
+D_FC = 14            # data slot of fc, this step's contact and friction forces (N, 3), N
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -74,10 +76,12 @@ OVERLAP_MIN_FRACTION = 0.05        # initial penetrations below 5 % of the small
 
 
 @njit(cache=True, error_model="numpy")
-def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1):
+def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1,
+             L_active):
     """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
-    history and the initial-overlap offsets, swap. L_h2 = [hist (C, 4), hist_spare, c_n (C, 3),
-    off (C, 1), off_spare]; L_h1 = [c_fn, c_s, c_t, c_phi, c_delta, c_share, c_fsum]."""
+    history and the initial-overlap offsets, swap. L_h2 = [hist (C, 5), hist_spare, c_n (C, 3),
+    off (C, 1), off_spare]; L_h1 = [c_fn, c_s, c_t, c_phi, c_delta, c_share, c_fsum, c_gap];
+    L_active = [c_active (C,) int64]."""
     while True:
         n = build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, fstate[FS_SKIN], fstate[FS_SEXCL],
                         L_pairs[1], L_keys[1])
@@ -86,11 +90,11 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
         cap = int(1.5 * (-n)) + 64
         L_pairs[1] = np.zeros((cap, 2), np.int64)
         L_keys[1] = np.zeros(cap, np.int64)
-        L_h2[1] = np.zeros((cap, 4))
+        L_h2[1] = np.zeros((cap, 5))
         L_h2[4] = np.zeros((cap, 1))
         istate[IS_NGROW] += 1
     if L_h2[1].shape[0] < L_pairs[1].shape[0]:
-        L_h2[1] = np.zeros((L_pairs[1].shape[0], 4))
+        L_h2[1] = np.zeros((L_pairs[1].shape[0], 5))
     if L_h2[4].shape[0] < L_pairs[1].shape[0]:
         L_h2[4] = np.zeros((L_pairs[1].shape[0], 1))
     if L_h1[0].shape[0] < n:
@@ -98,6 +102,7 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
         L_h2[2] = np.zeros((cap, 3))
         for k in range(len(L_h1)):
             L_h1[k] = np.zeros(cap)
+        L_active[0] = np.zeros(cap, np.int64)
     if istate[IS_FRICTION] == 1:
         remap_history(L_keys[0], istate[IS_NPAIRS], L_h2[0], L_keys[1], n, L_h2[1])
     if fstate[FS_OFF_MAX] > 0.0:
@@ -120,41 +125,43 @@ def _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref
     istate[IS_NBUILDS] += 1
     x_ref[:, :] = x
     # each pair's gap at this build (clamped segment distance − r_i − r_j): the contact pass skips
-    # a pair while the gap exceeds twice the largest node displacement since
+    # a pair while the gap exceeds twice the path bound since (and refreshes it when it looks)
     pairs = L_pairs[0]
     gap = L_h1[7]
     for k in range(n):
         gap[k] = pair_gap(x, seg_nodes, seg_radius, pairs, k)
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def contact_power(v, data):
-    """Σ f_n·v [W] of the contact forces of the last :func:`contact_step` (``fc_prev``) at the
-    velocities ``v``; the step loop books ½Δt × this after its velocity update, so the contact work
-    of step n is Δt f_n·v̄_n, in phase with the kinetic energy and the plane work of the history row
-    at t_n (the old trapezoid ½Δt(f_{n−1} + f_n)·v_{n−½} lagged half a step: during an undamped
-    impact the balance swung by ±2e-5 J per row, a residual of 0.15)."""
-    fc_prev = data[D_FC_PREV]
-    s = 0.0
-    for i in range(v.shape[0]):
-        s += fc_prev[i, 0] * v[i, 0] + fc_prev[i, 1] * v[i, 1] + fc_prev[i, 2] * v[i, 2]
-    return s
+@njit(cache=True, error_model="numpy")
+def contact_forces_of(data):
+    """The force array (N, 3) [N] :func:`contact_step` leaves its forces in: the step loop adds it to
+    the nodes in its update, books its work ``Δt f_n·v̄_n`` (``v̄_n`` the mean of the two half-step
+    velocities, in phase with the kinetic energy and the plate work of the history row at t_n) and
+    clears it (one pass over the nodes instead of three: add, power before, power after)."""
+    return data[D_FC]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring."""
     (istate, fstate, seg_nodes, seg_radius, seg_fiber, seg_arc, law_params, gxi, gw, x_ref,
-     L_pairs, L_keys, L_h2, L_h1, fc, fc_prev,
+     L_pairs, L_keys, L_h2, L_h1, fc,
      radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
-     pl_hist, pl_tforce) = data
+     pl_hist, pl_tforce, L_active) = data
+    step = istate[IS_STEP]
+    istate[IS_STEP] = step + 1
     N = x.shape[0]
-    dm2 = max_displacement2(x, x_ref)
+    dm2, vm2 = max_displacement2_speed2(x, x_ref, v)
+    # v holds v_{n−½}, the velocity that moved every node from x_{n−1} to x_n
+    fstate[FS_PATH] += dt * math.sqrt(vm2)
     half_skin = 0.5 * fstate[FS_SKIN]
     if istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin:
-        _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1)
-        dm2 = 0.0
-    reach = 2.0 * math.sqrt(dm2)
+        _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1,
+                 L_active)
+        fstate[FS_PATH] = 0.0
+    # pairs are re-evaluated only when the nodes may have closed their gap since the last look
+    # (contact_forces_ex, c_gap): the path bound refreshes per pair, the displacement bound does not
+    reach = 2.0 * fstate[FS_PATH]
     c_gap = L_h1[7]
     pairs = L_pairs[0]
     hist = L_h2[0]
@@ -168,13 +175,14 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     c_share = L_h1[5]
     c_fsum = L_h1[6]
     off0 = L_h2[3]
+    c_active = L_active[0]
     # initial overlaps (first call): record each pair's penetration δ0 at t = 0 as its offset; the
     # contact then sees δ − δ0·(1 − t/T_release)⁺, so overlapping input is pushed apart gradually
     if istate[IS_OVERLAP] == 0:
         istate[IS_OVERLAP] = 1
         contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
                           gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, np.zeros(0), c_share, c_fsum,
-                          c_gap, reach)
+                          c_gap, reach, c_active)
         omax = 0.0
         for k in range(n_pairs):
             i = pairs[k, 0]
@@ -203,17 +211,17 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
         else:
             fstate[FS_OFF_MAX] = 0.0  # released: no offsets any more (new pairs get none either)
             use_off = False
-    # fc is all zeros here: the work loop at the end of the previous call cleared it (fused loops)
+    # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
     energy, n_active = contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, istate[IS_LAW], law_params,
                                          gxi, gw, fc, c_fn, c_n, c_s, c_t, c_phi, c_delta, off, c_share, c_fsum,
-                                         c_gap, reach)
+                                         c_gap, reach, c_active)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
     # grows by Σ|f|·Δoff); a prescribed "motion", booked as external work (ALLWK)
     if use_off and rel_prev > rel:
         wrel = 0.0
-        for k in range(n_pairs):
-            if c_fn[k] > 0.0:
-                wrel += c_fsum[k] * off0[k, 0]
+        for kk in range(n_active):
+            k = c_active[kk]
+            wrel += c_fsum[k] * off0[k, 0]
         acc[ACC_WK] += wrel * (rel_prev - rel)
     fstate[FS_E_CONTACT] = energy
     diss = 0.0
@@ -221,7 +229,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     kt = fstate[FS_KT]
     if istate[IS_FRICTION] == 1:
         dff, esp = friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, kt, dt, hist, fc,
-                                      c_share)
+                                      c_share, c_active, n_active, step)
         diss += dff
         fstate[FS_E_SPRING] = esp
     P = pl_axis.shape[0]
@@ -235,35 +243,18 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
             pl_vel[p, 2] = 0.0
             pl_vel[p, pl_axis[p]] = vel
         diss += plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, kt, dt, pl_hist, fc,
-                               pl_tforce)
-    # work of the contact forces on the fibers over step n is Δt f_n·v̄_n, v̄_n = (v_{n−½} + v_{n+½})/2,
-    # booked in two halves like the plane penalty's: ½Δt f_n·v_{n−½} here, ½Δt f_n·v_{n+½} by the
-    # step loop after the velocity update (contact_power); add to f; keep f_n
-    pw = 0.0
-    for i in range(N):
-        a0 = fc[i, 0]
-        a1 = fc[i, 1]
-        a2 = fc[i, 2]
-        pw += a0 * v[i, 0] + a1 * v[i, 1] + a2 * v[i, 2]
-        f[i, 0] += a0
-        f[i, 1] += a1
-        f[i, 2] += a2
-        fc_prev[i, 0] = a0
-        fc_prev[i, 1] = a1
-        fc_prev[i, 2] = a2
-        fc[i, 0] = 0.0
-        fc[i, 1] = 0.0
-        fc[i, 2] = 0.0
-    acc[ACC_PW] += 0.5 * dt * pw + diss
+                               pl_tforce, step)
+    # the forces stay in fc: the step loop's update applies them, books their work and clears fc
+    acc[ACC_PW] += diss
     acc[ACC_FD] += diss
     # statistics of this step
     fsum = 0.0
     dmax = 0.0
-    for k in range(n_pairs):
-        if c_fn[k] > 0.0:
-            fsum += c_fn[k]
-            if c_delta[k] > dmax:
-                dmax = c_delta[k]
+    for kk in range(n_active):
+        k = c_active[kk]
+        fsum += c_fn[k]
+        if c_delta[k] > dmax:
+            dmax = c_delta[k]
     fstate[FS_FN_SUM] = fsum
     fstate[FS_DELTA_MAX] = dmax
     istate[IS_NACTIVE] = n_active
@@ -392,19 +383,19 @@ def make_contact_hook(model, *, law=None, contact: bool = True, friction: bool =
         gxi, gw = gauss_points(n_gauss)
         L_pairs = List([np.zeros((cap, 2), np.int64), np.zeros((cap, 2), np.int64)])
         L_keys = List([np.zeros(cap, np.int64), np.zeros(cap, np.int64)])
-        L_h2 = List([np.zeros((cap, 4)), np.zeros((cap, 4)), np.zeros((cap, 3)), np.zeros((cap, 1)),
+        L_h2 = List([np.zeros((cap, 5)), np.zeros((cap, 5)), np.zeros((cap, 3)), np.zeros((cap, 1)),
                      np.zeros((cap, 1))])
         L_h1 = List([np.zeros(cap) for _ in range(8)])
         k_pen = scene.k_pen() if P > 0 else np.zeros(0)
         seg_nodes_u = seg_nodes if contact else seg_nodes[:0]
         data = (istate, fstate, seg_nodes_u, seg_radius[: len(seg_nodes_u)], seg_fiber[: len(seg_nodes_u)],
                 arc[: len(seg_nodes_u)], law.params(), gxi, gw, np.array(model_.nodes_m, dtype=np.float64),
-                L_pairs, L_keys, L_h2, L_h1, np.zeros((N, 3)), np.zeros((N, 3)),
+                L_pairs, L_keys, L_h2, L_h1, np.zeros((N, 3)),
                 np.ascontiguousarray(model_.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
                 scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), scene.pl_pos0.astype(np.float64),
                 scene.pl_move.astype(np.float64), scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64),
                 scene.pl_mode.astype(np.int64), scene.pl_pos0.astype(np.float64).copy(), np.zeros((P, 3)),
-                np.zeros((N, max(P, 1), 3)), np.zeros((max(P, 1), 3)))
+                np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), List([np.zeros(cap, np.int64)]))
         info.data = data
         return data
 

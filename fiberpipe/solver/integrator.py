@@ -186,13 +186,17 @@ class Integrator:
         # gives from rest (at the first history row the loads' work f·(x_n − x_0) is still 0)
         one_step = float(np.sum(np.sum(sc.f_ext**2, axis=1) * self.dt**2 / model.mass)) if sc.f_ext.size else 0.0
         self.e_ref = max(float(e_ref_J), one_step)
-        # solver.threads > 1: the beam pass runs one prange task per fiber; needs the CSR element order
-        self.threads = max(1, int(threads))
+        # the update gathers each node's beam resultants from the elements of its fiber: the CSR
+        # layout of build_model (fiber k owns nodes node_offsets[k] … and elements node − k …)
         self.node_offsets = np.ascontiguousarray(model.node_offsets, dtype=np.int64)
-        if self.threads > 1:
-            k = np.repeat(np.arange(model.n_fibers), np.diff(self.node_offsets) - 1)
-            if k.size != model.n_elements or not np.array_equal(model.el_n1, np.arange(k.size) + k):
-                self.threads = 1  # not the CSR layout: the serial beam pass
+        k = np.repeat(np.arange(model.n_fibers), np.diff(self.node_offsets) - 1)
+        if (self.node_offsets[-1] != n or k.size != model.n_elements
+                or not np.array_equal(model.el_n1, np.arange(k.size) + k)):
+            raise FiberpipeError("the model's elements are not in the CSR order of build_model "
+                                 "(fiber k: nodes node_offsets[k]…, elements node − k)")
+        self.eb = np.zeros((model.n_elements, K.EB_SIZE))
+        # solver.threads > 1: the beam pass runs one prange task per fiber
+        self.threads = max(1, int(threads))
         self._loop = K.step_loop_for(sc.contact_fn if sc.contact_on else K.no_contact, self.threads)
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
@@ -205,7 +209,7 @@ class Integrator:
             m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
             m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
             state.x, state.q, state.v, state.w, state.acc, state.t, state.step,
-            self.f, self.mom, self.dt, int(n_steps),
+            self.f, self.mom, self.eb, self.dt, int(n_steps),
             sc.alpha, sc.beta, self.strain_prev, sc.f_ext,
             sc.fix_mask, sc.node_drive, sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v,
             sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode, sc.pl_hist_col,

@@ -469,6 +469,23 @@ def law_weight(law_id, params, delta, r1, r2, phi):
     return smoothstep((phi - params[P_PHI_LO]) / (params[P_PHI_HI] - params[P_PHI_LO]))
 
 
+@njit(cache=True, fastmath=True, error_model="numpy")
+def law_weight_point(law_id, params, delta, r1, r2, phi):
+    """``(law_weight(...), *law_point(...))`` at the same δ and Φ: (w, F [N], energy [J]).
+
+    For hertz_oriented the weight needs the Hertz solution itself (the ellipse axis ``a``), so the
+    point force comes from the same evaluation (one table look-up and logarithm instead of two).
+    """
+    if law_id == LAW_HERTZ_ORIENTED:
+        if delta <= 0.0:
+            return 1.0, 0.0, 0.0
+        f, e, a = hertz_crossed_point(params, delta, r1, r2, phi)
+        xi = a / params[P_LBLEND]
+        return 1.0 - smoothstep((xi - params[P_XI_LO]) / (params[P_XI_HI] - params[P_XI_LO])), f, e
+    fp, ep = law_point(law_id, params, delta, r1, r2, phi)
+    return law_weight(law_id, params, delta, r1, r2, phi), fp, ep
+
+
 _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 
 

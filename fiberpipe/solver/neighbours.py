@@ -52,6 +52,24 @@ def max_displacement2(x, x_ref):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def max_displacement2_speed2(x, x_ref, v):
+    """:func:`max_displacement2` and the largest squared node speed [m²/s²] of ``v``, in one pass."""
+    m = 0.0
+    vm = 0.0
+    for i in range(x.shape[0]):
+        d0 = x[i, 0] - x_ref[i, 0]
+        d1 = x[i, 1] - x_ref[i, 1]
+        d2 = x[i, 2] - x_ref[i, 2]
+        q = d0 * d0 + d1 * d1 + d2 * d2
+        if q > m:
+            m = q
+        u = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+        if u > vm:
+            vm = u
+    return m, vm
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def max_displacement_exceeds(x, x_ref, limit):
     """True if any node moved more than ``limit`` [m] from ``x_ref`` (the positions at the last build)."""
     return max_displacement2(x, x_ref) > limit * limit
