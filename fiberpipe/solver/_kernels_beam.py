@@ -76,6 +76,35 @@ def _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2):
     return fac * rx, fac * ry, fac * rz
 
 
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot):
+    """Rotation matrix entries (row major) of the element midpoint rotation ``q_m ∝ q1 + q2``
+    (unit q1, q2 in the same hemisphere, ``dot = q1·q2 ≥ 0``).
+
+    ``R(q) = I + 2/|q|² (…)`` holds for any q ≠ 0 and ``|q1 + q2|² = 2 + 2 q1·q2``: no square root,
+    one division.
+    """
+    mw = w1 + w2
+    mx = x1 + x2
+    my = y1 + y2
+    mz = z1 + z2
+    s2 = 2.0 / (2.0 + 2.0 * dot)
+    xx = mx * mx * s2
+    yy = my * my * s2
+    zz = mz * mz * s2
+    xy = mx * my * s2
+    xz = mx * mz * s2
+    yz = my * mz * s2
+    wx = mw * mx * s2
+    wy = mw * my * s2
+    wz = mw * mz * s2
+    return (
+        1.0 - (yy + zz), xy - wz, xz + wy,
+        xy + wz, 1.0 - (xx + zz), yz - wx,
+        xz - wy, yz + wx, 1.0 - (xx + yy),
+    )
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
     """Rest strains of every element.
@@ -94,18 +123,16 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         b = a + 1
         w1, x1, y1, z1 = q[a, 0], q[a, 1], q[a, 2], q[a, 3]
         w2, x2, y2, z2 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-        if w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2 < 0.0:
+        dot = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+        if dot < 0.0:
             w2, x2, y2, z2 = -w2, -x2, -y2, -z2
+            dot = -dot
         tx, ty, tz = _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2)
         theta_rest[e, 0] = tx
         theta_rest[e, 1] = ty
         theta_rest[e, 2] = tz
-        mw = w1 + w2
-        mx = x1 + x2
-        my = y1 + y2
-        mz = z1 + z2
-        inv = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_to_matrix(mw * inv, mx * inv, my * inv, mz * inv)
+        # the same formula as the step loop's, so the rest state has zero strain to the last bit
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
         il = el_invL0[e]
         dx = (x[b, 0] - x[a, 0]) * il
         dy = (x[b, 1] - x[a, 1]) * il
@@ -146,31 +173,7 @@ def _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest
             w2, x2, y2, z2 = -w2, -x2, -y2, -z2
             dot = -dot
         tx, ty, tz = _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2)
-        # midpoint rotation from the unnormalised q1 + q2: R(q) = I + 2/|q|² (...) holds for any
-        # q ≠ 0, and |q1 + q2|² = 2 + 2 q1·q2 for unit q1, q2 (no square root, one division)
-        mw = w1 + w2
-        mx = x1 + x2
-        my = y1 + y2
-        mz = z1 + z2
-        s2 = 2.0 / (2.0 + 2.0 * dot)
-        xx = mx * mx * s2
-        yy = my * my * s2
-        zz = mz * mz * s2
-        xy = mx * my * s2
-        xz = mx * mz * s2
-        yz = my * mz * s2
-        wx = mw * mx * s2
-        wy = mw * my * s2
-        wz = mw * mz * s2
-        r00 = 1.0 - (yy + zz)
-        r01 = xy - wz
-        r02 = xz + wy
-        r10 = xy + wz
-        r11 = 1.0 - (xx + zz)
-        r12 = yz - wx
-        r20 = xz - wy
-        r21 = yz + wx
-        r22 = 1.0 - (xx + yy)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
         ex = x[b, 0] - x[a, 0]
         ey = x[b, 1] - x[a, 1]
         ez = x[b, 2] - x[a, 2]

@@ -33,14 +33,16 @@ from fiberpipe.solver.contact import segment_distance2
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def max_displacement2(x, x_ref):
-    """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build).
+def max_displacement2_speed2(x, x_ref, v):
+    """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build) and
+    the largest squared node speed [m²/s²] of ``v`` (0 if ``v`` has no rows), in one pass.
 
-    One pass without early exit: the contact pass uses the value itself (a pair whose gap at the
-    build exceeds twice the largest displacement since cannot touch, see
-    :func:`fiberpipe.solver.contact.contact_forces_ex`), not only the rebuild test.
+    The contact hook uses both every step: the first for the rebuild test, the second for the path
+    bound of its per-pair skip (:func:`fiberpipe.solver.contact.contact_forces_ex`).
     """
     m = 0.0
+    vm = 0.0
+    has_v = v.shape[0] == x.shape[0]
     for i in range(x.shape[0]):
         d0 = x[i, 0] - x_ref[i, 0]
         d1 = x[i, 1] - x_ref[i, 1]
@@ -48,25 +50,17 @@ def max_displacement2(x, x_ref):
         q = d0 * d0 + d1 * d1 + d2 * d2
         if q > m:
             m = q
-    return m
+        if has_v:
+            u = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+            if u > vm:
+                vm = u
+    return m, vm
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def max_displacement2_speed2(x, x_ref, v):
-    """:func:`max_displacement2` and the largest squared node speed [m²/s²] of ``v``, in one pass."""
-    m = 0.0
-    vm = 0.0
-    for i in range(x.shape[0]):
-        d0 = x[i, 0] - x_ref[i, 0]
-        d1 = x[i, 1] - x_ref[i, 1]
-        d2 = x[i, 2] - x_ref[i, 2]
-        q = d0 * d0 + d1 * d1 + d2 * d2
-        if q > m:
-            m = q
-        u = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
-        if u > vm:
-            vm = u
-    return m, vm
+def max_displacement2(x, x_ref):
+    """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build)."""
+    return max_displacement2_speed2(x, x_ref, np.empty((0, 3)))[0]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
