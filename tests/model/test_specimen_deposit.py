@@ -84,18 +84,21 @@ def test_shipped_paper40_is_the_deposited_pile():
     fibers = read_fibers(SAMPLE / "fibers.h5")
     info = json.loads((SAMPLE / "specimen.json").read_text())
     assert info["generator"]["placement"] == "deposit"
+    assert info["generator"]["settle"]["lock_axial"] == "all"  # then settled in the solver (make_paper40 --settle)
     pts = fibers.points_m.reshape(40, -1, 3)
     st = specimen_statistics(fibers, box_min_m=info["box_min_m"], box_max_m=info["box_max_m"])
     assert fibers.n_fibers == 40
-    assert st["min_gap_m"] >= GAP - 1e-9 and st["max_outside_m"] <= 1e-12
+    # settled: fibers press on each other under their weight only (penetrations of nanometres)
+    assert st["min_gap_m"] >= -0.1e-6 and st["max_outside_m"] <= 1e-9
+    assert info["settle"]["kinetic_energy_end_J"] < 1e-12 and info["settle"]["fiber_contacts"] >= 40
     assert 0.36 < info["volume_fraction"] < 0.40  # the study's 37.7 %: see the sample's README
     assert info["height_m"] - (pts[:, :, 1] + R).max() == pytest.approx(GAP, abs=1e-9)
     assert 4.5 < st["phi_mean_deg"] < 7.5  # the study's Φ_average = 6°
     assert st["curvature_xz_per_m"] == pytest.approx(0.2445, rel=0.15)  # Table 4: 0.241, 0.248
     assert st["curvature_yz_per_m"] == pytest.approx(0.2445, rel=0.15)
     assert info["deposit"]["contacts"] >= 40
-    bad = [k for k, (_, ok) in enumerate(_supports(pts)) if not ok]
-    assert not bad, f"fibers not supported on both sides of their centre of mass: {bad}"
+    # no rigid-body support check here: settled with every node's z locked, a fiber is also held
+    # by its axial stiffness (z fixed, a turn in y-z stretches it), as in the study's scene
     # the config's upper plate sits on the pile
     import yaml
 
@@ -105,11 +108,10 @@ def test_shipped_paper40_is_the_deposited_pile():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the deposited pile is not yet stable under gravity in the solver "
-                   "(fibers slide/turn off their crossings): data-samples/paper-40/README.md")
 def test_shipped_paper40_rests_under_gravity():
     """Meshed and simulated 5 ms under gravity alone (α = 300 1/s, so that a fiber without support
-    falls ≈ 79 µm), no node should move by more than 0.1 r."""
+    falls ≈ 79 µm), no node should move by more than 0.1 r. The pile as placed failed this
+    (115 µm); settled in the solver (make_paper40 --settle) it passes: data-samples/paper-40/README.md."""
     from fiberpipe.artifacts import read_fibers
     from fiberpipe.config import load_config
     from fiberpipe.model.mesh import mesh_polylines
