@@ -1,0 +1,158 @@
+"""The contact pass's work-saving bookkeeping is exact.
+
+* per-pair skip refreshed by a path bound (``c_gap``/``reach`` of ``contact_forces_ex``): a pair is
+  skipped only while it cannot have closed its gap, so forces equal those of evaluating every pair;
+* the list of pairs in contact (``c_active``);
+* time-stamped friction histories (fiber–fiber and fiber–plane): the same forces and histories as
+  clearing a history whenever its contact opens.
+"""
+
+import numpy as np
+import pytest
+
+from fiberpipe.solver import laws as L
+from fiberpipe.solver._contact_geometry import LE, R, assemble, fiber
+from fiberpipe.solver.contact import contact_forces_ex, gauss_points, pair_gap
+from fiberpipe.solver.friction import friction_forces_ex, plane_friction
+
+
+def _bundle(rng):
+    """Six short fibers crossing at small angles, some touching, some up to ≈ 40 µm apart."""
+    fibers = []
+    for k in range(6):
+        p0 = [-0.75e-3, (k % 3) * (2 * R + rng.uniform(-1e-6, 40e-6)), (k // 3) * (2 * R + rng.uniform(-1e-6, 40e-6))]
+        d = [1.0, rng.normal(0, 0.05), rng.normal(0, 0.05)]
+        fibers.append(fiber(p0, d, 5))
+    x, seg, rad, fib, _ = assemble(*fibers)
+    pairs = np.array([[i, j] for i in range(len(seg)) for j in range(i + 1, len(seg)) if fib[i] != fib[j]], np.int64)
+    return x, seg, rad, pairs
+
+
+def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
+    n = len(pairs)
+    gxi, gw = gauss_points(2)
+    f = np.zeros_like(x)
+    out = [np.zeros(n) for _ in range(7)]
+    cn = np.zeros((n, 3))
+    e, na = contact_forces_ex(x, seg, rad, pairs, n, law.law_id, law.params(), gxi, gw, f, out[0], cn, out[1], out[2],
+                              out[3], out[4], np.zeros(0), out[5], out[6], c_gap, reach, c_active)
+    return f, out[0], na
+
+
+def test_path_bound_skip_is_exact_and_refreshes():
+    rng = np.random.default_rng(3)
+    x, seg, rad, pairs = _bundle(rng)
+    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    n = len(pairs)
+    c_gap = np.array([pair_gap(x, seg, rad, pairs, k) for k in range(n)])  # the build
+    c_active = np.zeros(n, np.int64)
+    path = 0.0
+    skipped_total = 0
+    for step in range(60):
+        # every node moves by at most d this step (the bundle is squeezed together, with noise)
+        d = 1.5e-6
+        move = rng.normal(size=x.shape)
+        move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
+        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
+        move *= d / max(np.linalg.norm(move, axis=1).max(), d)
+        x = x + move
+        path += np.linalg.norm(move, axis=1).max()
+        reach = 2.0 * path
+        skipped_total += int(np.sum(c_gap > reach))
+        f_skip, fn_skip, na_skip = _pass(x, seg, rad, pairs, law, c_gap, reach, c_active)
+        f_all, fn_all, na_all = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, np.zeros(0, np.int64))
+        assert np.array_equal(f_skip, f_all) and np.array_equal(fn_skip, fn_all) and na_skip == na_all
+        # the pairs in contact, listed in order
+        assert np.array_equal(c_active[:na_skip], np.flatnonzero(fn_all > 0))
+        # every threshold is still a valid bound: gap now >= threshold − reach for every pair
+        gap_now = np.array([pair_gap(x, seg, rad, pairs, k) for k in range(n)])
+        assert np.all(gap_now >= c_gap - reach - 1e-15)
+    assert na_all > 0  # the test reaches contacts
+    assert skipped_total > 10 * n  # and the skip did skip (most pairs, most steps)
+
+
+def _pair_in_contact(delta):
+    xa = fiber([0, 0, 2 * R - delta], [1, 0, 0], 1)
+    xb = fiber([0.15e-3, -0.15e-3, 0], [0, 1, 0], 1)
+    x, seg, rad, fib, rng = assemble(xa, xb)
+    return x, seg, rad, np.array([[0, 1]], np.int64), rng
+
+
+def test_stamped_friction_history_equals_clearing_it():
+    """A contact that slides, opens for a few steps and closes again: the stamped history (visit the
+    pairs in contact only) gives the forces and histories of clearing every open pair's history."""
+    law = L.HertzCrossedLaw(90.0)
+    mu, kt, dt = 0.2, 1e5, 1e-7
+    hist_clear = np.zeros((1, 4))
+    hist_stamp = np.zeros((1, 5))
+    for step in range(40):
+        delta = 1e-6 if (step < 15 or step >= 20) else -1e-6  # open for steps 15–19
+        x, seg, rad, pairs, rng = _pair_in_contact(delta)
+        c_active = np.zeros(1, np.int64)
+        f0, fn, na = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, c_active)
+        gxi, gw = gauss_points(2)
+        out = [np.zeros(1) for _ in range(7)]
+        cn = np.zeros((1, 3))
+        contact_forces_ex(x, seg, rad, pairs, 1, law.law_id, law.params(), gxi, gw, np.zeros_like(x), out[0], cn,
+                          out[1], out[2], out[3], out[4], np.zeros(0), out[5], out[6], np.zeros(0), 0.0, c_active)
+        v = np.zeros_like(x)
+        v[rng[0][0]:rng[0][1], 0] = 0.3 * (1 + 0.1 * np.sin(step))
+        f1 = np.zeros_like(x)
+        f2 = np.zeros_like(x)
+        d1, e1 = friction_forces_ex(v, seg, pairs, 1, out[0], cn, out[1], out[2], mu, kt, dt, hist_clear, f1, out[5],
+                                    np.zeros(0, np.int64), 0, 0)
+        d2, e2 = friction_forces_ex(v, seg, pairs, 1, out[0], cn, out[1], out[2], mu, kt, dt, hist_stamp, f2, out[5],
+                                    c_active, na, step)
+        assert np.array_equal(f1, f2) and d1 == d2 and e1 == e2
+        if na:
+            assert np.array_equal(hist_clear[0, :4], hist_stamp[0, :4])
+    assert np.any(hist_clear[0, :3] != 0)
+
+
+def test_stamped_plane_friction_equals_clearing_it():
+    x_on = np.array([[0.0, 0.0, R - 1e-6]])
+    v = np.array([[1.0, 0.0, 0.0]])
+    args = (np.array([R]), np.array([1e6]), np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
+    h3 = np.zeros((1, 1, 3))
+    h4 = np.zeros((1, 1, 4))
+    for step in range(30):
+        x = x_on if not (10 <= step < 13) else x_on + [0, 0, 1e-5]  # off the plane for 3 steps
+        vv = v * (1 + 0.2 * np.cos(step))
+        f3 = np.zeros((1, 3))
+        f4 = np.zeros((1, 3))
+        d3 = plane_friction(x, vv, *args, 0.2, 1e5, 1e-7, h3, f3, np.zeros((1, 3)))
+        d4 = plane_friction(x, vv, *args, 0.2, 1e5, 1e-7, h4, f4, np.zeros((1, 3)), step)
+        assert np.array_equal(f3, f4) and d3 == d4
+        if step < 10 or step >= 13:
+            assert np.array_equal(h3[0, 0], h4[0, 0, :3])
+    assert np.any(h3 != 0)
+
+
+def test_loading_ramp_fraction_reaches_the_plates(tmp_path):
+    from fiberpipe.config import load_config
+    from fiberpipe.errors import FiberpipeError
+    from fiberpipe.model.mesh import Mesh
+    from fiberpipe.solver.build import build_simulation
+    from fiberpipe.solver.effects import Plates
+
+    cfg_text = """
+name: ramp
+input: {polylines: [[[0, "0.25 mm", 0], [0, "0.25 mm", "3 mm"]]]}
+fiber: {radius: "0.25 mm"}
+scene:
+  effects: [plates]
+  plates: {axis: y, lower: moving, upper: fixed, lower_position: 0, upper_position: "0.5 mm"}
+  loading: {displacement: "0.05 mm", velocity: "1000 mm/min", ramp_fraction: 0.02}
+"""
+    p = tmp_path / "c.yaml"
+    p.write_text(cfg_text)
+    cfg = load_config(p)
+    assert cfg.scene.loading.ramp_fraction == 0.02
+    x = np.zeros((11, 3))
+    x[:, 1] = 0.25e-3
+    x[:, 2] = np.linspace(0, 3e-3, 11)
+    _, effects, _ = build_simulation(Mesh(x, np.array([0, 11]), np.array([0.25e-3])), cfg)
+    plates = [e for e in effects if isinstance(e, Plates)][0]
+    assert plates.ramp_fraction == 0.02
+    with pytest.raises(FiberpipeError, match="ramp_fraction"):
+        load_config(p, {"scene.loading.ramp_fraction": 0.5})
