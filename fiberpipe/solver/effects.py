@@ -464,7 +464,9 @@ class ContactHook(Effect):
         spatial) into ``mom`` (N,3), add its penalty work on the fibers (J) to
         ``acc[ACC_PW]`` and its friction dissipation (J) to ``acc[ACC_FD]``, and return the
         number of active contacts. ``data`` is any numba-compatible tuple of arrays (neighbour
-        lists, friction history...).
+        lists, friction history...). (The built-in ``contact_effect.contact_step`` is the one
+        exception: it leaves its forces in ``contact_forces_of(data)``, which the step loop's
+        update applies, books and clears in its pass over the nodes.)
     data : tuple — passed through unchanged.
     prepare : optional callable ``prepare(model, scene) -> data`` run at setup (e.g. to build the
         neighbour list against ``model`` and size buffers with ``scene.dt``).
