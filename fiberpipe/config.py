@@ -336,6 +336,9 @@ class LoadingConfig(Section):
     @model_validator(mode="after")
     def _check(self):
         _positive("loading.velocity", self.velocity)
+        if self.ramp == "linear" and "ramp_fraction" in self.model_fields_set:
+            raise ValueError("loading.ramp_fraction applies to ramp: smooth only (a linear ramp starts "
+                             "at full speed)")
         return self
 
 

@@ -40,25 +40,6 @@ from numba import njit, prange
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def quat_to_matrix(w, x, y, z):
-    """Rotation matrix entries (row major) of the unit quaternion ``(w, x, y, z)``."""
-    xx = x * x
-    yy = y * y
-    zz = z * z
-    xy = x * y
-    xz = x * z
-    yz = y * z
-    wx = w * x
-    wy = w * y
-    wz = w * z
-    return (
-        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
-    )
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _relative_rotation_vector(w1, x1, y1, z1, w2, x2, y2, z2):
     """Rotation vector ``log(R_1ᵀ R_2)`` (rad, in the node-1 frame); q2 already in q1's hemisphere."""
     # conj(q1) ⊗ q2
@@ -131,7 +112,7 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         theta_rest[e, 0] = tx
         theta_rest[e, 1] = ty
         theta_rest[e, 2] = tz
-        # the same formula as the step loop's, so the rest state has zero strain to the last bit
+        # the same formula as the step loop's (the rest state's strain is rounding only)
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
         il = el_invL0[e]
         dx = (x[b, 0] - x[a, 0]) * il
@@ -142,24 +123,19 @@ def element_rest_strains(x, q, el_n1, el_invL0, gamma_rest, theta_rest):
         gamma_rest[e, 2] = r02 * dx + r12 * dy + r22 * dz
 
 
-# element resultant buffer columns (``eb``, (E, 9)): the spatial force n, moment m and the lever
-# term h = ½ (x_2 − x_1) × n; node 1 gets (+n, m + h), node 2 (−n, h − m)
-EB_N = 0
-EB_M = 3
-EB_H = 6
+# element resultant buffer (``eb``, (E, 9)): columns 0–2 the spatial force n, 3–5 the moment m,
+# 6–8 the lever term h = ½ (x_2 − x_1) × n; node 1 gets (+n, m + h), node 2 (−n, h − m)
 EB_SIZE = 9
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
                       record, beta_over_dt, strain_prev, e_lo, e_hi):
-    """Stress resultants of the elements ``e_lo … e_hi − 1`` into ``eb`` (returns their two energies).
-
+    """Stress resultants of the elements ``e_lo … e_hi − 1`` into ``eb`` (returns their two energies)."""
     # Strategy: no scatter. Each element writes only its own row of ``eb``; the nodes gather
-    # their two elements' rows afterwards (:func:`gather_resultants`, or the step loop's update).
+    # their two elements' rows afterwards (gather_resultants, or the step loop's update).
     # Without the read-modify-write of shared nodes the element loop has no dependence between
     # iterations, and the per-fiber prange variant needs no care about races.
-    """
     se = 0.0
     pd = 0.0
     use_beta = beta_over_dt > 0.0

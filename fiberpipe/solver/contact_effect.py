@@ -143,7 +143,12 @@ def contact_forces_of(data):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
-    """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring."""
+    """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring.
+
+    Unlike other hooks it does not add its forces to ``f``: it leaves them in
+    :func:`contact_forces_of` ``(data)``, which only the step loop specialised for this kernel
+    applies (a hook that wraps this one must add that array to ``f`` itself).
+    """
     (istate, fstate, seg_nodes, seg_radius, seg_fiber, seg_arc, law_params, gxi, gw, x_ref,
      L_pairs, L_keys, L_h2, L_h1, fc,
      radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
@@ -155,7 +160,12 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     # v holds v_{n−½}, the velocity that moved every node from x_{n−1} to x_n
     fstate[FS_PATH] += dt * math.sqrt(vm2)
     half_skin = 0.5 * fstate[FS_SKIN]
-    if istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin:
+    # the path bound holds only while positions change through the velocities (x_n = x_{n−1} + Δt v);
+    # a node farther from its build position than the bound allows was moved from outside (a new or
+    # edited state): rebuild, which restarts every bound from the positions as they are
+    path = fstate[FS_PATH]
+    moved_outside = dm2 > (path * (1.0 + 1e-12) + 1e-15) ** 2
+    if istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin or moved_outside:
         _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1,
                  L_active)
         fstate[FS_PATH] = 0.0

@@ -70,7 +70,7 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
     """Fiber–fiber friction with the full ``k_t`` on every pair in contact (see :func:`friction_forces_ex`);
     returns the dissipated energy [J]."""
     d, e = friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out,
-                              np.zeros(0), np.zeros(0, np.int64), 0, 0)
+                              np.zeros(0), np.zeros(0, np.int64), 0, -1)
     return d
 
 
@@ -98,8 +98,8 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_
 
     c_active, n_active : (n_active,) int64 — the pairs in contact (``c_active`` of the contact kernel);
         size 0: visit all ``n_pairs`` and clear the history of the open ones. step : int — this
-        step's number; with ``c_active`` and a 5th ``hist`` column (the step of the pair's last
-        update) only the pairs in contact are visited, and a pair's history counts only if it was
+        step's number (< 0: no time stamps); with ``c_active``, ``step ≥ 0`` and a 5th ``hist``
+        column (the step of the pair's last update) only the pairs in contact are visited, and a pair's history counts only if it was
         updated at ``step − 1`` (a contact that opened in between starts afresh, as if cleared).
     Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J]).
     """
@@ -107,7 +107,7 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_
     espring = 0.0
     use_share = c_share.shape[0] > 0
     keep_k = use_share and hist.shape[1] > 3  # column 3: the pair's k_t at its last update
-    lazy = c_active.shape[0] > 0 and hist.shape[1] > 4  # column 4: the step of the last update
+    lazy = c_active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0  # column 4: step of the last update
     n_visit = n_active if lazy else n_pairs
     for kk in range(n_visit):
         k = c_active[kk] if lazy else kk
@@ -190,15 +190,16 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, k_t, dt, hist, f_out, pl_tforce,
-                   step=0):
+                   step=-1):
     """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
 
     Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
     ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·δ`` (added by the plate kernel
     ``_kernels_boundary.plane_contacts``, not here). Here only the tangential force, from the
     node's velocity relative to the plane (``pl_vel`` (P, 3) m/s), with history ``hist`` (N, P, 3)
-    [N], or (N, P, 4) with the step of each entry's last update in column 3 (``step``: this step's
-    number): then a node off the plane is not visited again, and its history counts only if it
+    [N], or (N, P, 4) with the step of each entry's last update in column 3 and ``step`` ≥ 0, this
+    step's number (the default −1: no time stamps, open entries are cleared): then a node off the
+    plane is not visited again, and its history counts only if it
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
     Returns the dissipated energy [J].
     """
@@ -208,7 +209,7 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
         pl_tforce[p, 0] = 0.0
         pl_tforce[p, 1] = 0.0
         pl_tforce[p, 2] = 0.0
-    lazy = hist.shape[2] > 3
+    lazy = hist.shape[2] > 3 and step >= 0
     hflat = hist.reshape(hist.shape[0] * npl, hist.shape[2])  # a view (C-contiguous): no per-node view
     # plane outer, node inner (one axis per plane: a tight loop over the nodes, most not touching)
     for p in range(npl):

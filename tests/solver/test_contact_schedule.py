@@ -156,3 +156,30 @@ scene:
     assert plates.ramp_fraction == 0.02
     with pytest.raises(FiberpipeError, match="ramp_fraction"):
         load_config(p, {"scene.loading.ramp_fraction": 0.5})
+
+
+def test_positions_moved_from_outside_are_seen():
+    """A state edited between calls (a fiber pushed 25 µm into its neighbour without a velocity) gets
+    the contact force at once, as a fresh integrator gives it: the hook rebuilds when a node is
+    farther from its build position than the path bound allows. Non-unit quaternions handed in are
+    normalised."""
+    from fiberpipe.solver import Material, build_model
+    from fiberpipe.solver.contact_effect import make_contact_hook
+    from fiberpipe.solver.integrator import Integrator
+    from fiberpipe.solver.state import State
+
+    xa = fiber([0, 0, 0], [1, 0, 0], 10)
+    xb = fiber([0, 2 * R + 20e-6, 0], [1, 0, 0], 10)  # 20 µm apart: inside the skin, skipped
+    m = build_model(np.vstack([xa, xb]), np.array([0, 11, 22]), R, Material(15e9, 1380.0, 0.3))
+    integ = Integrator(m, [make_contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
+    st = State.at_rest(m)
+    integ.advance(st, 20)
+    st.x[11:, 1] -= 25e-6  # 5 µm overlap now
+    st.q[3] *= 1.5  # a non-unit quaternion from outside
+    fresh = st.copy()
+    integ.advance(st, 1)
+    integ2 = Integrator(m, [make_contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
+    integ2.advance(fresh, 1)
+    assert np.all(st.v[11:, 1] > 0)  # pushed apart
+    assert np.allclose(st.v, fresh.v, rtol=1e-9, atol=1e-15)
+    assert np.allclose(np.linalg.norm(st.q, axis=1), 1.0, atol=1e-12)
