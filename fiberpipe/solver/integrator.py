@@ -124,10 +124,7 @@ class SimulationResult:
 def choose_time_step(model: Model, effects: Sequence[Effect], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
     """The time step (s) the run will use and the stability report; refuses a user dt above the limit."""
     beta = max([getattr(e, "beta_s", 0.0) for e in effects if e.name == "damping"] or [0.0])
-    # the axial lock of every node removes the translations the axial mode needs (timestep.py)
-    locked = [e for e in effects if e.name == "constraints" and getattr(e, "nodes", "") == "all"]
-    axis = {"x": 0, "y": 1, "z": 2}[locked[0].axis] if locked else None
-    rep = stable_time_step(model, beta_s=beta, locked_axis=axis)
+    rep = stable_time_step(model, beta_s=beta)
     if settings.dt_s is None:
         return settings.dt_safety * rep.dt_stable_s, rep
     if settings.dt_s > rep.dt_stable_s and not settings.force_dt:
