@@ -59,7 +59,7 @@ bench: setup
 	$(FP) bench
 
 # The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
-REPRO_CONFIGS := paper-40 paper-40/alpha-0 paper-40/alpha-1e4 \
+REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/alpha-0 paper-40/alpha-1e4 \
                  paper-40/compaction paper-40/compaction-parallel paper-40/compaction-oblique-6 \
                  paper-40/compaction-identified
 REPRO_RUNS := $(addprefix runs/reproduce/,$(subst /,-,$(REPRO_CONFIGS)))

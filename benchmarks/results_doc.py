@@ -22,11 +22,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 STUDY = {
     "paper-40": "experiment ≈ 12 N at U = 1.15 mm; rise from U ≈ 0.55 mm",
+    "paper-40-parallel": "17 N (parallel model, Φ = 0) at U = 1.15 mm",
+    "paper-40-oblique-6": "9.5 N (oblique model, Φ = 6°) at U = 1.15 mm, below parallel",
     "paper-40-alpha-0": "(α = 0: the study's Table 2 asks what damping costs)",
     "paper-40-alpha-1e4": "",
     "paper-40-compaction": "— (orientation-aware law: the study's open problem)",
-    "paper-40-compaction-parallel": "17 N (parallel model, Φ = 0), the highest",
-    "paper-40-compaction-oblique-6": "9.5 N (oblique model, Φ = 6°), below parallel",
+    "paper-40-compaction-parallel": "(U = 3 mm) parallel model, Φ = 0",
+    "paper-40-compaction-oblique-6": "(U = 3 mm) oblique model, Φ = 6°",
     "paper-40-compaction-identified": "within ≈ 11 % of the experiment (identified model)",
 }
 
