@@ -33,32 +33,32 @@ STUDY = {
 }
 
 
-READING = """## Reading (measured 2026-11-22, 03:10 UTC run; these are what the runs gave, not targets)
+READING = """## Reading (measured 2026-11-22, 05:45–06:05 UTC run; these are what the runs gave, not targets)
 
-- **Every case of the study runs to the end** (α = 0, α = 1e4, the parallel, oblique-6° and
-  identified scaled-stiffness presets): before this session's fixes α ≤ 1e4 and the parallel/oblique
-  presets diverged. The causes (contact at free fiber ends, the gyroscopic term of an anisotropic
-  rotary inertia, fibers starting inside a plate) and their tests are in docs/reliability.md §5.
-- **At the study's settings (`paper-40`, U = 1.15 mm at 1e3 mm/min, α = 1e5)** the run completes in
-  ≈ 230–250 s on one core (the study: 882 s), but on this synthetic specimen the load-cell (upper)
-  plate carries no load up to U = 1.15 mm: the bundle is still rearranging (v_f 0.366 → 0.436). The
-  specimen now matches the study's measurable statistics (neighbour angle 5.8° mean against the
-  study's 6°, Table 4 curvature 0.25 1/m; `data-samples/paper-40/README.md`), but its fibers start
-  apart, without the load-bearing contact network of a scanned bundle that rests under gravity and
-  touches the upper plate at U = 0; that network is what makes the study's load rise from 0.55 mm.
-- **Compacted to U = 3 mm (`paper-40/compaction*`, 1e4 mm/min, α = 1e5)** the three phases appear:
-  zero load on the upper plate up to U ≈ 1.8–2.6 mm, a transition, then a load that rises in bursts
-  (fibers snapping past each other at 1e4 mm/min: the peaks are single events, not a smooth curve,
-  so the final values compare better than the peaks). The contact models order as in the study: parallel preset 8.3 N peak / 0.46 N final, oblique 6° 4.0 / 0.27 N,
-  orientation-aware Hertz 2.6 / 0.19 N, identified preset 1.2 / 0.20 N (the study, at U = 1.15 mm
-  on its real bundle: parallel 17 N above oblique 9.5 N, identified between them and the
-  experiment). The absolute loads are far below the study's because this specimen locks late.
-- **Undamped (α = 0)** the run completes, with K_e/S_e up to 320 (not quasi-static, as the study
-  found) and an energy residual of 0.13: energy appears that no work books, suspected the beam's
-  moment pair (exact to first order in the element rotation only; docs/reliability.md §5).
-- Energy balance residuals above 0.1 are transient: a sudden rearrangement (a fiber snapping past
-  another releases ≈ 1e-3 J of contact work within one history row) — the balance closes again to
-  < 0.01 afterwards (`post/energies.csv` of each run).
+- **Specimen and boundary condition** (issue 5, this session): `data-samples/paper-40` is now a pile
+  deposited under gravity and settled in the solver with friction (μ = 0.2) and the study's axial
+  lock ("the movement is locked in the fiber orientation": `scene.constraints: {lock_axial: all}`,
+  every node's z translation fixed); the upper plate sits on its top, v_f0 = 39.8 % (the study:
+  37.7 %), 74 fiber–fiber contacts at U = 0, Φ mean 4.7°, Table 4 curvature 0.21 / 0.27 1/m
+  (`data-samples/paper-40/README.md`). Without the lock the squeezed fibers escaped along z and the
+  load cell read 0 N up to U = 1.15 mm; with the lock alone (pile as placed) 0.33 N; settled 0.77 N.
+- **At the study's settings (`paper-40`, U = 1.15 mm at 1e3 mm/min, α = 1e5)** the load cell now
+  carries load from U ≈ 0.3 mm and reaches 0.77 N at U = 1.15 mm, with an energy residual below
+  1e-4 and K_e/S_e ≤ 0.09. The study's flat rearrangement phase up to 0.55 mm is not there (the
+  load rises gradually from 0.3 mm), and the final load is ≈ 1/20 of the study's (17 N parallel,
+  9.5 N oblique, 12 N experiment). The contact models give the same final load within the
+  fluctuation at this load level (parallel 0.775 N, oblique 6° 0.794 N, orientation-aware 0.771 N):
+  the study's parallel > oblique is not reproduced at U = 1.15 mm. The solver wall times of the
+  `paper-40` and `paper-40-parallel` rows were measured with three processes on the two cores (a
+  stale verification job); alone, `paper-40` takes ≈ 150 s (docs/benchmarks.md).
+- **Compacted to U = 3 mm (`paper-40/compaction*`, 1e4 mm/min)** the three phases are there: a
+  near-zero load up to U ≈ 1.5 mm, a transition, then a steep, bursty rise to tens of N (peaks
+  43–78 N at U ≈ 2.9–3 mm; v_f 0.40 → 0.71). Peak loads order as in the study (parallel 72 N above
+  oblique 6° 46 N and identified 43 N); the final values, single points of a bursty curve at 1e4
+  mm/min, do not (parallel 12.6 N, oblique 30.1 N).
+- **Undamped (α = 0)** the run completes with K_e/S_e up to 6.2 (not quasi-static, as the study
+  found) and an energy residual of 0.0045; α = 1e4: 0.0007.
+- Every case of the study runs to the end; energy residuals are below 0.06 everywhere.
 """
 
 
