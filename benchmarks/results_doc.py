@@ -50,7 +50,7 @@ READING = """## Reading (measured 2026-11-22, 05:45–06:05 UTC run; these are w
   fluctuation at this load level (parallel 0.775 N, oblique 6° 0.794 N, orientation-aware 0.771 N):
   the study's parallel > oblique is not reproduced at U = 1.15 mm. The solver wall times of the
   `paper-40` and `paper-40-parallel` rows were measured with three processes on the two cores (a
-  stale verification job); on its own core `paper-40` takes 165–170 s (docs/benchmarks.md: the
+  stale verification job); on its own core `paper-40` takes 165–200 s (docs/benchmarks.md: the
   load-bearing contact network costs more per step than the previous specimen's 130 s).
 - **Compacted to U = 3 mm (`paper-40/compaction*`, 1e4 mm/min)** the three phases are there: a
   near-zero load up to U ≈ 1.5 mm, a transition, then a steep, bursty rise to tens of N (peaks
