@@ -150,16 +150,10 @@ def _rigid_specimen(centres, rng, *, width_m, height_m, length_m, radius_m, tilt
     hi = np.array([width_m / 2 - radius_m, height_m - radius_m])
     sigma = np.broadcast_to(np.asarray(tilt_rad, float), (2,))
     zc = z - length_m / 2
-    if curvature_per_m > 0:  # circular arc through the fiber's ends: sagitta from the chord
-        rr = 1.0 / curvature_per_m
-        sag = (rr - np.sqrt(rr**2 - zc**2)) - (rr - np.sqrt(rr**2 - (length_m / 2) ** 2))
-    else:
-        sag = np.zeros_like(zc)
+    sag = _arc_sagitta(zc, length_m, curvature_per_m)
     ends = np.zeros((n, 2, 2))  # (x, y) of each fiber's mid-line at z = 0 and z = L
     bows = np.zeros((n, len(z), 2))  # the arc's offset from the chord, in a random plane
-    # bending planes stratified over [0, 2π) (then shuffled), so that with 40 fibers the XZ and YZ
-    # projections share the curvature evenly, as in the study's Table 4 (0.241 and 0.248 1/m)
-    planes = 2 * np.pi * (rng.permutation(n) + rng.uniform(0, 1, n)) / max(n, 1)
+    planes = _bow_planes(rng, n)
     for k in range(n):
         for _ in range(1000):
             a = rng.normal(0, 1, 2) * sigma
@@ -178,6 +172,21 @@ def _rigid_specimen(centres, rng, *, width_m, height_m, length_m, radius_m, tilt
     info = _box_info(width_m, height_m, length_m, n * np.pi * radius_m**2 * length_m)
     info["relaxation"] = relax
     return fibers, info
+
+
+def _arc_sagitta(zc, length_m, curvature_per_m):
+    """Offset (m) from its chord of a circular arc of ``curvature_per_m`` through the fiber's ends,
+    at ``zc`` from the middle (0 for a straight fiber)."""
+    if curvature_per_m <= 0:
+        return np.zeros_like(zc)
+    rr = 1.0 / curvature_per_m
+    return (rr - np.sqrt(rr**2 - zc**2)) - (rr - np.sqrt(rr**2 - (length_m / 2) ** 2))
+
+
+def _bow_planes(rng, n):
+    """Bending planes (rad) stratified over [0, 2π), then shuffled: with 40 fibers the XZ and YZ
+    projections share the curvature evenly, as in the study's Table 4 (0.241 and 0.248 1/m)."""
+    return 2 * np.pi * (rng.permutation(n) + rng.uniform(0, 1, n)) / max(n, 1)
 
 
 def _rigid_points(ends, bows, z, idx):
@@ -307,12 +316,8 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
     r, need = radius_m, 2 * radius_m + gap_m
     sigma = np.broadcast_to(np.asarray(tilt_rad, float), (2,))
     zc = z - length_m / 2
-    if curvature_per_m > 0:
-        rr = 1.0 / curvature_per_m
-        sag = (rr - np.sqrt(rr**2 - zc**2)) - (rr - np.sqrt(rr**2 - (length_m / 2) ** 2))
-    else:
-        sag = np.zeros_like(zc)
-    planes = 2 * np.pi * (rng.permutation(n) + rng.uniform(0, 1, n)) / max(n, 1)
+    sag = _arc_sagitta(zc, length_m, curvature_per_m)
+    planes = _bow_planes(rng, n)
     xlo, xhi = -width_m / 2 + r + gap_m, width_m / 2 - r - gap_m
     X = np.zeros((n, len(z)))
     Y = np.zeros((n, len(z)))
@@ -362,10 +367,10 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
     return fibers, info
 
 
-def _pair_gaps(x, y, X, Y, z, need, reach=2):
+def _pair_geometry(x, y, X, Y, z, need, reach=2):
     """Closest distances (minus ``need``) between the new fiber (x, y)(z) and placed fibers
-    (X, Y)(z), over segment pairs at most ``reach`` segments apart, and the vertical component of
-    their unit separation (new minus placed); also the z of the closest point on the new fiber."""
+    (X, Y)(z), over segment pairs at most ``reach`` segments apart; the unit separation (new minus
+    placed, (M, 3)), the z of the closest point on the new fiber and the placed fiber's index."""
     from fiberpipe.model.specimen_stats import segment_distances
 
     m, ns = len(X), len(z) - 1
@@ -380,8 +385,26 @@ def _pair_gaps(x, y, X, Y, z, need, reach=2):
     d, s, t = segment_distances(a0, a1, b0, b1)
     pa = a0 + s[..., None] * (a1 - a0)
     pb = b0 + t[..., None] * (b1 - b0)
-    uy = (pa[..., 1] - pb[..., 1]) / np.maximum(d, 1e-300)
-    return (d - need).ravel(), uy.ravel(), pa[..., 2].ravel(), np.repeat(np.arange(m), len(i))
+    nvec = (pa - pb) / np.maximum(d, 1e-300)[..., None]
+    return (d - need).ravel(), nvec.reshape(-1, 3), pa[..., 2].ravel(), np.repeat(np.arange(m), len(i))
+
+
+def _pair_gaps(x, y, X, Y, z, need, reach=2):
+    """:func:`_pair_geometry` with only the vertical component of the unit separation."""
+    g, nvec, zp, which = _pair_geometry(x, y, X, Y, z, need, reach)
+    return g, nvec[:, 1], zp, which
+
+
+def _supports(x, y, X, Y, z, r, need, gap_m, tol=2e-8):
+    """What the fiber (x, y)(z) rests on within ``tol`` of touching: the plate and placed fibers
+    (JSON-ready dicts with the z of the contact and, for fibers, its clearance)."""
+    pts = [{"on": "plate", "z_m": float(z[i])} for i in np.flatnonzero(y - r - gap_m <= tol)]
+    if len(X):
+        g, _, zp, which = _pair_gaps(x, y, X, Y, z, need)
+        for f in np.unique(which[g <= tol]):
+            sel = (which == f) & (g <= tol)
+            pts.append({"on": int(f), "z_m": float(np.mean(zp[sel])), "gap_m": float(g[sel].min() + gap_m)})
+    return pts
 
 
 def _drop_height(ys, x, X, Y, z, r, need, gap_m, tol=2e-9):
@@ -440,18 +463,7 @@ def _rest(x, bow_y, s0, X, Y, z, r, need, gap_m, ds0=2e-3, ds_min=1e-7, support_
             s, h, zt, ds = s + step, h2, zt2, min(2 * ds, ds0)
         else:
             ds /= 2
-    # what it rests on, within support_tol of touching
-    ys = s * zc + bow_y
-    pts = []
-    plate = r + gap_m - (h + ys)
-    for i in np.flatnonzero(plate >= -support_tol):
-        pts.append({"on": "plate", "z_m": float(z[i])})
-    if len(X):
-        g, uy, zp, which = _pair_gaps(x, h + ys, X, Y, z, need)
-        for f in np.unique(which[g <= support_tol]):
-            sel = (which == f) & (g <= support_tol)
-            pts.append({"on": int(f), "z_m": float(np.mean(zp[sel])), "gap_m": float(g[sel].min() + gap_m)})
-    return float(h), float(s), pts
+    return float(h), float(s), _supports(x, h + s * zc + bow_y, X, Y, z, r, need, gap_m, support_tol)
 
 
 def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3, trust0=5e-5,
@@ -483,29 +495,15 @@ def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3,
 
     def gaps(dx_, a, b):
         if len(near) == 0:
-            return np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0, int)
-        from fiberpipe.model.specimen_stats import segment_distances
-
-        p = np.stack([x + dx_, ycurve(a, b), z], axis=1)
-        Xn, Yn = X[near], Y[near]
-        q = np.stack([Xn, Yn, np.broadcast_to(z, Xn.shape)], axis=2)
-        ns = len(z) - 1
-        i = np.repeat(np.arange(ns), 5)
-        kk = i + np.tile(np.arange(-2, 3), ns)
-        ok = (kk >= 0) & (kk < ns)
-        i, kk = i[ok], kk[ok]
-        a0, a1 = p[i][None], p[i + 1][None]
-        d, s, t = segment_distances(a0, a1, q[:, kk], q[:, kk + 1])
-        pa = a0 + s[..., None] * (a1 - a0)
-        pb = q[:, kk] + t[..., None] * (q[:, kk + 1] - q[:, kk])
-        nvec = (pa - pb) / np.maximum(d, 1e-300)[..., None]
-        return (d - need).ravel(), nvec.reshape(-1, 3), ((pa[..., 2] - z[0]) / length).ravel(), np.repeat(near, len(i))
+            return np.zeros(0), np.zeros((0, 3)), np.zeros(0)
+        g, nvec, zp, _which = _pair_geometry(x + dx_, ycurve(a, b), X[near], Y[near], z, need)
+        return g, nvec, (zp - z[0]) / length
 
     trust = trust0
     c = np.r_[slide_cost, slide_cost, 0.5 + slide_cost, -0.5 + slide_cost, 0.5 + slide_cost, -0.5 + slide_cost]
     # variables: Δx⁺, Δx⁻, ΔyA⁺, ΔyA⁻, ΔyB⁺, ΔyB⁻ (all ≥ 0)
     for _ in range(max_steps):
-        g, n, up, _w = gaps(dx, yA, yB)
+        g, n, up = gaps(dx, yA, yB)
         sel = g < 3 * trust
         # linearised pair gaps: g + n_x Δx + n_y ((1−u) ΔyA + u ΔyB) ≥ margin
         rows = np.c_[n[sel, 0], -n[sel, 0], n[sel, 1] * (1 - up[sel]), -n[sel, 1] * (1 - up[sel]),
@@ -540,9 +538,4 @@ def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3,
         dx, yA, yB = dx + ddx, yA + dA, yB + dB
         trust = min(trust * 1.5, trust_max)
     xs, ys = x + dx, ycurve(yA, yB)
-    pts = [{"on": "plate", "z_m": float(z[i])} for i in np.flatnonzero(ys - r - gap_m <= 2e-8)]
-    g, n, up, w = gaps(dx, yA, yB)
-    for f in np.unique(w[g <= 2e-8]):
-        s_ = (w == f) & (g <= 2e-8)
-        pts.append({"on": int(f), "z_m": float(z[0] + length * np.mean(up[s_])), "gap_m": float(g[s_].min() + gap_m)})
-    return xs, ys, pts
+    return xs, ys, _supports(xs, ys, X, Y, z, r, need, gap_m)
