@@ -86,6 +86,7 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
 
     from fiberpipe.config import load_raw, validate_config
     from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.model.specimen import _box_info
     from fiberpipe.polylines import Polylines
     from fiberpipe.solver import simulate
     from fiberpipe.solver.build import build_simulation
@@ -121,8 +122,7 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
     height = top + gap_m
     width, length = float(info["width_m"]), float(info["length_m"])
     out = {k: v for k, v in info.items() if k != "deposit"}
-    out.update(height_m=height, volume_fraction=float(len(off) - 1) * np.pi * r**2 * length / (width * height * length),
-               box_max_m=[width / 2, height, length])
+    out.update(_box_info(width, height, length, float(len(off) - 1) * np.pi * r**2 * length))
     out["deposit"] = {k: v for k, v in info["deposit"].items() if k != "supports"}
     out["settle"] = {
         "alpha_per_s": float(alpha_per_s), "time_s": float(time_s), "mu": float(mu), "lock_axial": lock,
