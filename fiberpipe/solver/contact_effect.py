@@ -36,7 +36,7 @@ from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
 from ._kernels_integrate import ACC_FD, ACC_PW, ACC_WK
 from .contact import contact_forces_ex, gauss_points, pair_gap
-from .friction import friction_forces_ex, plane_friction, remap_history
+from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
 from .laws import make_law
 from .neighbours import build_pairs, max_displacement2_speed2
 
@@ -152,10 +152,23 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     (istate, fstate, seg_nodes, seg_radius, seg_fiber, seg_arc, law_params, gxi, gw, x_ref,
      L_pairs, L_keys, L_h2, L_h1, fc,
      radius_node, k_pen, pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_pos, pl_vel,
-     pl_hist, pl_tforce, L_active) = data
+     pl_hist, pl_tforce, L_active, cand_idx, cand_off, pl_pos_cand) = data
     step = istate[IS_STEP]
     istate[IS_STEP] = step + 1
     N = x.shape[0]
+    P = pl_axis.shape[0]
+    plane_fric = istate[IS_PLANE_FRICTION] == 1 and P > 0
+    plane_moved = 0.0
+    if plane_fric:
+        for p in range(P):
+            r0 = ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
+            pl_pos[p] = pl_pos0[p] + pl_sign[p] * pl_move[p] * r0
+            vel = pl_sign[p] * pl_move[p] * (r0 - ramp_fraction(t - dt, pl_T[p], pl_ta[p], pl_mode[p])) / dt
+            pl_vel[p, 0] = 0.0
+            pl_vel[p, 1] = 0.0
+            pl_vel[p, 2] = 0.0
+            pl_vel[p, pl_axis[p]] = vel
+            plane_moved = max(plane_moved, abs(pl_pos[p] - pl_pos_cand[p]))
     dm2, vm2 = max_displacement2_speed2(x, x_ref, v)
     # v holds v_{n−½}, the velocity that moved every node from x_{n−1} to x_n
     fstate[FS_PATH] += dt * math.sqrt(vm2)
@@ -165,10 +178,19 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     # edited state): rebuild, which restarts every bound from the positions as they are
     path = fstate[FS_PATH]
     moved_outside = dm2 > (path * (1.0 + 1e-12) + 1e-15) ** 2
-    if istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin or moved_outside:
+    rebuild = istate[IS_NBUILDS] == 0 or dm2 > half_skin * half_skin or moved_outside
+    if rebuild:
         _rebuild(x, seg_nodes, seg_radius, seg_fiber, seg_arc, istate, fstate, x_ref, L_pairs, L_keys, L_h2, L_h1,
                  L_active)
         fstate[FS_PATH] = 0.0
+    # the nodes near each plane, for its friction: a node touching now was within 1.5 skin of the
+    # plane when the list was made (it moved < skin since: ≤ skin/2 since the neighbour-list build
+    # before it and ≤ skin/2 after; the plane moved ≤ skin/2), so the list is remade with every
+    # neighbour-list build and whenever a plane has moved skin/2 since
+    if plane_fric and (rebuild or plane_moved > half_skin):
+        plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, 3.0 * half_skin, cand_idx, cand_off)
+        for p in range(P):
+            pl_pos_cand[p] = pl_pos[p]
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
     # (contact_forces_ex, c_gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * fstate[FS_PATH]
@@ -242,18 +264,9 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
                                       c_share, c_active, n_active, step)
         diss += dff
         fstate[FS_E_SPRING] = esp
-    P = pl_axis.shape[0]
-    if istate[IS_PLANE_FRICTION] == 1 and P > 0:
-        for p in range(P):
-            r0 = ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
-            pl_pos[p] = pl_pos0[p] + pl_sign[p] * pl_move[p] * r0
-            vel = pl_sign[p] * pl_move[p] * (r0 - ramp_fraction(t - dt, pl_T[p], pl_ta[p], pl_mode[p])) / dt
-            pl_vel[p, 0] = 0.0
-            pl_vel[p, 1] = 0.0
-            pl_vel[p, 2] = 0.0
-            pl_vel[p, pl_axis[p]] = vel
+    if plane_fric:
         diss += plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, kt, dt, pl_hist, fc,
-                               pl_tforce, step)
+                               pl_tforce, step, cand_idx, cand_off)
     # the forces stay in fc: the step loop's update applies them, books their work and clears fc
     acc[ACC_PW] += diss
     acc[ACC_FD] += diss
@@ -405,7 +418,8 @@ def make_contact_hook(model, *, law=None, contact: bool = True, friction: bool =
                 scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), scene.pl_pos0.astype(np.float64),
                 scene.pl_move.astype(np.float64), scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64),
                 scene.pl_mode.astype(np.int64), scene.pl_pos0.astype(np.float64).copy(), np.zeros((P, 3)),
-                np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), List([np.zeros(cap, np.int64)]))
+                np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), List([np.zeros(cap, np.int64)]),
+                np.zeros(N * P, np.int64), np.zeros(P + 1, np.int64), scene.pl_pos0.astype(np.float64).copy())
         info.data = data
         return data
 

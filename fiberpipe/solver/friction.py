@@ -35,25 +35,28 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
     h0 = h[k, 0]
     h1 = h[k, 1]
     h2 = h[k, 2]
-    old = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    old2 = h0 * h0 + h1 * h1 + h2 * h2
     hn = h0 * n0 + h1 * n1 + h2 * n2
-    h0 -= hn * n0
-    h1 -= hn * n1
-    h2 -= hn * n2
-    new = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
-    if new > 0.0:
-        sc = old / new
-        h0 *= sc
-        h1 *= sc
-        h2 *= sc
+    if hn != 0.0:
+        h0 -= hn * n0
+        h1 -= hn * n1
+        h2 -= hn * n2
+        new2 = h0 * h0 + h1 * h1 + h2 * h2
+        if new2 > 0.0:
+            sc = math.sqrt(old2 / new2)
+            h0 *= sc
+            h1 *= sc
+            h2 *= sc
     un = du0 * n0 + du1 * n1 + du2 * n2
     t0 = h0 - kt * (du0 - un * n0)
     t1 = h1 - kt * (du1 - un * n1)
     t2 = h2 - kt * (du2 - un * n2)
-    tm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    tm2 = t0 * t0 + t1 * t1 + t2 * t2
     lim = mu * fn
     diss = 0.0
-    if tm > lim:
+    # stick (the common case of a compacted bundle) needs no square root
+    if tm2 > lim * lim:
+        tm = math.sqrt(tm2)
         sc = lim / tm
         diss = lim * (tm - lim) / kt
         t0 *= sc
@@ -189,8 +192,32 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, margin, cand_idx, cand_off):
+    """The nodes within ``margin`` [m] of touching each plane: ``cand_idx[cand_off[p]:cand_off[p + 1]]``
+    for plane ``p`` (gap ``σ(x_{i,a} − s_p) − r_i < margin``; same planes as :func:`plane_friction`).
+
+    A node can touch plane ``p`` later only if its gap closed by more than ``margin``, i.e. if the
+    node and the plane moved by more than ``margin`` together since: while they have not,
+    :func:`plane_friction` may visit these nodes only (a few hundred) instead of all N per plane.
+    cand_idx : (N·P,) int64, cand_off : (P + 1,) int64 — out. Returns the number of candidates.
+    """
+    n = 0
+    cand_off[0] = 0
+    for p in range(pl_axis.shape[0]):
+        ax = pl_axis[p]
+        sg = pl_sign[p]
+        pos = pl_pos[p]
+        for i in range(x.shape[0]):
+            if sg * (x[i, ax] - pos) - radius_node[i] < margin:
+                cand_idx[n] = i
+                n += 1
+        cand_off[p + 1] = n
+    return n
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, k_t, dt, hist, f_out, pl_tforce,
-                   step=-1):
+                   step=-1, cand_idx=None, cand_off=None):
     """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
 
     Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
@@ -201,6 +228,8 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
     step's number (the default −1: no time stamps, open entries are cleared): then a node off the
     plane is not visited again, and its history counts only if it
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
+    ``cand_idx``, ``cand_off`` (with time stamps): visit only these nodes per plane
+    (:func:`plane_candidates`; the caller keeps them valid), not all N.
     Returns the dissipated energy [J].
     """
     diss = 0.0
@@ -225,7 +254,17 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
             n1 = sg
         else:
             n2 = sg
-        for i in range(x.shape[0]):
+        if cand_off is None or not lazy:
+            c_lo = 0
+            c_hi = x.shape[0]
+        else:
+            c_lo = cand_off[p]
+            c_hi = cand_off[p + 1]
+        for c in range(c_lo, c_hi):
+            if cand_off is None or not lazy:
+                i = c
+            else:
+                i = cand_idx[c]
             d = radius_node[i] - sg * (x[i, ax] - pos)
             if d <= 0.0:
                 if not lazy and (hist[i, p, 0] != 0.0 or hist[i, p, 1] != 0.0 or hist[i, p, 2] != 0.0):

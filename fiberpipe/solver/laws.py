@@ -85,7 +85,7 @@ P_XI_HI = 14  # hertz_oriented: a/ℓ_blend above which the line law is used alo
 P_NTAB = 15  # number of table entries
 P_LNPHI0 = 16  # ln(Φ0 / rad) of the first table entry
 P_DLNPHI = 17  # table step in ln Φ
-N_HEADER = 18  # table: ln k̂ (NTAB values), then ln â (NTAB values)
+N_HEADER = 18  # table: ln k̂ (NTAB values), ln â (NTAB values), then k̂ and â themselves (NTAB values each)
 
 DEG = math.pi / 180.0
 
@@ -366,7 +366,9 @@ def _equivalent_angle(phi, r1, r2):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _table_lookup(params, phi_eq):
-    """(k̂, â) at Φ_eq from the table in ``params`` (linear in ln Φ, clamped to the grid)."""
+    """(k̂, â) at Φ_eq from the table in ``params``: k̂ and â interpolated linearly in ln Φ, clamped to
+    the grid (within 1e-5 of the exact solution between the 512 grid points: tests/solver/test_laws.py;
+    interpolating ln k̂ instead costs an exp per value and contact for no accuracy that matters)."""
     nt = int(params[P_NTAB])
     if phi_eq <= 0.0:
         u = 0.0
@@ -381,9 +383,10 @@ def _table_lookup(params, phi_eq):
     else:
         i = min(max(int(u), 0), nt - 2)  # integer clamp: NaN-safe even under fastmath
         t = u - i
-    lk = params[N_HEADER + i] * (1.0 - t) + params[N_HEADER + i + 1] * t
-    la = params[N_HEADER + nt + i] * (1.0 - t) + params[N_HEADER + nt + i + 1] * t
-    return math.exp(lk), math.exp(la)
+    kk = N_HEADER + 2 * nt + i
+    ka = N_HEADER + 3 * nt + i
+    return (params[kk] * (1.0 - t) + params[kk + 1] * t,
+            params[ka] * (1.0 - t) + params[ka + 1] * t)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -397,10 +400,10 @@ def hertz_crossed_point(params, delta, r1, r2, phi):
     re = 2.0 * r1 * r2 / (r1 + r2)
     phe = _equivalent_angle(phi, r1, r2)
     kh, ah = _table_lookup(params, phe)
-    k = kh * params[P_ESTAR] * math.sqrt(re)
+    sre = math.sqrt(re)
     sd = math.sqrt(delta)
-    f = k * delta * sd
-    return f, 0.4 * f * delta, ah * math.sqrt(re * delta)
+    f = kh * params[P_ESTAR] * sre * delta * sd
+    return f, 0.4 * f * delta, ah * sre * sd
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -562,7 +565,7 @@ class ContactLaw:
 
     def _header(self) -> np.ndarray:
         l0, dl, lk, la = crossed_table()
-        p = np.zeros(N_HEADER + 2 * lk.size)
+        p = np.zeros(N_HEADER + 4 * lk.size)
         p[P_ESTAR] = self.e_star_pa
         p[P_LREF] = self.ref_length_m
         p[P_PHI_LO] = self.phi_lo_deg * DEG
@@ -576,8 +579,12 @@ class ContactLaw:
         p[P_NTAB] = lk.size
         p[P_LNPHI0] = l0
         p[P_DLNPHI] = dl
-        p[N_HEADER : N_HEADER + lk.size] = lk
-        p[N_HEADER + lk.size :] = la
+        n = lk.size
+        p[N_HEADER : N_HEADER + n] = lk
+        p[N_HEADER + n : N_HEADER + 2 * n] = la
+        # the values themselves: the kernels interpolate them linearly in ln Φ (no exp per contact)
+        p[N_HEADER + 2 * n : N_HEADER + 3 * n] = np.exp(lk)
+        p[N_HEADER + 3 * n :] = np.exp(la)
         return p
 
     def params(self) -> np.ndarray:

@@ -148,3 +148,25 @@ def test_oriented_kernel_continuous_and_monotone_in_phi():
         k = list(phis).index(phi) if phi in phis else None
         if k is not None:
             assert fs[k] == pytest.approx(L.HertzCrossedLaw(phi).stiffness() * 1e-9, rel=1e-6)
+
+
+def test_crossing_angle_series_and_acos_branches():
+    """Φ from the cross product and the asin series (below 15°) and from acos (above) against
+    atan2(|t_A × t_B|, |t_A·t_B|), from 1e-6 rad to 90°, across the 15° switch."""
+    import math
+
+    from fiberpipe.solver.contact import _crossing_angle
+
+    rng = np.random.default_rng(2)
+    for phi in np.concatenate([np.geomspace(1e-6, math.pi / 2, 60), np.radians([14.999, 15.0, 15.001])]):
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u)
+        w = np.cross(u, rng.normal(size=3))
+        w /= np.linalg.norm(w)
+        ta = 0.3e-3 * u
+        tb = 0.31e-3 * (math.cos(phi) * u + math.sin(phi) * w) * (-1 if phi > 0.5 else 1)
+        aa, bb, ab = ta @ ta, tb @ tb, ta @ tb
+        ref = math.atan2(np.linalg.norm(np.cross(ta, tb)), abs(ab))
+        got = _crossing_angle(*ta, *tb, aa, bb, ab)
+        tol = 1e-10 * ref if ref < math.radians(15.0) else 1e-8 * ref  # acos near 1 loses digits
+        assert abs(got - ref) <= tol + 1e-15, (phi, got, ref)

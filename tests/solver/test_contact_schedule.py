@@ -128,6 +128,48 @@ def test_stamped_plane_friction_equals_clearing_it():
     assert np.any(h3 != 0)
 
 
+def test_plane_friction_on_candidate_nodes_equals_scanning_all():
+    """Plane friction visiting only the nodes listed near each plane (``plane_candidates``, margin
+    M) equals scanning every node, as long as nodes and plane together moved < M since the list:
+    the hook's rule (remade at every neighbour-list build and when a plane moved skin/2)."""
+    from fiberpipe.solver.friction import plane_candidates
+
+    rng = np.random.default_rng(11)
+    N = 400
+    x = rng.uniform(-1.6e-3, 1.6e-3, (N, 3))
+    x[:, 1] = rng.uniform(0.2e-3, 0.45e-3, N)  # near the lower plate (y = 0, pushing +y) and far from the upper
+    rad = np.full(N, R)
+    k_pen = np.full(N, 1e6)
+    axis = np.array([1, 1, 0, 0], np.int64)
+    sign = np.array([1.0, -1.0, 1.0, -1.0])
+    pos = np.array([0.0, 3e-3, -1.5e-3, 1.5e-3])
+    margin = 60e-6
+    cand_idx = np.zeros(N * 4, np.int64)
+    cand_off = np.zeros(5, np.int64)
+    n_cand = plane_candidates(x, rad, axis, sign, pos, margin, cand_idx, cand_off)
+    assert 0 < n_cand < N
+    h_all = np.zeros((N, 4, 4))
+    h_cand = np.zeros((N, 4, 4))
+    touched = 0
+    for step in range(200):
+        p_now = pos + np.array([1.0, 0.0, 0.0, 0.0]) * 0.1e-6 * step  # the lower plate rises 20 µm
+        x_now = x + (0.15e-6 * step) * rng.uniform(-1, 1, (N, 3))     # nodes wander < 30 µm
+        v = rng.normal(size=(N, 3)) * 0.01
+        vel = np.zeros((4, 3))
+        vel[0, 1] = 0.1e-6 / 1e-7
+        f1 = np.zeros((N, 3))
+        f2 = np.zeros((N, 3))
+        t1 = np.zeros((4, 3))
+        t2 = np.zeros((4, 3))
+        d1 = plane_friction(x_now, v, rad, k_pen, axis, sign, p_now, vel, 0.2, 1e5, 1e-7, h_all, f1, t1, step)
+        d2 = plane_friction(x_now, v, rad, k_pen, axis, sign, p_now, vel, 0.2, 1e5, 1e-7, h_cand, f2, t2, step,
+                            cand_idx, cand_off)
+        assert np.array_equal(f1, f2) and d1 == d2 and np.array_equal(t1, t2)
+        touched += int(np.count_nonzero(f1.any(axis=1)))
+    assert np.array_equal(h_all[..., :3], h_cand[..., :3])
+    assert touched > 100  # nodes do reach the rising plate
+
+
 def test_loading_ramp_fraction_reaches_the_plates(tmp_path):
     from fiberpipe.config import load_config
     from fiberpipe.errors import FiberpipeError
