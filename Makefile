@@ -16,6 +16,7 @@ help:
 	@echo "make test     run the default test suite"
 	@echo "make verify   print the verification table (SPEC section 8)"
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
+	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 12 min)"
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -44,7 +45,7 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
-.PHONY: bench-contact bench-pyelastica
+.PHONY: bench-contact bench-pyelastica fast-settings
 bench-contact: setup
 	$(PY) benchmarks/bench_contact.py
 
@@ -76,6 +77,10 @@ reproduce: $(REPRO_RUNS)
 studies: setup
 	for s in configs/studies/*.yaml; do $(FP) study $$s --out runs/studies/$$(basename $$s .yaml) || exit 1; done
 	$(PY) benchmarks/accuracy_cost_doc.py --runs runs/studies --out docs/accuracy-cost.md
+
+# paper-40's fast settings against the study settings (issue 7; ≈ 12 min on one core)
+fast-settings: setup
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/fast_settings.py --save runs/fast_settings --out runs/fast_settings/table.md
 
 clean:
 	rm -rf runs .pytest_cache
