@@ -43,7 +43,8 @@ KEYS = ("wall_s", "wall_steady_s", "steps", "U_mm", "F_final_N", "U_curve", "F_c
 
 
 def _slug(name: str) -> str:
-    return "".join(c if c.isalnum() else "-" for c in name.split("(")[0].strip().lower()).strip("-")
+    slug = "".join(c if c.isalnum() else "-" for c in name.replace("+", "plus").replace("−", "minus").lower())
+    return "-".join(filter(None, slug.split("-")))
 
 
 def _run(name, overrides, save: Path, reuse: bool) -> dict:
