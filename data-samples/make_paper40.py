@@ -32,10 +32,17 @@ paper-40 scene, lower plate and walls fixed, no upper plate, gravity, contact, C
 energy has died out); the settled node positions become the mid-lines (rest shape) and the upper
 plate is put on the settled pile's top (+1 µm). The solver runs on one thread: deterministic
 (about 6.5 min on one core).
+
+``--wavy`` makes the variant of data-samples/paper-40-wavy/ instead (issue #5, Table 4's curvature
+read as 0.24 1/mm): the same deposit with a smooth 1.8–2.5 mm waviness of that projected
+curvature (``cassette_specimen(wave_curvature_per_m=...)``), settled with the work-around for the
+axial-lock instability of curved fibers described at ``WAVY_SETTLE_MASS_SCALING``. The default
+output (data-samples/paper-40/) is unchanged.
 """
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,10 +62,33 @@ SETTLE_TIME_S = 0.15  # 150 ms: kinetic energy 3e-15 J (from 1e-8 J), fastest no
 SETTLE_LOCK = "all"  # settle with the axial lock the paper-40 scene uses
 SETTLE_FRAMES = 9
 DEPOSIT_CANDIDATES = 2  # trial drops per fiber, the lowest kept: 1 gives v_f0 ≈ 30 %, 2 ≈ 38 %, 4 ≈ 48 %
+# --wavy (issue #5, Table 4 read as 1/mm): a smooth waviness of 0.24 1/mm projected curvature, 2 sine
+# modes per component of wavelengths 1.8-2.5 mm (longer waves with that curvature give Φ ≈ 20° and
+# v_f0 ≈ 19 %: data-samples/paper-40-wavy/README.md), the tilts lowered to keep Φ ≈ 6-7°, one trial
+# drop per fiber (a wavy pile is denser: two give v_f0 ≈ 40 % before settling)
+WAVY_OUT = Path(__file__).resolve().parent / "paper-40-wavy"
+WAVE_CURVATURE_PER_M = 267.0  # the curve's own; the 0.3 mm mesh polyline measures ≈ 240 1/m (Table 4)
+WAVE_LENGTHS_M = (1.8e-3, 2.5e-3)
+WAVE_MODES = 2
+WAVY_PHI_TILT_DEG = 3.0  # the tilts' share of Φ (the waves add the rest)
+WAVY_CANDIDATES = 1
+# The axial lock on an intrinsically wavy fiber is unstable in the solver at low damping (a lone wavy
+# fiber, lock on, no load, α = 0 or 300 1/s: its kinetic energy grows ~1e14-fold in 13 ms, an
+# amplitude growth rate ≈ 1.3e3 1/s; α = 1e5 1/s or no lock: stable; the shipped nearly straight
+# fibers: stable). So the wavy pile settles with a damping that outruns it, mass scaled by 25 (the
+# growth in 1/5) with α = 1e3 1/s (decay 500 1/s), and gravity × 84 so that the pile still falls
+# as fast as the shipped one did (the drag is α × the scaled mass: terminal velocity
+# 84 g / (25 α) = 33 mm/s = g / 300 1/s); the rest state under friction, not the way to it, is kept
+# (84 g presses the contacts ≈ 19× deeper: tenths of a µm).
+WAVY_SETTLE_MASS_SCALING = 25.0
+WAVY_SETTLE_ALPHA_PER_S = 1e3
+WAVY_SETTLE_GRAVITY_SCALE = 84.0
+WAVY_SETTLE_TIME_S = 0.15
 
 
 def parameters(phi_mean_deg: float = PHI_MEAN_DEG, seed: int = 0, original: bool = False,
-               rigid: bool = False) -> dict:
+               rigid: bool = False, *, candidates: int = DEPOSIT_CANDIDATES, wave_curvature_per_m: float = 0.0,
+               wave_lengths_m=WAVE_LENGTHS_M, wave_modes: int = WAVE_MODES) -> dict:
     if original:
         return {"seed": seed}
     params = {
@@ -68,12 +98,16 @@ def parameters(phi_mean_deg: float = PHI_MEAN_DEG, seed: int = 0, original: bool
         "curvature_per_m": CURVATURE_PER_M,
     }
     if not rigid:
-        params.update(candidates=DEPOSIT_CANDIDATES, top="pile")
+        params.update(candidates=candidates, top="pile")
+        if wave_curvature_per_m > 0:
+            params.update(wave_curvature_per_m=float(wave_curvature_per_m),
+                          wave_lengths_m=[float(v) for v in wave_lengths_m], wave_modes=int(wave_modes))
     return params
 
 
 def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_TIME_S, mu=0.2, lock=None,
-                frames=SETTLE_FRAMES, gap_m=1e-6):
+                frames=SETTLE_FRAMES, gap_m=1e-6, dt_safety=None, mass_scaling=None,
+                gravity_scale=None):
     """Settle ``fibers`` (a deposited pile) in the solver under gravity with friction; returns the
     settled Polylines (the node positions of the last frame, per fiber) and ``info`` updated to
     the settled pile (height = its top + ``gap_m``, v_f0, contacts, the settling figures).
@@ -103,6 +137,12 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
     if lock:
         sc["constraints"] = {"lock_axial": lock}
     raw["solver"] = {**raw.get("solver", {}), "end_time": float(time_s), "output_frames": int(frames)}
+    if dt_safety is not None:  # the config's otherwise (0.95)
+        raw["solver"]["dt_safety"] = float(dt_safety)
+    if mass_scaling is not None:  # the wavy pile: see WAVY_SETTLE_MASS_SCALING
+        raw["solver"]["mass_scaling"] = float(mass_scaling)
+    if gravity_scale is not None:
+        sc["gravity"] = {"acceleration": [0.0, -9.81 * float(gravity_scale), 0.0]}
     cfg = validate_config(raw, where="settle_pile")
     mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
     model, effects, settings = build_simulation(mesh, cfg)
@@ -126,6 +166,8 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
     out["deposit"] = {k: v for k, v in info["deposit"].items() if k != "supports"}
     out["settle"] = {
         "alpha_per_s": float(alpha_per_s), "time_s": float(time_s), "mu": float(mu), "lock_axial": lock,
+        **({"mass_scaling": float(mass_scaling)} if mass_scaling is not None else {}),
+        **({"gravity_scale": float(gravity_scale)} if gravity_scale is not None else {}),
         "dt_s": float(res.dt_s), "steps": int(res.steps),
         "max_displacement_m": float(moved.max()), "median_fiber_max_displacement_m":
             float(np.median([moved[off[i]:off[i + 1]].max() for i in range(len(off) - 1)])),
@@ -181,18 +223,53 @@ def main(argv=None):
     ap.add_argument("--settle-time", type=float, default=SETTLE_TIME_S, help="settling time, s")
     ap.add_argument("--settle-lock", choices=["all", "ends", "none"], default=SETTLE_LOCK,
                     help="lock the fibers' z translation while settling (scene.constraints.lock_axial)")
+    ap.add_argument("--wavy", action="store_true",
+                    help="the wavy variant (Table 4 read as 1/mm): --wave-curvature %g --phi-mean-deg %g --candidates %d "
+                         "--out data-samples/paper-40-wavy unless given" % (WAVE_CURVATURE_PER_M, WAVY_PHI_TILT_DEG,
+                                                                             WAVY_CANDIDATES))
+    ap.add_argument("--wave-curvature", type=float, default=None,
+                    help="deposit: smooth waviness of this projected curvature, 1/m (0: none, the default)")
+    ap.add_argument("--wave-lengths-mm", type=float, nargs=2, default=[v * 1e3 for v in WAVE_LENGTHS_M])
+    ap.add_argument("--wave-modes", type=int, default=WAVE_MODES)
+    ap.add_argument("--candidates", type=int, default=None, help="deposit: trial drops per fiber")
+    ap.add_argument("--settle-mass-scaling", type=float, default=None, help="solver.mass_scaling while settling")
+    ap.add_argument("--settle-gravity-scale", type=float, default=None, help="gravity × this while settling")
     args = ap.parse_args(argv)
-    params = parameters(args.phi_mean_deg, args.seed, args.original, args.rigid)
-    fibers, info = cassette_specimen(**params)
+    if args.wavy:
+        args.wave_curvature = WAVE_CURVATURE_PER_M if args.wave_curvature is None else args.wave_curvature
+        args.candidates = WAVY_CANDIDATES if args.candidates is None else args.candidates
+        args.out = WAVY_OUT if args.out == OUT else args.out
+        given = sys.argv[1:] if argv is None else argv
+        if "--settle-alpha" not in given:
+            args.settle_alpha = WAVY_SETTLE_ALPHA_PER_S
+        if "--settle-time" not in given:
+            args.settle_time = WAVY_SETTLE_TIME_S
+        if args.settle_mass_scaling is None:
+            args.settle_mass_scaling = WAVY_SETTLE_MASS_SCALING
+        if args.settle_gravity_scale is None:
+            args.settle_gravity_scale = WAVY_SETTLE_GRAVITY_SCALE
+        if "--phi-mean-deg" not in given:
+            args.phi_mean_deg = WAVY_PHI_TILT_DEG
+    params = parameters(args.phi_mean_deg, args.seed, args.original, args.rigid,
+                        candidates=DEPOSIT_CANDIDATES if args.candidates is None else args.candidates,
+                        wave_curvature_per_m=args.wave_curvature or 0.0,
+                        wave_lengths_m=[v * 1e-3 for v in args.wave_lengths_mm], wave_modes=args.wave_modes)
+    fibers, info = cassette_specimen(**{k: tuple(v) if k == "wave_lengths_m" else v for k, v in params.items()})
     if args.settle and params.get("placement") == "deposit":
         fibers, info = settle_pile(fibers, info, alpha_per_s=args.settle_alpha, time_s=args.settle_time,
-                                   lock=None if args.settle_lock == "none" else args.settle_lock)
-        params["settle"] = {k: info["settle"][k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial")}
+                                   lock=None if args.settle_lock == "none" else args.settle_lock,
+                                   mass_scaling=args.settle_mass_scaling, gravity_scale=args.settle_gravity_scale)
+        params["settle"] = {k: info["settle"][k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial", "mass_scaling",
+                                                                 "gravity_scale")
+                            if k in info["settle"]}
         wall = info.pop("settle_wall_time_s")
     stats = specimen_statistics(fibers, box_min_m=info["box_min_m"], box_max_m=info["box_max_m"])
     info["generator"] = {"function": "fiberpipe.model.specimen.cassette_specimen", **params}
     if not args.original:
         info["generator"]["target_phi_mean_deg"] = args.phi_mean_deg
+        if args.wave_curvature:  # the tilts' share; the waves add the rest (the study's 6°)
+            info["generator"]["target_phi_mean_deg"] = PHI_MEAN_DEG
+            info["generator"]["tilt_phi_mean_deg"] = args.phi_mean_deg
     info["statistics"] = stats
     args.out.mkdir(parents=True, exist_ok=True)
     write_fibers(args.out / "fibers.h5", fibers)
