@@ -60,6 +60,26 @@ READING = """## Reading (measured 2026-11-22, 05:45–06:05 UTC run; these are w
 - **Undamped (α = 0)** the run completes with K_e/S_e up to 6.2 (not quasi-static, as the study
   found) and an energy residual of 0.0045; α = 1e4: 0.0007.
 - Every case of the study runs to the end; energy residuals are below 0.06 everywhere.
+- **Table 4 read as 1/mm: the wavy variant** (`data-samples/paper-40-wavy/README.md`, issue 5, fourth
+  round; `configs/paper-40-wavy/`). A curvature of 0.24 1/m is a sagitta of 7 µm over 15 mm, below
+  half a voxel: a curvature averaged along centre lines traced from a scan can hardly be that low,
+  while 0.24 1/mm is the size of real fibers' local waviness. Fibers with 2 mm waves of 40 µm rms
+  (the only wavelength that keeps Φ mean ≈ 6° and v_f0 ≈ 38 % together in the 3 mm cassette;
+  projected curvature 241 / 236 1/m on the 0.3 mm mesh), settled like the shipped pile (v_f0 39.8 %),
+  carry ≈ 6× the shipped specimen's load: at the study's settings 0.67 / 1.46 / 2.86 / **4.96 N** at
+  U = 0.55 / 0.8 / 1.0 / 1.15 mm (parallel 5.09 N, oblique 6° 5.04 N), load above 0.1 N from
+  U = 0.29 mm and a slope above 5 N/mm from 0.93 mm: closer to the study's shape and to its 9.5–17 N,
+  but still 2–3× below it, the contact law still does not matter, and it depends on the pile (a
+  second seed settles at 41.9 % and reaches 7.2 N; a pile at 36.3 % only 1.6 N). Not shipped as
+  `paper-40`: the settling of wavy fibers needs a work-around (below).
+- **A solver limit found with the wavy fibers** (measured, not fixed): a single free fiber with 2 mm
+  waves (rest rotation ≈ 0.07 rad per 0.3 mm element), no damping, no gravity or contact, gains
+  kinetic energy from a 1e-24 J kick: to 1e-9 J in 11 ms with the axial lock (2 of 5 fibers tried),
+  ×100 in 12 ms without it. The growth rate is the same at dt_safety 0.95, 0.5 and 0.25, so it is not
+  the time step: the discrete beam is not exactly conservative for large rest curvatures per element
+  (its moments are the gradient of the bending energy only to O(|θ|²)). The shipped, nearly straight
+  fibers (rest rotation ≈ 1e-4 rad) stay at their kick's energy; the study's α = 1e5 1/s damps the growth, α = 300 1/s does not. An
+  exact conjugate moment (R_mid(I + d θ×²) m_b) alone did not cure it and was not landed.
 """
 
 
