@@ -26,11 +26,12 @@ from fiberpipe.solver.build import build_simulation
 from fiberpipe.solver.integrator import Integrator, choose_time_step
 from fiberpipe.solver.state import State
 
+# every set with the axial lock of configs/paper-40.yaml (without it the squeezed fibers leave along z)
 EFFECT_SETS = (
-    ["gravity", "damping"],
-    ["gravity", "damping", "plates", "walls"],
-    ["gravity", "damping", "contact", "plates", "walls"],
-    ["gravity", "damping", "contact", "friction", "plates", "walls"],
+    ["gravity", "damping", "constraints"],
+    ["gravity", "damping", "constraints", "plates", "walls"],
+    ["gravity", "damping", "constraints", "contact", "plates", "walls"],
+    ["gravity", "damping", "constraints", "contact", "friction", "plates", "walls"],
 )
 
 
