@@ -35,8 +35,10 @@ BENCH_DIR = ROOT / "benchmarks"
 BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
 PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging")
-# settings found fastest within 2 % of the study-settings curve (docs/benchmarks.md, "fast settings")
-FAST_OVERRIDES = {"solver.mass_scaling": 100, "scene.damping.alpha": "1e3 1/s"}
+# the fast setting of docs/benchmarks.md, "Fast settings": within 1.84 % of the mean of three
+# study-settings runs in 0.23 mm window means (the study runs themselves: 1.3–3.0 %), ≈ 27 s
+FAST_OVERRIDES = {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s"}
+FAST_WINDOW_M = 0.23e-3  # window of the curve comparison (one run of the study settings is chaotic)
 
 
 def _load(name: str):
@@ -127,9 +129,9 @@ def curve_error_binned(ref: dict, other: dict, window_m: float = 0.05e-3) -> flo
     |ΔF̄| over the windows, relative to the largest reference window mean.
 
     The pointwise error of two paper-40 runs is dominated by the timing of contact bursts (fibers
-    snapping past each other), which any change of rounding moves: the same settings with gravity
-    perturbed by 1e-8 differ by tens of percent pointwise, by < 1 % in window means
-    (benchmarks/fast_settings.py).
+    snapping past each other), which any change of rounding moves: on the settled specimen the same
+    settings with gravity perturbed by ±1e-8 differ by 25–29 % pointwise, by up to 8.9 % in 0.05 mm
+    window means and 4.4 % in 0.23 mm ones (benchmarks/fast_settings.py, docs/benchmarks.md).
     """
     import numpy as np
     u_ref, f_ref = ref["U_curve"], ref["F_curve"]
@@ -209,11 +211,11 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
                 echo(f"bench: fast settings failed: {exc}")
                 diverged.append(f"{fast_name}: {type(exc).__name__}: {str(exc)[:300]}")
             else:
-                rows.append((fast_name, fast, curve_error(ref, fast)))
+                rows.append((fast_name, fast, curve_error_binned(ref, fast, FAST_WINDOW_M)))
         loads["paper40"] = load()
         sec += ["## Time to solution: configs/paper-40.yaml", "",
                 f"Mesh + simulate in one process, one thread ({loads['paper40']}). Load = lower-plate force.", "",
-                "| settings | steps | element-steps | dt (s) | wall (s) | without first-chunk compile/load (s) | M element-steps/s | U reached (mm) | final load (N) | max load (N) | curve vs study settings |",
+                "| settings | steps | element-steps | dt (s) | wall (s) | without first-chunk compile/load (s) | M element-steps/s | U reached (mm) | final load (N) | max load (N) | curve vs study settings (0.23 mm window means) |",
                 "|---|---|---|---|---|---|---|---|---|---|---|"]
         for name, r, err in rows:
             sec.append(f"| {name} | {r['steps']} | {r['elem_steps']:.3g} | {r['dt_s']:.3g} | {r['wall_s']:.1f} | {r['wall_steady_s']:.1f} | "
