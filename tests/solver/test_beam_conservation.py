@@ -3,7 +3,9 @@
 For a large rest curvature per element (the wavy variant's 2 mm waves: up to ≈ 0.2 rad per 0.3 mm
 element) the first-order moment pair of the earlier kernel was the gradient of the strain energy only
 to O(|θ|) and the kinetic energy of a 1e-24 J kick grew to ~1e-9 J in 11 ms at any time step; the
-kernel's moments are now the exact gradient (test_beam_solver's finite-difference check).
+kernel's moments are now the exact gradient for elements with a curved rest shape (test_beam_solver's
+finite-difference check); straight ones (rest rotation ≤ 1e-3 rad, the shipped fibers) keep the
+cheaper first-order pair and must keep the kick's energy too.
 """
 
 from pathlib import Path
