@@ -71,15 +71,19 @@ READING = """## Reading (measured 2026-11-22, 05:45–06:05 UTC run; these are w
   U = 0.29 mm and a slope above 5 N/mm from 0.93 mm: closer to the study's shape and to its 9.5–17 N,
   but still 2–3× below it, the contact law still does not matter, and it depends on the pile (a
   second seed settles at 41.9 % and reaches 7.2 N; a pile at 36.3 % only 1.6 N). Not shipped as
-  `paper-40`: the settling of wavy fibers needs a work-around (below).
-- **A solver limit found with the wavy fibers** (measured, not fixed): a single free fiber with 2 mm
-  waves (rest rotation ≈ 0.07 rad per 0.3 mm element), no damping, no gravity or contact, gains
-  kinetic energy from a 1e-24 J kick: to 1e-9 J in 11 ms with the axial lock (2 of 5 fibers tried),
-  ×100 in 12 ms without it. The growth rate is the same at dt_safety 0.95, 0.5 and 0.25, so it is not
-  the time step: the discrete beam is not exactly conservative for large rest curvatures per element
-  (its moments are the gradient of the bending energy only to O(|θ|²)). The shipped, nearly straight
-  fibers (rest rotation ≈ 1e-4 rad) stay at their kick's energy; the study's α = 1e5 1/s damps the growth, α = 300 1/s does not. An
-  exact conjugate moment (R_mid(I + d θ×²) m_b) alone did not cure it and was not landed.
+  `paper-40`; its committed pile was settled with a work-around for the beam limit below (since fixed).
+- **A solver limit found with the wavy fibers, then fixed** (ccc8b55, 1d8499d): a single free fiber
+  with 2 mm waves (rest rotation up to 0.2 rad per 0.3 mm element), no damping, no gravity or
+  contact, gained kinetic energy from a 1e-24 J kick: to 1e-9 J in 11 ms with the axial lock (2 of 5
+  fibers tried), at any time step (dt_safety 0.95, 0.5 and 0.25 gave the same rate). The element's
+  moments were the gradient of its strain energy only to O(|θ|): the moment of the force about the
+  element's middle assumed the midpoint frame spins with (δφ₁ + δφ₂)/2, and the bending moment
+  dropped J_r(θ)⁻ᵀ; the tangent stiffness was unsymmetric (a flutter). A finite-difference check
+  of −∂W/∂φ gave moment errors of 11 % (helix, 0.5 rad per element), 0.4 % (0.05 rad) and 4.8e-3
+  (wavy fiber 3); with the exact terms, < 1e-6 (tested). After the fix the kick's energy ratio
+  after 11 ms is 0.35–0.61 with the lock for the five fibers (2.2e14 and 1.1e12 before for fibers
+  3 and 20). Elements with a straight rest shape (≤ 1e-3 rad, the shipped fibers) keep the cheaper
+  first-order pair: the exact terms cost 6 ns per element (+34 % on the beam pass).
 """
 
 
