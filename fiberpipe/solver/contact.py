@@ -104,7 +104,8 @@ def _window(s):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _joint_share(x, seg_nodes, e, s, d_own, o0, to, rr):
-    """Share of the point contact owned by segment ``e`` (against the other segment ``o0``–``o1``).
+    """Share of the point contact owned by segment ``e`` (against the other segment, from node
+    position ``o0`` along ``to``).
 
     The neighbouring segment of the same fibre at the end nearer to the line closest parameter
     ``s`` competes for the contact: the segment whose clamped segment–segment distance is smaller
