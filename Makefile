@@ -16,7 +16,8 @@ help:
 	@echo "make test     run the default test suite"
 	@echo "make verify   print the verification table (SPEC section 8)"
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
-	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 12 min)"
+	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 15 min)"
+	@echo "make contact-ensemble  the study's contact models over 8 paper-40 specimens (≈ 25 min on 2 cores)"
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,7 +46,7 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
-.PHONY: bench-contact bench-pyelastica fast-settings
+.PHONY: bench-contact bench-pyelastica fast-settings contact-ensemble
 bench-contact: setup
 	$(PY) benchmarks/bench_contact.py
 
@@ -81,6 +82,9 @@ studies: setup
 # paper-40's fast settings against the study settings (issue 7; ≈ 12 min on one core)
 fast-settings: setup
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/fast_settings.py --save runs/fast_settings --out runs/fast_settings/table.md
+
+contact-ensemble: setup
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/contact_ensemble.py --seeds 0-7 --jobs 2 --out runs/contact_ensemble/table.md
 
 clean:
 	rm -rf runs .pytest_cache

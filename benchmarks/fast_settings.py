@@ -4,7 +4,9 @@ Runs ``configs/paper-40.yaml`` at the study's settings, the same settings with g
 ±1e-8 (the chaotic floor: any change of rounding moves the bundle's contact bursts, so two runs of
 the *same* settings differ by this much), and cheaper candidates (mass scaling k with α/k, which
 keeps the damping force α m v; loading velocity × k with α/k, the same drag at k × the speed; a
-coarser mesh). Compares each lower-plate force curve with the reference by
+coarser mesh). Compares each force curve with the reference, the load cell's (the fixed upper
+plate, the study's measure) and the moving lower plate's (the load plus the damping drag of the
+fibers it sweeps; the measure until 2026-11-22), by
 ``fiberpipe.bench.curve_error`` (largest pointwise |ΔF|, relative to the largest F) and by
 ``fiberpipe.bench.curve_error_binned`` (the same on the mean load in U windows of 0.05, 0.115 and
 0.23 mm: 23, 10 and 5 windows over the loading), against the reference run and against the mean
@@ -41,7 +43,8 @@ CANDIDATES = [
     ("velocity × 10 (1e4 mm/min), α = 1e4 1/s", {"scene.loading.velocity": "10000 mm/min", "scene.damping.alpha": "1e4 1/s"}),
     ("0.6 mm elements", {"mesh.element_length": "0.6 mm"}),
 ]
-KEYS = ("wall_s", "wall_steady_s", "steps", "U_mm", "F_final_N", "U_curve", "F_curve")
+KEYS = ("wall_s", "wall_steady_s", "steps", "U_mm", "F_final_N", "U_curve", "F_curve", "F_cell_final_N", "F_cell_curve")
+PLATES = (("load cell (upper plate)", "F_cell"), ("moving lower plate", "F"))
 
 
 def _slug(name: str) -> str:
@@ -60,41 +63,67 @@ def _run(name, overrides, save: Path, reuse: bool) -> dict:
     return r
 
 
+def _curve(r: dict, key: str) -> dict | None:
+    """``r``'s curve of plate force ``key`` ("F" or "F_cell") as the ``U_curve``/``F_curve`` pair the
+    error measures read; None if the run has none (failed, or saved before the load cell was kept)."""
+    if f"{key}_curve" not in r or "U_curve" not in r:
+        return None
+    return {"U_curve": r["U_curve"], "F_curve": r[f"{key}_curve"]}
+
+
+def _table(runs, key: str) -> list[str]:
+    """Markdown rows comparing every run's ``key`` force curve with the reference and with the mean
+    of the study-settings runs."""
+    ref = _curve(runs[0][1], key)
+    rows = []
+    for name, r, fail in runs:
+        c = _curve(r, key)
+        if fail or c is None or ref is None:
+            rows.append((name, r, fail or "—", None, None))
+        elif name == runs[0][0]:
+            rows.append((name, r, None, None, c))
+        else:
+            rows.append((name, r, curve_error(ref, c), [curve_error_binned(ref, c, w) for w in WINDOWS_M], c))
+    # the study settings are chaotic: their own runs (the reference and the floor runs) differ by
+    # several % even in window means. Their mean is the better estimate of "the study-settings
+    # curve"; each run's distance from it is the floor a cheaper setting can be judged against.
+    study = [c for name, _, _, _, c in rows if name.startswith("study settings") and c is not None]
+    ens_err = {}
+    if study:
+        k = min(len(c["F_curve"]) for c in study)
+        ens = {"U_curve": study[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in study], axis=0)}
+        ens_err = {name: [curve_error_binned(ens, c, w) for w in WINDOWS_M[1:]]
+                   for name, _, _, _, c in rows if c is not None}
+    head = " | ".join(f"binned {w * 1e3:g} mm" for w in WINDOWS_M)
+    head_e = " | ".join(f"vs mean of study runs, {w * 1e3:g} mm" for w in WINDOWS_M[1:])
+    lines = [f"| settings | steps | wall (s) | F at U = 1.15 mm (N) | pointwise | {head} | {head_e} |",
+             "|---|---|---|---|---|" + "---|" * (2 * len(WINDOWS_M) - 1)]
+    for name, r, e1, e2, _ in rows:
+        f1 = "—" if e1 is None else (e1 if isinstance(e1, str) else f"{100 * e1:.1f} %")
+        f2 = " | ".join("—" for _ in WINDOWS_M) if e2 is None else " | ".join(f"{100 * e:.2f} %" for e in e2)
+        ff = r.get(f"{key}_final_N", float("nan"))
+        f3 = " | ".join(f"{100 * e:.2f} %" for e in ens_err[name]) if name in ens_err else " | ".join(
+            "—" for _ in WINDOWS_M[1:])
+        lines.append(f"| {name} | {r['steps']} | {r['wall_s']:.1f} | {ff:.3f} | {f1} | {f2} | {f3} |")
+    return lines
+
+
 def main(argv=None) -> str:
     argv = list(sys.argv[1:] if argv is None else argv)
     out = argv[argv.index("--out") + 1] if "--out" in argv else None
     save = Path(argv[argv.index("--save") + 1]) if "--save" in argv else Path("runs/fast_settings")
     reuse = "--reuse" in argv
     ref = _run(*REFERENCE, save, reuse)
-    rows = [(REFERENCE[0], ref, None, None)]
+    runs = [(REFERENCE[0], ref, None)]
     for name, ov in CANDIDATES:
         try:
-            r = _run(name, ov, save, reuse)
+            runs.append((name, _run(name, ov, save, reuse), None))
         except Exception as exc:  # a diverging candidate is a result too
-            rows.append((name, {"wall_s": float("nan"), "steps": 0, "U_mm": float("nan")}, f"failed: {exc}"[:80], None))
-            continue
-        rows.append((name, r, curve_error(ref, r), [curve_error_binned(ref, r, w) for w in WINDOWS_M]))
-    # the study settings are chaotic: their own runs (the reference and the floor runs) differ by
-    # several % even in window means. Their mean is the better estimate of "the study-settings
-    # curve"; each run's distance from it is the floor a cheaper setting can be judged against.
-    study = [r for name, r, _, _ in rows if name.startswith("study settings") and "U_curve" in r]
-    k = min(len(r["F_curve"]) for r in study)
-    ens = {"U_curve": study[0]["U_curve"][:k], "F_curve": np.mean([r["F_curve"][:k] for r in study], axis=0)}
-    ens_err = {name: [curve_error_binned(ens, r, w) for w in WINDOWS_M[1:]]
-               for name, r, _, _ in rows if "U_curve" in r}
-    head = " | ".join(f"binned {w * 1e3:g} mm" for w in WINDOWS_M)
-    head_e = " | ".join(f"vs mean of study runs, {w * 1e3:g} mm" for w in WINDOWS_M[1:])
+            runs.append((name, {"wall_s": float("nan"), "steps": 0, "U_mm": float("nan")}, f"failed: {exc}"[:80]))
     lines = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, one thread "
-             "(wall: the whole run, including the first chunk's cache load).", "",
-             f"| settings | steps | wall (s) | F at U = 1.15 mm (N) | pointwise | {head} | {head_e} |",
-             "|---|---|---|---|---|" + "---|" * (2 * len(WINDOWS_M) - 1)]
-    for name, r, e1, e2 in rows:
-        f1 = "—" if e1 is None else (e1 if isinstance(e1, str) else f"{100 * e1:.1f} %")
-        f2 = " | ".join("—" for _ in WINDOWS_M) if e2 is None else " | ".join(f"{100 * e:.2f} %" for e in e2)
-        ff = r.get("F_final_N", float("nan"))
-        f3 = " | ".join(f"{100 * e:.2f} %" for e in ens_err[name]) if name in ens_err else " | ".join(
-            "—" for _ in WINDOWS_M[1:])
-        lines.append(f"| {name} | {r['steps']} | {r['wall_s']:.1f} | {ff:.3f} | {f1} | {f2} | {f3} |")
+             "(wall: the whole run, including the first chunk's cache load)."]
+    for title, key in PLATES:
+        lines += ["", f"**{title}**", ""] + _table(runs, key)
     text = "\n".join(lines) + "\n"
     print(text)
     if out:

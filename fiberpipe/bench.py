@@ -102,13 +102,15 @@ def paper40_run(overrides: dict | None = None, config: Path | None = None) -> di
         steady = (wall - w1) * res.steps / (res.steps - s1)
     h = res.history
     U = h["plate_displacement"][:, 0]
-    F = h["plate_force"][:, 0]
+    F = h["plate_force"][:, 0]  # the moving (lower) plate's reaction: the load plus the drag of the fibers it sweeps
+    F_cell = h["plate_force"][:, 1]  # the fixed upper plate: the study's load cell
     return {"overrides": dict(overrides or {}), "wall_s": wall, "wall_steady_s": steady,
             "first_chunk_s": first[0][0] if first else wall, "steps": int(res.steps), "elements": int(res.elements),
             "dt_s": float(res.dt_s), "elem_steps": float(res.steps) * res.elements,
             "Mes_per_s": res.steps * res.elements / wall / 1e6, "U_mm": float(U[-1] * 1e3),
             "F_final_N": float(F[-1]), "F_max_N": float(F.max()), "completed": bool(res.completed),
-            "U_curve": U.copy(), "F_curve": F.copy(), "t_curve": h["time"].copy()}
+            "F_cell_final_N": float(F_cell[-1]), "F_cell_max_N": float(F_cell.max()),
+            "U_curve": U.copy(), "F_curve": F.copy(), "F_cell_curve": F_cell.copy(), "t_curve": h["time"].copy()}
 
 
 def curve_error(ref: dict, other: dict) -> float:

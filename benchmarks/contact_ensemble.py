@@ -1,0 +1,212 @@
+"""The study's contact models over specimen realisations (issue 5: is parallel above oblique?).
+
+One paper-40 run is one trajectory of a chaotic bundle: the same settings with gravity × (1 ± 1e-8)
+end 9 % apart at U = 1.15 mm (benchmarks/fast_settings.py). Whether the parallel contact model
+(the study's 17 N) carries more than the oblique 6° model (9.5 N) is therefore a question about
+the mean over specimens, not about one pair of runs. This study makes ``--seeds`` specimens with
+the shipped generator (``data-samples/make_paper40.py``: the same deposit and settle, seed 0 is the
+shipped ``data-samples/paper-40``), compacts each one with the three models of
+``configs/paper-40/`` (``hertz_oriented``, the study's parallel ``table1_parallel`` and oblique
+``table1_phi6``), and compares their load-cell (upper plate) force by pairs on the same specimen.
+
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/contact_ensemble.py [--seeds 0-7] [--jobs 2]
+        [--study] [--save DIR] [--out FILE.md] [--reuse]
+
+By default the compactions run at the fast settings of ``fiberpipe.bench.FAST_OVERRIDES`` (mass
+scaling 25 with α/25: the study settings' curve within its own run-to-run scatter, ≈ 30 s a run);
+``--study`` runs the study settings (≈ 150 s a run). Each specimen's settle takes ≈ 4.5 min on one
+core and is kept in ``DIR/seed-N/`` (default ``runs/contact_ensemble``) with every run's curves;
+``--reuse`` only recomputes the table and the plot (``DIR/contact_ensemble.png``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+LAWS = (("hertz_oriented", {}),
+        ("parallel (table1_parallel)", {"scene.contact.law": "scaled_stiffness", "scene.contact.preset": "table1_parallel"}),
+        ("oblique 6° (table1_phi6)", {"scene.contact.law": "scaled_stiffness", "scene.contact.preset": "table1_phi6"}))
+FINAL_WINDOW_M = (1.10e-3, 1.15e-3)  # the final load: the mean over the last 0.05 mm (one row fluctuates by ±0.05 N)
+READ_AT_M = (0.3e-3, 0.55e-3, 0.8e-3, 1.0e-3)
+
+
+def _slug(name: str) -> str:
+    return name.split(" ")[0]
+
+
+def specimen(seed: int, save: Path) -> tuple[Path, float]:
+    """The settled pile of ``seed`` (``data-samples/paper-40`` for seed 0) and its top (m)."""
+    if seed == 0:
+        d = ROOT / "data-samples" / "paper-40"
+    else:
+        d = save / f"seed-{seed}"
+        if not (d / "fibers.h5").exists():
+            sys.path.insert(0, str(ROOT / "data-samples"))
+            import make_paper40 as mp  # the shipped generator, unchanged
+
+            from fiberpipe.artifacts import write_fibers
+            from fiberpipe.model.specimen import cassette_specimen
+
+            fibers, info = cassette_specimen(**mp.parameters(seed=seed))
+            fibers, info = mp.settle_pile(fibers, info, lock=mp.SETTLE_LOCK)
+            info["settle_wall_time_s"] = float(info["settle_wall_time_s"])
+            d.mkdir(parents=True, exist_ok=True)
+            write_fibers(d / "fibers.h5", fibers)
+            (d / "specimen.json").write_text(json.dumps(info, indent=1) + "\n")
+    info = json.loads((d / "specimen.json").read_text())
+    return d / "fibers.h5", float(info["height_m"])
+
+
+def run_seed(seed: int, save: str, study: bool) -> list[str]:
+    """Make (or read) the specimen of ``seed`` and run the three laws on it; returns log lines."""
+    from fiberpipe.bench import FAST_OVERRIDES, paper40_run
+
+    save = Path(save)
+    t0 = time.perf_counter()
+    fibers, top = specimen(seed, save)
+    log = [f"seed {seed}: specimen {fibers} (top {top * 1e3:.4f} mm) in {time.perf_counter() - t0:.0f} s"]
+    out = save / f"seed-{seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    for name, law in LAWS:
+        path = out / f"{_slug(name)}{'-study' if study else ''}.npz"
+        if path.exists():
+            continue
+        ov = {**({} if study else FAST_OVERRIDES), **law, "solver.output_frames": 2, "input.fibers": str(fibers),
+              "post.reference_fibers": str(fibers), "scene.plates.upper_position": top}
+        r = paper40_run(ov)
+        np.savez(path, U=r["U_curve"], F_cell=r["F_cell_curve"], F_lower=r["F_curve"], wall_s=r["wall_s"])
+        log.append(f"seed {seed} {name}: F_cell(1.15 mm) {r['F_cell_final_N']:.3f} N, {r['wall_s']:.0f} s")
+    return log
+
+
+def figures(U: np.ndarray, F: np.ndarray) -> dict:
+    """Load-cell figures of one run: final-window mean, reads at ``READ_AT_M``, peak, onsets (m)."""
+    lo, hi = FINAL_WINDOW_M
+    k = (U >= lo) & (U <= hi + 1e-9)
+    peak = float(F.max())
+    onset = {}
+    for frac in (0.02, 0.2):
+        above = np.flatnonzero(F > frac * peak)
+        onset[frac] = float(U[above[0]]) if above.size else float("nan")
+    return {"final": float(F[k].mean()), "reads": [float(F[min(np.searchsorted(U, u), len(F) - 1)]) for u in READ_AT_M],
+            "peak": peak, "onset2": onset[0.02], "onset20": onset[0.2]}
+
+
+def paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """Mean of the relative paired difference 2(a − b)/(a + b), its standard error and t."""
+    d = 2 * (a - b) / (a + b)
+    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else float("nan")
+    m = float(d.mean())
+    return m, se, m / se if se > 0 else float("nan")
+
+
+def summarise(seeds, save: Path, study: bool) -> str:
+    suffix = "-study" if study else ""
+    res: dict = {}
+    for s in seeds:
+        for name, _ in LAWS:
+            p = save / f"seed-{s}" / f"{_slug(name)}{suffix}.npz"
+            if p.exists():
+                d = np.load(p)
+                res[(s, name)] = (d["U"], d["F_cell"], float(d["wall_s"]))
+    done = [s for s in seeds if all((s, n) in res for n, _ in LAWS)]
+    lines = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} by `benchmarks/contact_ensemble.py"
+             f"{' --study' if study else ''}`: {len(done)} specimens (seeds {', '.join(map(str, done))}; seed 0 is "
+             f"the shipped `data-samples/paper-40`), {'study settings' if study else 'fast settings (mass scaling 25, α = 4e3 1/s)'}, "
+             "load-cell (upper plate) force; final = mean over U = 1.10–1.15 mm.", "",
+             "| seed | law | F at U = 0.3 / 0.55 / 0.8 / 1.0 mm (N) | final (N) | peak (N) | > 2 % of peak from U (mm) | "
+             "> 20 % from U (mm) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
+    table = {name: [] for name, _ in LAWS}
+    for s in done:
+        for name, _ in LAWS:
+            U, F, wall = res[(s, name)]
+            f = figures(U, F)
+            table[name].append(f)
+            lines.append(f"| {s} | {name} | {' / '.join(f'{v:.3f}' for v in f['reads'])} | {f['final']:.3f} | "
+                         f"{f['peak']:.3f} | {f['onset2'] * 1e3:.2f} | {f['onset20'] * 1e3:.2f} | {wall:.0f} |")
+    if len(done) >= 2:
+        lines += ["", "| law | final, mean ± s.e. (N) | range (N) | > 2 % of peak from U, mean (mm) | > 20 %, mean (mm) |",
+                  "|---|---|---|---|---|"]
+        for name, _ in LAWS:
+            fin = np.array([f["final"] for f in table[name]])
+            lines.append(f"| {name} | {fin.mean():.3f} ± {fin.std(ddof=1) / np.sqrt(fin.size):.3f} | "
+                         f"{fin.min():.3f}–{fin.max():.3f} | {np.mean([f['onset2'] for f in table[name]]) * 1e3:.2f} | "
+                         f"{np.mean([f['onset20'] for f in table[name]]) * 1e3:.2f} |")
+        names = [n for n, _ in LAWS]
+        fin = {n: np.array([f["final"] for f in table[n]]) for n in names}
+        lines += ["", "| pair, same specimens | mean relative difference of the final load ± s.e. | t | first above in |",
+                  "|---|---|---|---|"]
+        for a, b in ((names[1], names[2]), (names[1], names[0]), (names[2], names[0])):
+            m, se, t = paired(fin[a], fin[b])
+            lines.append(f"| {a} − {b} | {100 * m:+.1f} % ± {100 * se:.1f} % | {t:+.2f} | "
+                         f"{int(np.sum(fin[a] > fin[b]))} of {fin[a].size} |")
+        _plot(done, res, save / f"contact_ensemble{suffix}.png")
+    return "\n".join(lines) + "\n"
+
+
+def _plot(seeds, res, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    grid = np.linspace(0, FINAL_WINDOW_M[1], 116)
+    for (name, _), c in zip(LAWS, ("C0", "C3", "C2")):
+        curves = []
+        for s in seeds:
+            U, F, _ = res[(s, name)]
+            k = int(np.argmax(U)) + 1
+            u, i = np.unique(U[:k], return_index=True)
+            curves.append(np.interp(grid, u, F[:k][i]))
+            ax.plot(U[:k] * 1e3, F[:k], color=c, lw=0.4, alpha=0.35)
+        ax.plot(grid * 1e3, np.mean(curves, axis=0), color=c, lw=2, label=f"{name}, mean of {len(seeds)}")
+    ax.set_xlabel("U, lower plate travel (mm)")
+    ax.set_ylabel("F, load cell (upper plate) (N)")
+    ax.set_title("paper-40 specimens (seeds) under the study's contact models")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=120)
+    os.replace(tmp, path)
+    plt.close(fig)
+
+
+def _seeds(text: str) -> list[int]:
+    if "-" in text:
+        a, b = text.split("-")
+        return list(range(int(a), int(b) + 1))
+    return [int(v) for v in text.split(",")]
+
+
+def main(argv=None) -> str:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    opt = lambda k, d: argv[argv.index(k) + 1] if k in argv else d  # noqa: E731
+    seeds = _seeds(opt("--seeds", "0-7"))
+    jobs = int(opt("--jobs", "2"))
+    save = Path(opt("--save", str(ROOT / "runs" / "contact_ensemble")))
+    out = opt("--out", None)
+    study = "--study" in argv
+    if "--reuse" not in argv:
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for log in pool.map(run_seed, seeds, [str(save)] * len(seeds), [study] * len(seeds)):
+                print("\n".join(log), flush=True)
+    text = summarise(seeds, save, study)
+    print(text)
+    if out:
+        Path(out).write_text(text)
+    return text
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,74 @@
+"""The figures of the study scripts in benchmarks/ (fast_settings.py, contact_ensemble.py), on
+synthetic curves with known answers: what they report about runs is what the runs held."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def ensemble():
+    return _load("contact_ensemble")
+
+
+@pytest.fixture(scope="module")
+def fast():
+    return _load("fast_settings")
+
+
+def test_figures_of_a_known_curve(ensemble):
+    """F = 0 up to 0.5 mm, then linear to 1 N at 1.15 mm: onsets and the final-window mean exact."""
+    U = np.linspace(0, 1.15e-3, 2301)
+    F = np.clip((U - 0.5e-3) / 0.65e-3, 0, None)
+    f = ensemble.figures(U, F)
+    assert f["peak"] == pytest.approx(1.0)
+    # first sample above 2 % / 20 % of the peak (samples every 0.5 µm)
+    assert f["onset2"] == pytest.approx(0.5e-3 + 0.02 * 0.65e-3, abs=1e-6)
+    assert f["onset20"] == pytest.approx(0.5e-3 + 0.2 * 0.65e-3, abs=1e-6)
+    # mean of a linear ramp over U = 1.10–1.15 mm: its value at 1.125 mm
+    assert f["final"] == pytest.approx((1.125e-3 - 0.5e-3) / 0.65e-3, rel=1e-3)
+    assert f["reads"][0] == 0.0 and f["reads"][3] == pytest.approx(0.5 / 0.65, abs=1e-3)
+
+
+def test_paired_difference(ensemble):
+    a = np.array([1.1, 2.2, 3.3])
+    b = np.array([1.0, 2.0, 3.0])
+    m, se, t = ensemble.paired(a, b)
+    d = 2 * 0.1 / 2.1  # the same relative difference for every pair
+    assert m == pytest.approx(d) and se == pytest.approx(0.0, abs=1e-15)
+    m, se, t = ensemble.paired(np.array([1.0, 2.0]), np.array([2.0, 1.0]))
+    assert m == pytest.approx(0.0) and se == pytest.approx(2 / 3) and t == pytest.approx(0.0)
+
+
+def test_seed_ranges(ensemble):
+    assert ensemble._seeds("0-3") == [0, 1, 2, 3]
+    assert ensemble._seeds("0,5") == [0, 5]
+
+
+def test_fast_settings_table_reads_the_requested_plate(fast):
+    """A run equal to the reference on the load cell but 10 % off on the lower plate: the load-cell
+    table gives 0 %, the lower-plate one 10 %."""
+    U = np.linspace(0, 1.15e-3, 1000)
+    F = U / 1.15e-3
+    ref = {"U_curve": U, "F_curve": F, "F_cell_curve": F, "steps": 10, "wall_s": 1.0, "F_final_N": 1.0,
+           "F_cell_final_N": 1.0}
+    other = {**ref, "F_curve": 1.1 * F}
+    runs = [(fast.REFERENCE[0], ref, None), ("candidate", other, None)]
+    cell = fast._table(runs, "F_cell")[-1]
+    lower = fast._table(runs, "F")[-1]
+    assert "| 0.0 % | 0.00 % |" in cell
+    assert "| 10.0 % | 10.00 % |" in lower
+    # a run saved before the load cell was kept has no load-cell curve: reported, not invented
+    old = {k: v for k, v in other.items() if not k.startswith("F_cell")}
+    assert "| — |" in fast._table([(fast.REFERENCE[0], ref, None), ("old", old, None)], "F_cell")[-1]
