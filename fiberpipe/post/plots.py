@@ -24,11 +24,23 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_force_displacement(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], *, title: str = "") -> Path:
-    """One or several F(U) curves; ``curves`` maps a label to (U in m, F in N)."""
+def plot_force_displacement(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]], *, title: str = "",
+                            phases: dict | None = None) -> Path:
+    """One or several F(U) curves; ``curves`` maps a label to (U in m, F in N). ``phases``
+    (:func:`fiberpipe.post.phases.compaction_phases` of the first curve) shades the transition and
+    the steep rise."""
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, (U, F) in curves.items():
         ax.plot(np.asarray(U) * 1e3, F, label=label)
+    u1 = (phases or {}).get("rearrangement_end_U_m")
+    if u1 is not None:
+        u_end = max(float(np.max(np.asarray(U))) for U, _ in curves.values()) * 1e3
+        u2 = phases.get("steep_start_U_m")
+        ax.axvspan(u1 * 1e3, (u2 * 1e3 if u2 is not None else u_end), color="C1", alpha=0.12, lw=0,
+                   label="transition")
+        if u2 is not None:
+            ax.axvspan(u2 * 1e3, u_end, color="C3", alpha=0.12, lw=0, label="steep rise")
+        ax.legend(fontsize=8)
     ax.set_xlabel("plate displacement U [mm]")
     ax.set_ylabel("compaction load F [N]")
     ax.grid(alpha=0.3)

@@ -19,6 +19,7 @@ from fiberpipe.post.compaction import fit_van_wyk, mean_field_contacts
 from fiberpipe.post.curves import force_displacement
 from fiberpipe.post.energies import energy_balance, quasi_static_ratio
 from fiberpipe.post.geometry import fiber_volume_m3, projected_curvature, volume_fraction
+from fiberpipe.post.phases import compaction_phases, describe
 from fiberpipe.post.history import load_simulation
 from fiberpipe.post.positions import position_error
 
@@ -78,11 +79,14 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
             out_dir / "force_displacement.csv",
             {"time_s": t_hist, "U_m": U, "load_N": F, "lower_plate_force_N": force[:, 0], "upper_plate_force_N": force[:, -1]},
         )
-        plots.plot_force_displacement(out_dir / "force_displacement.png", {cfg.name: (U, F)}, title="compaction load")
+        phases = compaction_phases(U, F)
+        plots.plot_force_displacement(out_dir / "force_displacement.png", {cfg.name: (U, F)}, title="compaction load",
+                                      phases=phases)
         made += ["force_displacement.csv", "force_displacement.png"]
         summary["final_U_m"] = float(U[-1])
         summary["final_load_N"] = float(F[-1])
         summary["max_load_N"] = float(np.max(F))
+        summary["phases"] = phases
 
     # -- energies -------------------------------------------------------------------------------
     if energy:
@@ -226,6 +230,13 @@ def _report(cfg: Config, s: dict, made: list[str]) -> str:
         ("mean fiber-position error", _fmt(s.get("position_error_mean_m", float("nan")) * 1e3, "mm") if "position_error_mean_m" in s else "n/a"),
     ]
     lines += [f"| {a} | {b} |" for a, b in rows]
+    ph = s.get("phases")
+    if ph:
+        lines += ["", "## Compaction phases (the study's section 4)", "", describe(ph) + ".", "",
+                  f"Criteria (docs/outputs.md): load means over {ph['window_m'] * 1e3:g} mm of U; rearrangement until "
+                  f"they exceed {100 * ph['onset_fraction']:g} % of their peak; a steep phase where a two-segment fit's "
+                  f"last slope is ≥ {ph['steep_factor']:g}× the mean slope since the onset. The study: rearrangement "
+                  "0–0.55 mm, transition 0.55–1.12 mm, locking from 1.12 mm."]
     c = s.get("curvature_per_m", {})
     if c:
         lines += ["", "## Projected average curvature (the study's Table 4), 1/m", "", "| state | XZ plane | YZ plane |", "| --- | --- | --- |"]
