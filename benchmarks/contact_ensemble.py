@@ -88,16 +88,17 @@ def run_seed(seed: int, save: str, study: bool) -> list[str]:
 
 
 def figures(U: np.ndarray, F: np.ndarray) -> dict:
-    """Load-cell figures of one run: final-window mean, reads at ``READ_AT_M``, peak, onsets (m)."""
+    """Load-cell figures of one run: final-window mean, reads at ``READ_AT_M``, peak, and the phases
+    of :func:`fiberpipe.post.phases.compaction_phases` (U in m; NaN where a phase is absent)."""
+    from fiberpipe.post.phases import compaction_phases
+
     lo, hi = FINAL_WINDOW_M
     k = (U >= lo) & (U <= hi + 1e-9)
-    peak = float(F.max())
-    onset = {}
-    for frac in (0.02, 0.2):
-        above = np.flatnonzero(F > frac * peak)
-        onset[frac] = float(U[above[0]]) if above.size else float("nan")
+    ph = compaction_phases(U, F)
+    nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
     return {"final": float(F[k].mean()), "reads": [float(F[min(np.searchsorted(U, u), len(F) - 1)]) for u in READ_AT_M],
-            "peak": peak, "onset2": onset[0.02], "onset20": onset[0.2]}
+            "peak": float(F.max()), "rearrangement_end": nan(ph["rearrangement_end_U_m"]),
+            "steep_start": nan(ph["steep_start_U_m"]), "steepness": nan(ph["steepness"])}
 
 
 def paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
@@ -122,8 +123,11 @@ def summarise(seeds, save: Path, study: bool) -> str:
              f"{' --study' if study else ''}`: {len(done)} specimens (seeds {', '.join(map(str, done))}; seed 0 is "
              f"the shipped `data-samples/paper-40`), {'study settings' if study else 'fast settings (mass scaling 25, α = 4e3 1/s)'}, "
              "load-cell (upper plate) force; final = mean over U = 1.10–1.15 mm.", "",
-             "| seed | law | F at U = 0.3 / 0.55 / 0.8 / 1.0 mm (N) | final (N) | peak (N) | > 2 % of peak from U (mm) | "
-             "> 20 % from U (mm) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
+             "Phases by `fiberpipe.post.phases` (docs/outputs.md): rearrangement until the 0.05 mm window means exceed "
+             "2 % of their peak; a steep rise where a two-segment fit's last slope is ≥ 1.5× the mean slope since then "
+             "(the study: rearrangement 0–0.55 mm, transition 0.55–1.12 mm, locking from 1.12 mm).", "",
+             "| seed | law | F at U = 0.3 / 0.55 / 0.8 / 1.0 mm (N) | final (N) | peak (N) | rearrangement until U (mm) | "
+             "steep rise from U (mm) | steepness | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
     table = {name: [] for name, _ in LAWS}
     for s in done:
         for name, _ in LAWS:
@@ -131,15 +135,19 @@ def summarise(seeds, save: Path, study: bool) -> str:
             f = figures(U, F)
             table[name].append(f)
             lines.append(f"| {s} | {name} | {' / '.join(f'{v:.3f}' for v in f['reads'])} | {f['final']:.3f} | "
-                         f"{f['peak']:.3f} | {f['onset2'] * 1e3:.2f} | {f['onset20'] * 1e3:.2f} | {wall:.0f} |")
+                         f"{f['peak']:.3f} | {f['rearrangement_end'] * 1e3:.2f} | {f['steep_start'] * 1e3:.2f} | "
+                         f"{f['steepness']:.2f} | {wall:.0f} |")
     if len(done) >= 2:
-        lines += ["", "| law | final, mean ± s.e. (N) | range (N) | > 2 % of peak from U, mean (mm) | > 20 %, mean (mm) |",
-                  "|---|---|---|---|---|"]
+        lines += ["", "| law | final, mean ± s.e. (N) | range (N) | rearrangement until U, mean (mm) | "
+                      "runs with a steep rise | its start, mean (mm) |", "|---|---|---|---|---|---|"]
         for name, _ in LAWS:
             fin = np.array([f["final"] for f in table[name]])
+            steep = np.array([f["steep_start"] for f in table[name]])
+            ok = np.isfinite(steep)
             lines.append(f"| {name} | {fin.mean():.3f} ± {fin.std(ddof=1) / np.sqrt(fin.size):.3f} | "
-                         f"{fin.min():.3f}–{fin.max():.3f} | {np.mean([f['onset2'] for f in table[name]]) * 1e3:.2f} | "
-                         f"{np.mean([f['onset20'] for f in table[name]]) * 1e3:.2f} |")
+                         f"{fin.min():.3f}–{fin.max():.3f} | "
+                         f"{np.mean([f['rearrangement_end'] for f in table[name]]) * 1e3:.2f} | {int(ok.sum())} of {ok.size} | "
+                         f"{(np.mean(steep[ok]) * 1e3 if ok.any() else float('nan')):.2f} |")
         names = [n for n, _ in LAWS]
         fin = {n: np.array([f["final"] for f in table[n]]) for n in names}
         lines += ["", "| pair, same specimens | mean relative difference of the final load ± s.e. | t | first above in |",

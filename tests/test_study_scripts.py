@@ -33,9 +33,9 @@ def test_figures_of_a_known_curve(ensemble):
     F = np.clip((U - 0.5e-3) / 0.65e-3, 0, None)
     f = ensemble.figures(U, F)
     assert f["peak"] == pytest.approx(1.0)
-    # first sample above 2 % / 20 % of the peak (samples every 0.5 µm)
-    assert f["onset2"] == pytest.approx(0.5e-3 + 0.02 * 0.65e-3, abs=1e-6)
-    assert f["onset20"] == pytest.approx(0.5e-3 + 0.2 * 0.65e-3, abs=1e-6)
+    # window means (0.05 mm) first above 2 % of their peak: within a window of the exact 0.513 mm
+    assert f["rearrangement_end"] == pytest.approx(0.5e-3 + 0.02 * 0.65e-3, abs=0.05e-3)
+    assert np.isnan(f["steep_start"])  # a straight rise after the onset: no steep phase
     # mean of a linear ramp over U = 1.10–1.15 mm: its value at 1.125 mm
     assert f["final"] == pytest.approx((1.125e-3 - 0.5e-3) / 0.65e-3, rel=1e-3)
     assert f["reads"][0] == 0.0 and f["reads"][3] == pytest.approx(0.5 / 0.65, abs=1e-3)
