@@ -38,6 +38,11 @@ CANDIDATES = [
     ("mass scaling 9, α = 1.111e4 1/s", {"solver.mass_scaling": 9, "scene.damping.alpha": "1.1111e4 1/s"}),
     ("mass scaling 16, α = 6.25e3 1/s", {"solver.mass_scaling": 16, "scene.damping.alpha": "6.25e3 1/s"}),
     ("mass scaling 25, α = 4e3 1/s", {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s"}),
+    # its twins: one run of a chaotic bundle is one sample; three of each setting compare expected curves
+    ("mass scaling 25, α = 4e3 1/s, gravity × (1 + 1e-8) (twin)",
+     {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s", "scene.gravity.acceleration": [0, "-9.8100001 m/s^2", 0]}),
+    ("mass scaling 25, α = 4e3 1/s, gravity × (1 − 1e-8) (twin)",
+     {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s", "scene.gravity.acceleration": [0, "-9.8099999 m/s^2", 0]}),
     ("velocity × 2 (2e3 mm/min), α = 5e4 1/s", {"scene.loading.velocity": "2000 mm/min", "scene.damping.alpha": "5e4 1/s"}),
     ("velocity × 5 (5e3 mm/min), α = 2e4 1/s", {"scene.loading.velocity": "5000 mm/min", "scene.damping.alpha": "2e4 1/s"}),
     ("velocity × 10 (1e4 mm/min), α = 1e4 1/s", {"scene.loading.velocity": "10000 mm/min", "scene.damping.alpha": "1e4 1/s"}),
@@ -108,6 +113,39 @@ def _table(runs, key: str) -> list[str]:
     return lines
 
 
+def _family(name: str) -> str:
+    """The setting a run samples: its name without the gravity perturbation and the reference tag."""
+    return name.split(", gravity")[0].replace(" (reference)", "")
+
+
+def _ensembles(runs, key: str) -> list[str]:
+    """Mean curve of each setting with several runs (gravity twins) against the study settings' mean
+    curve: the error of the expected curve, without the one-run chaotic scatter."""
+    fam: dict[str, list] = {}
+    for name, r, fail in runs:
+        c = _curve(r, key)
+        if not fail and c is not None:
+            fam.setdefault(_family(name), []).append(c)
+    fam = {k: v for k, v in fam.items() if len(v) >= 2}
+    study = fam.get(_family(REFERENCE[0]))
+    if not study:
+        return []
+
+    def mean(cs):
+        k = min(len(c["F_curve"]) for c in cs)
+        return {"U_curve": cs[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in cs], axis=0)}
+
+    ref = mean(study)
+    lines = ["| settings | runs | " + " | ".join(f"mean vs study mean, {w * 1e3:g} mm" for w in WINDOWS_M) + " |",
+             "|---|---|" + "---|" * len(WINDOWS_M)]
+    for k, cs in fam.items():
+        if k == _family(REFERENCE[0]):
+            continue
+        m = mean(cs)
+        lines.append(f"| {k} | {len(cs)} | " + " | ".join(f"{100 * curve_error_binned(ref, m, w):.2f} %" for w in WINDOWS_M) + " |")
+    return lines
+
+
 def main(argv=None) -> str:
     argv = list(sys.argv[1:] if argv is None else argv)
     out = argv[argv.index("--out") + 1] if "--out" in argv else None
@@ -124,6 +162,10 @@ def main(argv=None) -> str:
              "(wall: the whole run, including the first chunk's cache load)."]
     for title, key in PLATES:
         lines += ["", f"**{title}**", ""] + _table(runs, key)
+        ens = _ensembles(runs, key)
+        if ens:
+            lines += ["", f"Expected curves, {title}: the mean of each setting's runs against the mean of the study "
+                      "settings' runs", ""] + ens
     text = "\n".join(lines) + "\n"
     print(text)
     if out:

@@ -72,3 +72,23 @@ def test_fast_settings_table_reads_the_requested_plate(fast):
     # a run saved before the load cell was kept has no load-cell curve: reported, not invented
     old = {k: v for k, v in other.items() if not k.startswith("F_cell")}
     assert "| — |" in fast._table([(fast.REFERENCE[0], ref, None), ("old", old, None)], "F_cell")[-1]
+
+
+def test_fast_settings_expected_curves(fast):
+    """Three study runs scattered ±2 % around F and two twins of a candidate at 1.05 F: the mean
+    curves differ by 5 %, whatever each single run's scatter."""
+    U = np.linspace(0, 1.15e-3, 1000)
+    F = U / 1.15e-3
+
+    def run(scale):
+        return {"U_curve": U, "F_curve": scale * F, "F_cell_curve": scale * F}
+
+    runs = [(fast.REFERENCE[0], run(1.0), None),
+            ("study settings, gravity × (1 + 1e-8) (chaotic floor)", run(1.02), None),
+            ("study settings, gravity × (1 − 1e-8) (chaotic floor)", run(0.98), None),
+            ("mass scaling 25, α = 4e3 1/s", run(1.05), None),
+            ("mass scaling 25, α = 4e3 1/s, gravity × (1 + 1e-8) (twin)", run(1.05), None),
+            ("velocity × 10", run(2.0), None)]  # one run only: no expected curve
+    lines = fast._ensembles(runs, "F_cell")
+    assert len(lines) == 3
+    assert lines[2].startswith("| mass scaling 25, α = 4e3 1/s | 2 | 5.00 % | 5.00 % | 5.00 % |")
