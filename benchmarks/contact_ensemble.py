@@ -101,6 +101,17 @@ def figures(U: np.ndarray, F: np.ndarray) -> dict:
             "steep_start": nan(ph["steep_start_U_m"]), "steepness": nan(ph["steepness"])}
 
 
+STUDY_VF0 = 0.377
+STUDY_HEIGHT_M = 40 * np.pi * 0.25e-3**2 / (STUDY_VF0 * 3e-3)  # the cassette gap that makes 37.7 %: 6.94 mm
+STUDY_PHASES_M = (0.55e-3, 1.12e-3)  # rearrangement until, locking from (the study, section 4)
+
+
+def vf_at(U_m: float, vf0: float, height_m: float) -> float:
+    """Volume fraction of the cassette box (fiber volume / (width × plate gap × length), the study's
+    37.7 % measure) after a plate travel ``U_m``."""
+    return vf0 * height_m / (height_m - U_m)
+
+
 def paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
     """Mean of the relative paired difference 2(a − b)/(a + b), its standard error and t."""
     d = 2 * (a - b) / (a + b)
@@ -119,6 +130,11 @@ def summarise(seeds, save: Path, study: bool) -> str:
                 d = np.load(p)
                 res[(s, name)] = (d["U"], d["F_cell"], float(d["wall_s"]))
     done = [s for s in seeds if all((s, n) in res for n, _ in LAWS)]
+    box = {}
+    for s in done:
+        d = ROOT / "data-samples" / "paper-40" if s == 0 else save / f"seed-{s}"
+        info = json.loads((d / "specimen.json").read_text())
+        box[s] = (float(info["volume_fraction"]), float(info["height_m"]))
     lines = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} by `benchmarks/contact_ensemble.py"
              f"{' --study' if study else ''}`: {len(done)} specimens (seeds {', '.join(map(str, done))}; seed 0 is "
              f"the shipped `data-samples/paper-40`), {'study settings' if study else 'fast settings (mass scaling 25, α = 4e3 1/s)'}, "
@@ -126,28 +142,39 @@ def summarise(seeds, save: Path, study: bool) -> str:
              "Phases by `fiberpipe.post.phases` (docs/outputs.md): rearrangement until the 0.05 mm window means exceed "
              "2 % of their peak; a steep rise where a two-segment fit's last slope is ≥ 1.5× the mean slope since then "
              "(the study: rearrangement 0–0.55 mm, transition 0.55–1.12 mm, locking from 1.12 mm).", "",
-             "| seed | law | F at U = 0.3 / 0.55 / 0.8 / 1.0 mm (N) | final (N) | peak (N) | rearrangement until U (mm) | "
-             "steep rise from U (mm) | steepness | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+             f"v_f: the cassette box's (the study's 37.7 % measure); the study's phase boundaries are at "
+             f"v_f = {100 * vf_at(STUDY_PHASES_M[0], STUDY_VF0, STUDY_HEIGHT_M):.1f} % and "
+             f"{100 * vf_at(STUDY_PHASES_M[1], STUDY_VF0, STUDY_HEIGHT_M):.1f} %.", "",
+             "| seed | v_f0 | law | F at U = 0.3 / 0.55 / 0.8 / 1.0 mm (N) | final (N) | peak (N) | rearrangement until U (mm) "
+             "[v_f] | steep rise from U (mm) [v_f] | steepness | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
     table = {name: [] for name, _ in LAWS}
     for s in done:
         for name, _ in LAWS:
             U, F, wall = res[(s, name)]
             f = figures(U, F)
+            f["vf_rearrangement_end"] = vf_at(f["rearrangement_end"], *box[s])
+            f["vf_steep_start"] = vf_at(f["steep_start"], *box[s])
             table[name].append(f)
-            lines.append(f"| {s} | {name} | {' / '.join(f'{v:.3f}' for v in f['reads'])} | {f['final']:.3f} | "
-                         f"{f['peak']:.3f} | {f['rearrangement_end'] * 1e3:.2f} | {f['steep_start'] * 1e3:.2f} | "
-                         f"{f['steepness']:.2f} | {wall:.0f} |")
+            lines.append(f"| {s} | {100 * box[s][0]:.1f} % | {name} | {' / '.join(f'{v:.3f}' for v in f['reads'])} | "
+                         f"{f['final']:.3f} | {f['peak']:.3f} | {f['rearrangement_end'] * 1e3:.2f} "
+                         f"[{100 * f['vf_rearrangement_end']:.1f} %] | {f['steep_start'] * 1e3:.2f} "
+                         f"[{100 * f['vf_steep_start']:.1f} %] | {f['steepness']:.2f} | {wall:.0f} |")
     if len(done) >= 2:
-        lines += ["", "| law | final, mean ± s.e. (N) | range (N) | rearrangement until U, mean (mm) | "
-                      "runs with a steep rise | its start, mean (mm) |", "|---|---|---|---|---|---|"]
+        lines += ["", "| law | final, mean ± s.e. (N) | range (N) | rearrangement until U, mean (mm) [v_f, mean ± s.d.] | "
+                      "runs with a steep rise | its start, mean (mm) [v_f, mean ± s.d.] |", "|---|---|---|---|---|---|"]
         for name, _ in LAWS:
             fin = np.array([f["final"] for f in table[name]])
             steep = np.array([f["steep_start"] for f in table[name]])
             ok = np.isfinite(steep)
+            v1 = np.array([f["vf_rearrangement_end"] for f in table[name]])
+            v2 = np.array([f["vf_steep_start"] for f in table[name]])[ok]
+            sd = lambda v: float(v.std(ddof=1)) if v.size > 1 else float("nan")  # noqa: E731
             lines.append(f"| {name} | {fin.mean():.3f} ± {fin.std(ddof=1) / np.sqrt(fin.size):.3f} | "
                          f"{fin.min():.3f}–{fin.max():.3f} | "
-                         f"{np.mean([f['rearrangement_end'] for f in table[name]]) * 1e3:.2f} | {int(ok.sum())} of {ok.size} | "
-                         f"{(np.mean(steep[ok]) * 1e3 if ok.any() else float('nan')):.2f} |")
+                         f"{np.mean([f['rearrangement_end'] for f in table[name]]) * 1e3:.2f} "
+                         f"[{100 * v1.mean():.1f} ± {100 * sd(v1):.1f} %] | {int(ok.sum())} of {ok.size} | "
+                         f"{(np.mean(steep[ok]) * 1e3 if ok.any() else float('nan')):.2f} "
+                         f"[{(100 * v2.mean() if v2.size else float('nan')):.1f} ± {100 * sd(v2):.1f} %] |")
         names = [n for n, _ in LAWS]
         fin = {n: np.array([f["final"] for f in table[n]]) for n in names}
         lines += ["", "| pair, same specimens | mean relative difference of the final load ± s.e. | t | first above in |",

@@ -92,3 +92,10 @@ def test_fast_settings_expected_curves(fast):
     lines = fast._ensembles(runs, "F_cell")
     assert len(lines) == 3
     assert lines[2].startswith("| mass scaling 25, α = 4e3 1/s | 2 | 5.00 % | 5.00 % | 5.00 % |")
+
+
+def test_box_volume_fraction(ensemble):
+    """The study's 37.7 % box: 6.94 mm gap; its phase boundaries at U = 0.55 and 1.12 mm."""
+    assert ensemble.STUDY_HEIGHT_M == pytest.approx(6.944e-3, rel=1e-3)
+    assert ensemble.vf_at(0.0, 0.377, ensemble.STUDY_HEIGHT_M) == pytest.approx(0.377)
+    assert ensemble.vf_at(1.12e-3, 0.377, ensemble.STUDY_HEIGHT_M) == pytest.approx(0.377 * 6.944 / 5.824, rel=1e-3)
