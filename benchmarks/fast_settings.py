@@ -45,6 +45,12 @@ CANDIDATES = [
      {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s", "scene.gravity.acceleration": [0, "-9.8099999 m/s^2", 0]}),
     ("velocity × 2 (2e3 mm/min), α = 5e4 1/s", {"scene.loading.velocity": "2000 mm/min", "scene.damping.alpha": "5e4 1/s"}),
     ("velocity × 5 (5e3 mm/min), α = 2e4 1/s", {"scene.loading.velocity": "5000 mm/min", "scene.damping.alpha": "2e4 1/s"}),
+    ("velocity × 5 (5e3 mm/min), α = 2e4 1/s, gravity × (1 + 1e-8) (twin)",
+     {"scene.loading.velocity": "5000 mm/min", "scene.damping.alpha": "2e4 1/s",
+      "scene.gravity.acceleration": [0, "-9.8100001 m/s^2", 0]}),
+    ("velocity × 5 (5e3 mm/min), α = 2e4 1/s, gravity × (1 − 1e-8) (twin)",
+     {"scene.loading.velocity": "5000 mm/min", "scene.damping.alpha": "2e4 1/s",
+      "scene.gravity.acceleration": [0, "-9.8099999 m/s^2", 0]}),
     ("velocity × 10 (1e4 mm/min), α = 1e4 1/s", {"scene.loading.velocity": "10000 mm/min", "scene.damping.alpha": "1e4 1/s"}),
     ("0.6 mm elements", {"mesh.element_length": "0.6 mm"}),
 ]
