@@ -57,6 +57,9 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:00 UTC `make reproduce`
   the rearrangement ends at v_f = 41.4 ± 3.3 % and 6 of 8 show a steep rise, from v_f =
   46.7 ± 4.0 % (mean ± s.d.): the bundle locks at the study's volume fraction, within the spread of
   specimens; what U it takes depends on how dense the pile starts.
+
+  ![paper-40 at the study's settings, phases shaded](img/paper40_force_displacement.png)
+
 - **Contact models: no order, because the normal law does not carry the compliance.** Single runs
   at the study's settings give parallel 0.792 N, oblique 6° 0.758 N, orientation-aware 0.769 N at
   U = 1.15 mm (the study's order, by 4 %); compacted to U = 3 mm the peaks order the other way
@@ -154,6 +157,9 @@ def main(argv=None):
     comp = Path(a.runs) / "comparison" / "comparison.png"
     if comp.exists():
         shutil.copyfile(comp, img / "reproduce_comparison.png")
+    p40 = Path(a.runs) / "paper-40" / "post" / "force_displacement.png"  # its phases shaded
+    if p40.exists():
+        shutil.copyfile(p40, img / "paper40_force_displacement.png")
     ens = ROOT / "runs" / "contact_ensemble" / "contact_ensemble.png"  # make contact-ensemble's plot, if run
     if ens.exists():
         shutil.copyfile(ens, img / "contact_ensemble.png")
