@@ -11,6 +11,7 @@ from fiberpipe.artifacts import write_text_atomic
 from fiberpipe.errors import InputError
 from fiberpipe.post.curves import force_displacement
 from fiberpipe.post.history import load_simulation
+from fiberpipe.post.phases import compaction_phases
 from fiberpipe.post.plots import plot_force_displacement
 
 
@@ -25,6 +26,7 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
         if not sim_path.exists():
             if (d / "simulation_diverged.h5").exists():
                 rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
+                             "rearrangement_end_U_mm": float("nan"), "steep_start_U_mm": float("nan"),
                              "peak_ke_over_se": float("nan"), "energy_residual": float("nan"), "steps": 0,
                              "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
                 continue
@@ -39,13 +41,17 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
             curves[name] = (U, F)
             final = float(F[-1])
             peak = float(np.max(F))
+            ph = compaction_phases(U, F)
+            u1, u2 = (float("nan") if ph[k] is None else 1e3 * ph[k] for k in ("rearrangement_end_U_m", "steep_start_U_m"))
         except KeyError:
-            final = peak = float("nan")
+            final = peak = u1 = u2 = float("nan")
         rows.append(
             {
                 "run": name,
                 "final_load_N": final,
                 "max_load_N": peak,
+                "rearrangement_end_U_mm": u1,
+                "steep_start_U_mm": u2,
                 "peak_ke_over_se": summary.get("peak_ke_over_se", float("nan")),
                 "energy_residual": summary.get("energy_balance_residual_max", float("nan")),
                 "steps": int(sim.attrs.get("steps", 0)),

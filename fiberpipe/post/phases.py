@@ -24,7 +24,8 @@ def compaction_phases(U_m, F_N, *, window_m: float = WINDOW_M, onset_fraction: f
     # Strategy: on the loading branch (up to the largest U), average F in U windows of
     # ``window_m`` (a paper-40 curve is a sequence of contact bursts: single samples scatter by
     # ±0.05 N). The rearrangement ends where the window means first cross ``onset_fraction`` of
-    # their peak (linear between window centres). Between that onset and the peak window, fit a
+    # their peak (linear between window centres; the loading's start if the first window already
+    # does). Between that onset and the peak window, fit a
     # continuous two-segment line (slopes b₁ then b₂, breakpoint at a window centre, least squares);
     # the load "rises steeply" from the breakpoint if b₂ ≥ ``steep_factor`` × the mean slope
     # s̄ = (F̄_peak − F̄_onset)/(U_peak − U_onset). A straight rise gives b₂ ≈ s̄ (no steep phase); a
@@ -66,8 +67,8 @@ def compaction_phases(U_m, F_N, *, window_m: float = WINDOW_M, onset_fraction: f
     p = int(np.flatnonzero(fm == fm.max())[-1])
     thr = onset_fraction * fm[p]
     i = int(np.flatnonzero(fm > thr)[0])
-    if i == 0:
-        u1 = float(uc[0])
+    if i == 0:  # loaded from the first window on: no rearrangement
+        u1 = float(edges[0])
     else:  # the crossing, linear between the window centres
         u1 = float(uc[i - 1] + (thr - fm[i - 1]) * (uc[i] - uc[i - 1]) / (fm[i] - fm[i - 1]))
     out.update(rearrangement_end_U_m=u1, peak_window_load_N=float(fm[p]), peak_U_m=float(uc[p]))

@@ -109,3 +109,16 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     assert "final_load_N" in figures
     header = (tmp_path / "post" / "force_displacement.csv").read_text().splitlines()[0]
     assert header == "time_s,U_m,load_N,lower_plate_force_N,upper_plate_force_N"
+    # the phases: a straight rise from U = 0 (F = 1e3 U), so no rearrangement and no steep phase
+    assert s["phases"]["rearrangement_end_U_m"] < 0.02e-3
+    assert s["phases"]["steep_start_U_m"] is None
+    assert "## Compaction phases" in (tmp_path / "post" / "report.md").read_text()
+    # and in the comparison of runs (make reproduce)
+    from fiberpipe.post.compare import compare_runs
+
+    table = compare_runs([tmp_path], tmp_path / "cmp")
+    head, _, row = table.splitlines()[:3]
+    assert "rearrangement_end_U_mm" in head and "steep_start_U_mm" in head
+    cells = dict(zip([c.strip() for c in head.strip("|").split("|")], [c.strip() for c in row.strip("|").split("|")]))
+    assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
+    assert (tmp_path / "cmp" / "comparison.png").exists()
