@@ -82,23 +82,33 @@ def run_seed(seed: int, save: str, study: bool) -> list[str]:
         ov = {**({} if study else FAST_OVERRIDES), **law, "solver.output_frames": 2, "input.fibers": str(fibers),
               "post.reference_fibers": str(fibers), "scene.plates.upper_position": top}
         r = paper40_run(ov)
-        np.savez(path, U=r["U_curve"], F_cell=r["F_cell_curve"], F_lower=r["F_curve"], wall_s=r["wall_s"])
+        np.savez(path, U=r["U_curve"], F_cell=r["F_cell_curve"], F_lower=r["F_curve"], wall_s=r["wall_s"],
+                 completed=r["completed"], overrides=json.dumps(ov, default=str))
         log.append(f"seed {seed} {name}: F_cell(1.15 mm) {r['F_cell_final_N']:.3f} N, {r['wall_s']:.0f} s")
     return log
 
 
+def _window_mean(U: np.ndarray, F: np.ndarray, lo: float, hi: float) -> float:
+    """Mean load over lo ≤ U ≤ hi (NaN if the run has no sample there)."""
+    k = (U >= lo) & (U <= hi + 1e-9)
+    return float(F[k].mean()) if k.any() else float("nan")
+
+
 def figures(U: np.ndarray, F: np.ndarray) -> dict:
-    """Load-cell figures of one run: final-window mean, reads at ``READ_AT_M``, peak, and the phases
-    of :func:`fiberpipe.post.phases.compaction_phases` (U in m; NaN where a phase is absent)."""
+    """Load-cell figures of one run (loading branch): final-window mean, window means of ±0.025 mm
+    at ``READ_AT_M`` (single rows fluctuate by ±0.05 N), peak, and the phases of
+    :func:`fiberpipe.post.phases.compaction_phases` (U in m; NaN where absent or not reached)."""
     from fiberpipe.post.phases import compaction_phases
 
-    lo, hi = FINAL_WINDOW_M
-    k = (U >= lo) & (U <= hi + 1e-9)
+    k = int(np.argmax(U)) + 1
+    U, F = U[:k], F[:k]
     ph = compaction_phases(U, F)
     nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
-    return {"final": float(F[k].mean()), "reads": [float(F[min(np.searchsorted(U, u), len(F) - 1)]) for u in READ_AT_M],
+    return {"final": _window_mean(U, F, *FINAL_WINDOW_M),
+            "reads": [_window_mean(U, F, u - 0.025e-3, u + 0.025e-3) for u in READ_AT_M],
             "peak": float(F.max()), "rearrangement_end": nan(ph["rearrangement_end_U_m"]),
-            "steep_start": nan(ph["steep_start_U_m"]), "steepness": nan(ph["steepness"])}
+            "steep_start": nan(ph["steep_start_U_m"]), "steep_censored": bool(ph["steep_start_censored"]),
+            "steepness": nan(ph["steepness"])}
 
 
 STUDY_VF0 = 0.377
@@ -112,15 +122,28 @@ def vf_at(U_m: float, vf0: float, height_m: float) -> float:
     return vf0 * height_m / (height_m - U_m)
 
 
-def paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
-    """Mean of the relative paired difference 2(a − b)/(a + b), its standard error and t."""
+def paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float, float]:
+    """Relative paired difference d = 2(a − b)/(a + b) on the same specimens: its mean, standard
+    error, Student t (±inf when every pair differs by the same amount) and two-sided p (n − 1
+    degrees of freedom; NaN for fewer than two pairs)."""
+    from scipy import stats
+
     d = 2 * (a - b) / (a + b)
-    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else float("nan")
     m = float(d.mean())
-    return m, se, m / se if se > 0 else float("nan")
+    if d.size < 2:
+        return m, float("nan"), float("nan"), float("nan")
+    se = float(d.std(ddof=1) / np.sqrt(d.size))
+    if se <= 1e-12 * max(abs(m), 1e-300):
+        t = float("nan") if m == 0 else float(np.copysign(np.inf, m))
+    else:
+        t = m / se
+    p = float(2 * stats.t.sf(abs(t), d.size - 1)) if np.isfinite(t) else (0.0 if np.isinf(t) else float("nan"))
+    return m, se, t, p
 
 
 def summarise(seeds, save: Path, study: bool) -> str:
+    from fiberpipe.bench import FAST_OVERRIDES
+
     suffix = "-study" if study else ""
     res: dict = {}
     for s in seeds:
@@ -128,6 +151,9 @@ def summarise(seeds, save: Path, study: bool) -> str:
             p = save / f"seed-{s}" / f"{_slug(name)}{suffix}.npz"
             if p.exists():
                 d = np.load(p)
+                if "completed" in d.files and not bool(d["completed"]):
+                    print(f"seed {s} {name}: the run stopped before the end; left out")
+                    continue
                 res[(s, name)] = (d["U"], d["F_cell"], float(d["wall_s"]))
     done = [s for s in seeds if all((s, n) in res for n, _ in LAWS)]
     box = {}
@@ -157,7 +183,7 @@ def summarise(seeds, save: Path, study: bool) -> str:
             table[name].append(f)
             lines.append(f"| {s} | {100 * box[s][0]:.1f} % | {name} | {' / '.join(f'{v:.3f}' for v in f['reads'])} | "
                          f"{f['final']:.3f} | {f['peak']:.3f} | {f['rearrangement_end'] * 1e3:.2f} "
-                         f"[{100 * f['vf_rearrangement_end']:.1f} %] | {f['steep_start'] * 1e3:.2f} "
+                         f"[{100 * f['vf_rearrangement_end']:.1f} %] | {f['steep_start'] * 1e3:.2f}{'+' if f['steep_censored'] else ''} "
                          f"[{100 * f['vf_steep_start']:.1f} %] | {f['steepness']:.2f} | {wall:.0f} |")
     if len(done) >= 2:
         lines += ["", "| law | final, mean ± s.e. (N) | range (N) | rearrangement until U, mean (mm) [v_f, mean ± s.d.] | "
@@ -177,12 +203,14 @@ def summarise(seeds, save: Path, study: bool) -> str:
                          f"[{(100 * v2.mean() if v2.size else float('nan')):.1f} ± {100 * sd(v2):.1f} %] |")
         names = [n for n, _ in LAWS]
         fin = {n: np.array([f["final"] for f in table[n]]) for n in names}
-        lines += ["", "| pair, same specimens | mean relative difference of the final load ± s.e. | t | first above in |",
-                  "|---|---|---|---|"]
+        lines += ["", "| pair, same specimens | mean relative difference of the final load ± s.e. | t (n − 1 dof) | "
+                      "two-sided p | first above in |", "|---|---|---|---|---|"]
         for a, b in ((names[1], names[2]), (names[1], names[0]), (names[2], names[0])):
-            m, se, t = paired(fin[a], fin[b])
-            lines.append(f"| {a} − {b} | {100 * m:+.1f} % ± {100 * se:.1f} % | {t:+.2f} | "
+            m, se, t, p = paired(fin[a], fin[b])
+            lines.append(f"| {a} − {b} | {100 * m:+.1f} % ± {100 * se:.1f} % | {t:+.2f} ({fin[a].size - 1}) | {p:.2f} | "
                          f"{int(np.sum(fin[a] > fin[b]))} of {fin[a].size} |")
+        lines += ["", "Three pairs tested on the same runs, uncorrected; the final load is the mean over "
+                  "U = 1.10–1.15 mm; d = 2(a − b)/(a + b) per specimen."]
         _plot(done, res, save / f"contact_ensemble{suffix}.png")
     return "\n".join(lines) + "\n"
 

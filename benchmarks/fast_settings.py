@@ -16,7 +16,7 @@ settings themselves when its error is at the floor runs' level for the same wind
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/fast_settings.py [--out FILE.md] [--save DIR] [--reuse]
 
 ``--save DIR`` (default ``runs/fast_settings``) keeps every run's curve and figures as ``.npz``;
-``--reuse`` recomputes the table from them without running anything.
+``--reuse`` recomputes the table from them without running anything (runs never saved show as "not run").
 """
 
 from __future__ import annotations
@@ -63,9 +63,12 @@ def _slug(name: str) -> str:
     return "-".join(filter(None, slug.split("-")))
 
 
-def _run(name, overrides, save: Path, reuse: bool) -> dict:
+def _run(name, overrides, save: Path, reuse: bool) -> dict | None:
+    """The run's saved figures (``reuse``; None if it was never saved) or a new run, saved."""
     path = save / f"{_slug(name)}.npz"
-    if reuse and path.exists():
+    if reuse:
+        if not path.exists():
+            return None
         d = np.load(path)
         return {k: (d[k] if d[k].ndim else d[k].item()) for k in d.files}
     r = paper40_run({"solver.output_frames": 2, **overrides})
@@ -98,15 +101,27 @@ def _table(runs, key: str) -> list[str]:
     # the study settings are chaotic: their own runs (the reference and the floor runs) differ by
     # several % even in window means. Their mean is the better estimate of "the study-settings
     # curve"; each run's distance from it is the floor a cheaper setting can be judged against.
-    study = [c for name, _, _, _, c in rows if name.startswith("study settings") and c is not None]
+    # A study run is compared with the mean of the *other* study runs (leave one out): against a mean
+    # that contains it, it would sit ≈ 1/3 closer than an independent run of the same settings.
+    study = [(name, c) for name, _, _, _, c in rows if name.startswith("study settings") and c is not None]
+
+    def mean(cs):
+        k = min(len(c["F_curve"]) for c in cs)
+        return {"U_curve": cs[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in cs], axis=0)}
+
     ens_err = {}
     if study:
-        k = min(len(c["F_curve"]) for c in study)
-        ens = {"U_curve": study[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in study], axis=0)}
-        ens_err = {name: [curve_error_binned(ens, c, w) for w in WINDOWS_M[1:]]
-                   for name, _, _, _, c in rows if c is not None}
+        ens = mean([c for _, c in study])
+        for name, _, _, _, c in rows:
+            if c is None:
+                continue
+            others = [o for n, o in study if n != name]
+            if len(others) < len(study) and not others:
+                continue
+            ref_c = mean(others) if len(others) < len(study) else ens
+            ens_err[name] = [curve_error_binned(ref_c, c, w) for w in WINDOWS_M[1:]]
     head = " | ".join(f"binned {w * 1e3:g} mm" for w in WINDOWS_M)
-    head_e = " | ".join(f"vs mean of study runs, {w * 1e3:g} mm" for w in WINDOWS_M[1:])
+    head_e = " | ".join(f"vs mean of study runs (of the others, for a study run), {w * 1e3:g} mm" for w in WINDOWS_M[1:])
     lines = [f"| settings | steps | wall (s) | F at U = 1.15 mm (N) | pointwise | {head} | {head_e} |",
              "|---|---|---|---|---|" + "---|" * (2 * len(WINDOWS_M) - 1)]
     for name, r, e1, e2, _ in rows:
@@ -126,7 +141,8 @@ def _family(name: str) -> str:
 
 def _ensembles(runs, key: str) -> list[str]:
     """Mean curve of each setting with several runs (gravity twins) against the study settings' mean
-    curve: the error of the expected curve, without the one-run chaotic scatter."""
+    curve: the error of the expected curve. A mean of three runs still scatters, by ≈ √(1/3) of one
+    run's chaotic scatter each side (≈ √(2/3) for the difference of two such means)."""
     fam: dict[str, list] = {}
     for name, r, fail in runs:
         c = _curve(r, key)
@@ -159,11 +175,18 @@ def main(argv=None) -> str:
     reuse = "--reuse" in argv
     ref = _run(*REFERENCE, save, reuse)
     runs = [(REFERENCE[0], ref, None)]
+    if ref is None:
+        raise SystemExit(f"--reuse: no saved reference run in {save}")
     for name, ov in CANDIDATES:
         try:
-            runs.append((name, _run(name, ov, save, reuse), None))
+            r = _run(name, ov, save, reuse)
         except Exception as exc:  # a diverging candidate is a result too
             runs.append((name, {"wall_s": float("nan"), "steps": 0, "U_mm": float("nan")}, f"failed: {exc}"[:80]))
+            continue
+        if r is None:
+            runs.append((name, {"wall_s": float("nan"), "steps": 0, "U_mm": float("nan")}, "not run (--reuse)"))
+        else:
+            runs.append((name, r, None))
     lines = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, one thread "
              "(wall: the whole run, including the first chunk's cache load)."]
     for title, key in PLATES:
@@ -171,7 +194,7 @@ def main(argv=None) -> str:
         ens = _ensembles(runs, key)
         if ens:
             lines += ["", f"Expected curves, {title}: the mean of each setting's runs against the mean of the study "
-                      "settings' runs", ""] + ens
+                      "settings' runs (each mean still scatters by ≈ √(1/3) of one run's scatter)", ""] + ens
     text = "\n".join(lines) + "\n"
     print(text)
     if out:

@@ -38,17 +38,26 @@ def test_figures_of_a_known_curve(ensemble):
     assert np.isnan(f["steep_start"])  # a straight rise after the onset: no steep phase
     # mean of a linear ramp over U = 1.10–1.15 mm: its value at 1.125 mm
     assert f["final"] == pytest.approx((1.125e-3 - 0.5e-3) / 0.65e-3, rel=1e-3)
-    assert f["reads"][0] == 0.0 and f["reads"][3] == pytest.approx(0.5 / 0.65, abs=1e-3)
+    # reads: window means over ±0.025 mm (a ramp's mean is its middle value)
+    assert f["reads"][3] == pytest.approx(0.5 / 0.65, abs=1e-3) and f["reads"][2] == pytest.approx(0.3 / 0.65, abs=1e-3)
+    short = ensemble.figures(U[U <= 0.9e-3], F[U <= 0.9e-3])  # a run that stopped at 0.9 mm
+    assert np.isnan(short["final"]) and np.isnan(short["reads"][3]) and np.isfinite(short["reads"][2])
 
 
 def test_paired_difference(ensemble):
     a = np.array([1.1, 2.2, 3.3])
     b = np.array([1.0, 2.0, 3.0])
-    m, se, t = ensemble.paired(a, b)
-    d = 2 * 0.1 / 2.1  # the same relative difference for every pair
-    assert m == pytest.approx(d) and se == pytest.approx(0.0, abs=1e-15)
-    m, se, t = ensemble.paired(np.array([1.0, 2.0]), np.array([2.0, 1.0]))
-    assert m == pytest.approx(0.0) and se == pytest.approx(2 / 3) and t == pytest.approx(0.0)
+    m, se, t, p = ensemble.paired(a, b)
+    d = 2 * 0.1 / 2.1  # the same relative difference for every pair: certain, not a 1e15 t from rounding
+    assert m == pytest.approx(d) and se == pytest.approx(0.0, abs=1e-15) and t == np.inf and p == 0.0
+    m, se, t, p = ensemble.paired(np.array([1.0, 2.0]), np.array([2.0, 1.0]))
+    assert m == pytest.approx(0.0) and se == pytest.approx(2 / 3) and t == pytest.approx(0.0) and p == pytest.approx(1.0)
+    # t = 1.225 with 3 degrees of freedom: two-sided p = 0.308 (Student's t table)
+    d = np.array([0.1, 0.3, -0.1, 0.1])  # mean 0.1, s.d. 0.163, s.e. 0.0816: t = 1.22
+    aa, bb = (2 + d) / (2 - d), np.ones(4)  # 2(a − b)/(a + b) = d
+    m, se, t, p = ensemble.paired(aa, bb)
+    assert m == pytest.approx(0.1) and t == pytest.approx(0.1 / (np.std(d, ddof=1) / 2))
+    assert p == pytest.approx(0.309, abs=0.002)
 
 
 def test_seed_ranges(ensemble):
