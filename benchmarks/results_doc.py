@@ -50,13 +50,14 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:00 UTC `make reproduce`
   plot; criteria in docs/outputs.md: rearrangement until the 0.05 mm window means of the load
   exceed 2 % of their peak, then a steep rise where a two-segment fit's last slope is ≥ 1.5× the
   mean slope since then): `paper-40` rearranges with a near-zero load up to U = 0.34 mm, goes
-  through a transition, and rises steeply from U = 0.93 mm (last slope 2.0× the mean). The study:
+  through a transition, and rises steeply from U = 0.92 mm (last slope 2.0× the mean). The study:
   0.55 mm and 1.12 mm. Our pile starts denser (v_f0 39.8 % against 37.7 % by the same cassette-box
   measure), and in volume fraction the boundaries nearly coincide: **42.0 % and 46.3 %** here,
-  **40.9 % and 45.0 %** in the study. Over eight specimens of the same generator (seeds 0–7, below)
-  the rearrangement ends at v_f = 41.4 ± 3.3 % and 6 of 8 show a steep rise, from v_f =
-  46.7 ± 4.0 % (mean ± s.d.): the bundle locks at the study's volume fraction, within the spread of
-  specimens; what U it takes depends on how dense the pile starts.
+  **40.9 % and 45.0 %** in the study. Over eight specimens of the same generator (seeds 0–7, below;
+  orientation-aware law) the rearrangement ends at v_f = 41.8 ± 3.8 % and 6 of 8 show a steep rise,
+  from v_f = 46.4 ± 4.6 % (mean ± s.d., study settings; 41.8 ± 3.8 % and 46.7 ± 4.0 % at the fast
+  settings): the bundle locks at the study's volume fraction, within the spread of specimens; what
+  U it takes depends on how dense the pile starts (v_f0 35.8–46.0 %).
 
   ![paper-40 at the study's settings, phases shaded](img/paper40_force_displacement.png)
 
@@ -67,15 +68,15 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:00 UTC `make reproduce`
   `make reproduce` had parallel 72 N above oblique 46 N). One run is one trajectory of a chaotic
   bundle (gravity × (1 ± 1e-8) moves the final load by 9 %), so `make contact-ensemble`
   (`benchmarks/contact_ensemble.py`) compacts eight specimens with each law and compares them on
-  the same specimen: **parallel − oblique 6° = +0.5 % ± 1.3 %** (mean relative difference of the
-  final load, U = 1.10–1.15 mm, ± s.e.; parallel above in 3 of 8), against the study's +57 %
-  (17 against 9.5 N). The largest fiber–fiber penetration at U = 1.15 mm is 0.28 µm (parallel)
+  the same specimen: **parallel − oblique 6° = +3.3 % ± 3.7 %** at the study's settings and
+  **+0.5 % ± 1.3 %** at the fast settings (mean relative difference of the final load,
+  U = 1.10–1.15 mm, ± s.e.; two-sided p = 0.40 and 0.72; parallel above in 3 of 8 both times),
+  against the study's +57 % (17 against 9.5 N). The largest fiber–fiber penetration at U = 1.15 mm is 0.28 µm (parallel)
   to 0.68 µm (orientation-aware), 2.5e-4 to 6e-4 of the plate travel: the load is set by the
   fibers' bending and sliding, and a stiffer or softer normal law changes it by less than the
-  scatter. The specimens' final loads span 0.26–1.14 N (mean 0.54–0.58 N by law) and grow with
-  their v_f0 (35.8–46.0 %). The ensemble runs at the fast settings (mass scaling 25 with α/25: its
-  expected load-cell curve is 3.1 % from the study settings', docs/benchmarks.md), which is the
-  same for all three laws of a pair; `--study` repeats it at the study's settings.
+  scatter. The specimens' final loads span 0.15–1.08 N at the study's settings (means 0.50–0.57 N
+  by law) and grow with their v_f0. The fast settings (mass scaling 25 with α/25, docs/benchmarks.md)
+  give the same picture in a fifth of the time.
 
 ![paper-40 specimens under the three contact models](img/contact_ensemble.png)
 
