@@ -13,10 +13,14 @@ fibers it sweeps; the measure until 2026-11-22), by
 of the study-settings runs (reference and floor runs). A setting is as accurate as the study
 settings themselves when its error is at the floor runs' level for the same window.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/fast_settings.py [--out FILE.md] [--save DIR] [--reuse]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/fast_settings.py [--out FILE.md] [--save DIR] [--reuse | --resume]
+        [--twins K]
 
 ``--save DIR`` (default ``runs/fast_settings``) keeps every run's curve and figures as ``.npz``;
-``--reuse`` recomputes the table from them without running anything (runs never saved show as "not run").
+``--reuse`` recomputes the table from them without running anything (runs never saved show as "not run");
+``--resume`` runs only the ones never saved. ``--twins K`` (default 1) adds, for K ≥ 2, the study
+settings and mass scaling 25 with gravity × (1 ± k·1e-8), k = 2..K: 2K + 1 runs of each for their
+expected curves (K = 3: four more study runs, ≈ 10 min more).
 """
 
 from __future__ import annotations
@@ -63,10 +67,23 @@ def _slug(name: str) -> str:
     return "-".join(filter(None, slug.split("-")))
 
 
-def _run(name, overrides, save: Path, reuse: bool) -> dict | None:
-    """The run's saved figures (``reuse``; None if it was never saved) or a new run, saved."""
+def _twins(k_max: int) -> list:
+    """Extra gravity twins (k = 2..k_max) of the study settings and of mass scaling 25."""
+    out = []
+    for k in range(2, k_max + 1):
+        for sign, word in ((1, "+"), (-1, "−")):
+            g = [0, f"{-9.81 * (1 + sign * k * 1e-8):.10g} m/s^2", 0]
+            out.append((f"study settings, gravity × (1 {word} {k}e-8) (chaotic floor)", {"scene.gravity.acceleration": g}))
+            out.append((f"mass scaling 25, α = 4e3 1/s, gravity × (1 {word} {k}e-8) (twin)",
+                        {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s", "scene.gravity.acceleration": g}))
+    return out
+
+
+def _run(name, overrides, save: Path, reuse: bool, resume: bool = False) -> dict | None:
+    """The run's saved figures (``reuse``/``resume``; with ``reuse`` None if it was never saved) or
+    a new run, saved."""
     path = save / f"{_slug(name)}.npz"
-    if reuse:
+    if reuse or (resume and path.exists()):
         if not path.exists():
             return None
         d = np.load(path)
@@ -173,13 +190,15 @@ def main(argv=None) -> str:
     out = argv[argv.index("--out") + 1] if "--out" in argv else None
     save = Path(argv[argv.index("--save") + 1]) if "--save" in argv else Path("runs/fast_settings")
     reuse = "--reuse" in argv
-    ref = _run(*REFERENCE, save, reuse)
+    resume = "--resume" in argv
+    twins = int(argv[argv.index("--twins") + 1]) if "--twins" in argv else 1
+    ref = _run(*REFERENCE, save, reuse, resume)
     runs = [(REFERENCE[0], ref, None)]
     if ref is None:
         raise SystemExit(f"--reuse: no saved reference run in {save}")
-    for name, ov in CANDIDATES:
+    for name, ov in CANDIDATES + _twins(twins):
         try:
-            r = _run(name, ov, save, reuse)
+            r = _run(name, ov, save, reuse, resume)
         except Exception as exc:  # a diverging candidate is a result too
             runs.append((name, {"wall_s": float("nan"), "steps": 0, "U_mm": float("nan")}, f"failed: {exc}"[:80]))
             continue
