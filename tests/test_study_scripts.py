@@ -108,3 +108,11 @@ def test_box_volume_fraction(ensemble):
     assert ensemble.STUDY_HEIGHT_M == pytest.approx(6.944e-3, rel=1e-3)
     assert ensemble.vf_at(0.0, 0.377, ensemble.STUDY_HEIGHT_M) == pytest.approx(0.377)
     assert ensemble.vf_at(1.12e-3, 0.377, ensemble.STUDY_HEIGHT_M) == pytest.approx(0.377 * 6.944 / 5.824, rel=1e-3)
+
+
+def test_more_twins_join_their_settings(fast):
+    names = [n for n, _ in fast._twins(3)]
+    assert len(names) == 8
+    fams = {fast._family(n) for n in names}
+    assert fams == {fast._family(fast.REFERENCE[0]), "mass scaling 25, α = 4e3 1/s"}
+    assert fast._twins(1) == []
