@@ -76,7 +76,7 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:07 UTC `make reproduce`
   fibers' bending and sliding, and a stiffer or softer normal law changes it by less than the
   scatter. The specimens' final loads span 0.15–1.08 N at the study's settings (means 0.50–0.57 N
   by law) and grow with their v_f0 (Pearson r = 0.66 over the 24 runs of 8 specimens). The fast settings (mass scaling 25 with α/25, docs/benchmarks.md)
-  give the same picture in a fifth of the time.
+  (load-cell curve within 2.15 % of the study settings' in expectation) give the same picture in a fifth of the time.
 
 ![paper-40 specimens under the three contact models](img/contact_ensemble.png)
 
