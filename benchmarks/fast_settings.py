@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.bench import curve_error, curve_error_binned, paper40_run
+from fiberpipe.bench import curve_error, curve_error_binned, load_curve as _curve, paper40_run
 
 WINDOWS_M = (0.05e-3, 0.115e-3, 0.23e-3)
 REFERENCE = ("study settings (reference)", {})
@@ -94,12 +94,11 @@ def _run(name, overrides, save: Path, reuse: bool, resume: bool = False) -> dict
     return r
 
 
-def _curve(r: dict, key: str) -> dict | None:
-    """``r``'s curve of plate force ``key`` ("F" or "F_cell") as the ``U_curve``/``F_curve`` pair the
-    error measures read; None if the run has none (failed, or saved before the load cell was kept)."""
-    if f"{key}_curve" not in r or "U_curve" not in r:
-        return None
-    return {"U_curve": r["U_curve"], "F_curve": r[f"{key}_curve"]}
+def _mean_curve(cs: list[dict]) -> dict:
+    """The mean of several runs' curves, sample by sample over their common length (the runs share
+    the step and the output cadence, hence the U samples)."""
+    k = min(len(c["F_curve"]) for c in cs)
+    return {"U_curve": cs[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in cs], axis=0)}
 
 
 def _table(runs, key: str) -> list[str]:
@@ -120,23 +119,12 @@ def _table(runs, key: str) -> list[str]:
     # curve"; each run's distance from it is the floor a cheaper setting can be judged against.
     # A study run is compared with the mean of the *other* study runs (leave one out): against a mean
     # that contains it, it would sit ≈ 1/3 closer than an independent run of the same settings.
-    study = [(name, c) for name, _, _, _, c in rows if name.startswith("study settings") and c is not None]
-
-    def mean(cs):
-        k = min(len(c["F_curve"]) for c in cs)
-        return {"U_curve": cs[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in cs], axis=0)}
-
+    study = [(name, c) for name, _, _, _, c in rows if _family(name) == _family(REFERENCE[0]) and c is not None]
     ens_err = {}
-    if study:
-        ens = mean([c for _, c in study])
-        for name, _, _, _, c in rows:
-            if c is None:
-                continue
-            others = [o for n, o in study if n != name]
-            if len(others) < len(study) and not others:
-                continue
-            ref_c = mean(others) if len(others) < len(study) else ens
-            ens_err[name] = [curve_error_binned(ref_c, c, w) for w in WINDOWS_M[1:]]
+    for name, _, _, _, c in rows:
+        others = [o for n, o in study if n != name]
+        if c is not None and others:
+            ens_err[name] = [curve_error_binned(_mean_curve(others), c, w) for w in WINDOWS_M[1:]]
     head = " | ".join(f"binned {w * 1e3:g} mm" for w in WINDOWS_M)
     head_e = " | ".join(f"vs mean of study runs (of the others, for a study run), {w * 1e3:g} mm" for w in WINDOWS_M[1:])
     lines = [f"| settings | steps | wall (s) | F at U = 1.15 mm (N) | pointwise | {head} | {head_e} |",
@@ -158,8 +146,8 @@ def _family(name: str) -> str:
 
 def _ensembles(runs, key: str) -> list[str]:
     """Mean curve of each setting with several runs (gravity twins) against the study settings' mean
-    curve: the error of the expected curve. A mean of three runs still scatters, by ≈ √(1/3) of one
-    run's chaotic scatter each side (≈ √(2/3) for the difference of two such means)."""
+    curve: the error of the expected curve. A mean of n runs still scatters, by ≈ √(1/n) of one run's
+    chaotic scatter."""
     fam: dict[str, list] = {}
     for name, r, fail in runs:
         c = _curve(r, key)
@@ -169,18 +157,13 @@ def _ensembles(runs, key: str) -> list[str]:
     study = fam.get(_family(REFERENCE[0]))
     if not study:
         return []
-
-    def mean(cs):
-        k = min(len(c["F_curve"]) for c in cs)
-        return {"U_curve": cs[0]["U_curve"][:k], "F_curve": np.mean([c["F_curve"][:k] for c in cs], axis=0)}
-
-    ref = mean(study)
+    ref = _mean_curve(study)
     lines = ["| settings | runs | " + " | ".join(f"mean vs study mean, {w * 1e3:g} mm" for w in WINDOWS_M) + " |",
              "|---|---|" + "---|" * len(WINDOWS_M)]
     for k, cs in fam.items():
         if k == _family(REFERENCE[0]):
             continue
-        m = mean(cs)
+        m = _mean_curve(cs)
         lines.append(f"| {k} | {len(cs)} | " + " | ".join(f"{100 * curve_error_binned(ref, m, w):.2f} %" for w in WINDOWS_M) + " |")
     return lines
 
@@ -213,7 +196,7 @@ def main(argv=None) -> str:
         ens = _ensembles(runs, key)
         if ens:
             lines += ["", f"Expected curves, {title}: the mean of each setting's runs against the mean of the study "
-                      "settings' runs (each mean still scatters by ≈ √(1/3) of one run's scatter)", ""] + ens
+                      "settings' runs (a mean of n runs still scatters by ≈ √(1/n) of one run's scatter)", ""] + ens
     text = "\n".join(lines) + "\n"
     print(text)
     if out:
