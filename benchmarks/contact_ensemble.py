@@ -42,25 +42,26 @@ def _slug(name: str) -> str:
     return name.split(" ")[0]
 
 
+def specimen_dir(seed: int, save: Path) -> Path:
+    """Where the specimen of ``seed`` lives: the shipped ``data-samples/paper-40`` for seed 0."""
+    return ROOT / "data-samples" / "paper-40" if seed == 0 else save / f"seed-{seed}"
+
+
 def specimen(seed: int, save: Path) -> tuple[Path, float]:
     """The settled pile of ``seed`` (``data-samples/paper-40`` for seed 0) and its top (m)."""
-    if seed == 0:
-        d = ROOT / "data-samples" / "paper-40"
-    else:
-        d = save / f"seed-{seed}"
-        if not (d / "fibers.h5").exists():
-            sys.path.insert(0, str(ROOT / "data-samples"))
-            import make_paper40 as mp  # the shipped generator, unchanged
+    d = specimen_dir(seed, save)
+    if seed != 0 and not (d / "fibers.h5").exists():
+        sys.path.insert(0, str(ROOT / "data-samples"))
+        import make_paper40 as mp  # the shipped generator, unchanged
 
-            from fiberpipe.artifacts import write_fibers
-            from fiberpipe.model.specimen import cassette_specimen
+        from fiberpipe.artifacts import write_fibers
+        from fiberpipe.model.specimen import cassette_specimen
 
-            fibers, info = cassette_specimen(**mp.parameters(seed=seed))
-            fibers, info = mp.settle_pile(fibers, info, lock=mp.SETTLE_LOCK)
-            info["settle_wall_time_s"] = float(info["settle_wall_time_s"])
-            d.mkdir(parents=True, exist_ok=True)
-            write_fibers(d / "fibers.h5", fibers)
-            (d / "specimen.json").write_text(json.dumps(info, indent=1) + "\n")
+        fibers, info = cassette_specimen(**mp.parameters(seed=seed))
+        fibers, info = mp.settle_pile(fibers, info, lock=mp.SETTLE_LOCK)
+        d.mkdir(parents=True, exist_ok=True)
+        write_fibers(d / "fibers.h5", fibers)
+        (d / "specimen.json").write_text(json.dumps(info, indent=1) + "\n")
     info = json.loads((d / "specimen.json").read_text())
     return d / "fibers.h5", float(info["height_m"])
 
@@ -158,7 +159,7 @@ def summarise(seeds, save: Path, study: bool) -> str:
     done = [s for s in seeds if all((s, n) in res for n, _ in LAWS)]
     box = {}
     for s in done:
-        d = ROOT / "data-samples" / "paper-40" if s == 0 else save / f"seed-{s}"
+        d = specimen_dir(s, save)
         info = json.loads((d / "specimen.json").read_text())
         box[s] = (float(info["volume_fraction"]), float(info["height_m"]))
     lines = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} by `benchmarks/contact_ensemble.py"
