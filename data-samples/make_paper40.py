@@ -42,7 +42,6 @@ output (data-samples/paper-40/) is unchanged.
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -209,10 +208,29 @@ def fiber_contacts(x, off, r, tol_m=1e-7) -> int:
     return len({(min(i, j), max(i, j)) for i, j in zip(fib[a[hit]], fib[b[hit]])})
 
 
-def main(argv=None):
+# the options whose default depends on the variant: (shipped paper-40, --wavy)
+VARIANT_DEFAULTS = {
+    "out": (OUT, WAVY_OUT),
+    "phi_mean_deg": (PHI_MEAN_DEG, WAVY_PHI_TILT_DEG),
+    "wave_curvature": (0.0, WAVE_CURVATURE_PER_M),
+    "candidates": (DEPOSIT_CANDIDATES, WAVY_CANDIDATES),
+    "settle_alpha": (SETTLE_ALPHA_PER_S, WAVY_SETTLE_ALPHA_PER_S),
+    "settle_time": (SETTLE_TIME_S, WAVY_SETTLE_TIME_S),
+    "settle_mass_scaling": (None, WAVY_SETTLE_MASS_SCALING),
+    "settle_gravity_scale": (None, WAVY_SETTLE_GRAVITY_SCALE),
+}
+
+
+def options(argv=None) -> argparse.Namespace:
+    """The command line parsed, with the variant-dependent defaults resolved (VARIANT_DEFAULTS)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--phi-mean-deg", type=float, default=PHI_MEAN_DEG)
+
+    def dflt(key: str) -> str:
+        a, b = VARIANT_DEFAULTS[key]
+        return f"default {a}, with --wavy {b}"
+
+    ap.add_argument("--out", type=Path, default=None, help=dflt("out"))
+    ap.add_argument("--phi-mean-deg", type=float, default=None, help=dflt("phi_mean_deg"))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--original", action="store_true", help="the specimen before the statistics were matched")
     ap.add_argument("--rigid", action="store_true",
@@ -220,40 +238,33 @@ def main(argv=None):
     ap.add_argument("--settle", action=argparse.BooleanOptionalAction, default=True,
                     help="settle the deposited pile in the solver under gravity with friction (settle_pile; the "
                          "default); --no-settle: the deposited pile as placed")
-    ap.add_argument("--settle-alpha", type=float, default=SETTLE_ALPHA_PER_S, help="damping alpha while settling, 1/s")
-    ap.add_argument("--settle-time", type=float, default=SETTLE_TIME_S, help="settling time, s")
+    ap.add_argument("--settle-alpha", type=float, default=None, help="damping alpha while settling, 1/s; " + dflt("settle_alpha"))
+    ap.add_argument("--settle-time", type=float, default=None, help="settling time, s; " + dflt("settle_time"))
     ap.add_argument("--settle-lock", choices=["all", "ends", "none"], default=SETTLE_LOCK,
                     help="lock the fibers' z translation while settling (scene.constraints.lock_axial)")
     ap.add_argument("--wavy", action="store_true",
-                    help="the wavy variant (Table 4 read as 1/mm): --wave-curvature %g --phi-mean-deg %g --candidates %d "
-                         "--out data-samples/paper-40-wavy unless given" % (WAVE_CURVATURE_PER_M, WAVY_PHI_TILT_DEG,
-                                                                             WAVY_CANDIDATES))
+                    help="the wavy variant (Table 4 read as 1/mm): changes the defaults of the options that say so")
     ap.add_argument("--wave-curvature", type=float, default=None,
-                    help="deposit: smooth waviness of this projected curvature, 1/m (0: none, the default)")
+                    help="deposit: smooth waviness of this projected curvature, 1/m (0: none); " + dflt("wave_curvature"))
     ap.add_argument("--wave-lengths-mm", type=float, nargs=2, default=[v * 1e3 for v in WAVE_LENGTHS_M])
     ap.add_argument("--wave-modes", type=int, default=WAVE_MODES)
-    ap.add_argument("--candidates", type=int, default=None, help="deposit: trial drops per fiber")
-    ap.add_argument("--settle-mass-scaling", type=float, default=None, help="solver.mass_scaling while settling")
-    ap.add_argument("--settle-gravity-scale", type=float, default=None, help="gravity × this while settling")
+    ap.add_argument("--candidates", type=int, default=None, help="deposit: trial drops per fiber; " + dflt("candidates"))
+    ap.add_argument("--settle-mass-scaling", type=float, default=None,
+                    help="solver.mass_scaling while settling; " + dflt("settle_mass_scaling"))
+    ap.add_argument("--settle-gravity-scale", type=float, default=None,
+                    help="gravity × this while settling; " + dflt("settle_gravity_scale"))
     args = ap.parse_args(argv)
-    if args.wavy:
-        args.wave_curvature = WAVE_CURVATURE_PER_M if args.wave_curvature is None else args.wave_curvature
-        args.candidates = WAVY_CANDIDATES if args.candidates is None else args.candidates
-        args.out = WAVY_OUT if args.out == OUT else args.out
-        given = sys.argv[1:] if argv is None else argv
-        if "--settle-alpha" not in given:
-            args.settle_alpha = WAVY_SETTLE_ALPHA_PER_S
-        if "--settle-time" not in given:
-            args.settle_time = WAVY_SETTLE_TIME_S
-        if args.settle_mass_scaling is None:
-            args.settle_mass_scaling = WAVY_SETTLE_MASS_SCALING
-        if args.settle_gravity_scale is None:
-            args.settle_gravity_scale = WAVY_SETTLE_GRAVITY_SCALE
-        if "--phi-mean-deg" not in given:
-            args.phi_mean_deg = WAVY_PHI_TILT_DEG
+    # one rule for every variant-dependent option: what is given wins, else the variant's default
+    for key, (plain, wavy) in VARIANT_DEFAULTS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, wavy if args.wavy else plain)
+    return args
+
+
+def main(argv=None):
+    args = options(argv)
     params = parameters(args.phi_mean_deg, args.seed, args.original, args.rigid,
-                        candidates=DEPOSIT_CANDIDATES if args.candidates is None else args.candidates,
-                        wave_curvature_per_m=args.wave_curvature or 0.0,
+                        candidates=args.candidates, wave_curvature_per_m=args.wave_curvature,
                         wave_lengths_m=[v * 1e-3 for v in args.wave_lengths_mm], wave_modes=args.wave_modes)
     fibers, info = cassette_specimen(**params)
     if args.settle and params.get("placement") == "deposit":

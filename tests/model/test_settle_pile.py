@@ -52,3 +52,17 @@ def test_fiber_contacts_counts_touching_pairs_once():
                         np.c_[0 * z + 5 * R, 0 * z + R, z]])
     off = np.array([0, 11, 22, 33])
     assert mp.fiber_contacts(x, off, R) == 1  # 0–1 touch (10 nm overlap), 2 is 0.75 mm away
+
+
+def test_command_line_defaults_follow_the_variant():
+    """make_paper40's options: the shipped defaults, --wavy's own, and what is given always wins."""
+    mp = _make_paper40()
+    plain = mp.options([])
+    assert (plain.out, plain.candidates, plain.wave_curvature, plain.settle_mass_scaling) == (
+        mp.OUT, mp.DEPOSIT_CANDIDATES, 0.0, None)
+    wavy = mp.options(["--wavy"])
+    for key, (_, w) in mp.VARIANT_DEFAULTS.items():
+        assert getattr(wavy, key) == w, key
+    given = mp.options(["--wavy", "--settle-time", "0.2", "--out", "elsewhere", "--candidates", "3"])
+    assert (given.settle_time, str(given.out), given.candidates) == (0.2, "elsewhere", 3)
+    assert given.settle_alpha == mp.WAVY_SETTLE_ALPHA_PER_S
