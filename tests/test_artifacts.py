@@ -66,3 +66,24 @@ def test_mesh_round_trip(tmp_path):
     np.testing.assert_array_equal(back.nodes_m, mesh.nodes_m)
     art = read_artifact(p, "mesh")
     np.testing.assert_array_equal(art["mesh/elements"], mesh.elements())
+
+
+def test_written_files_get_the_umask_mode_not_0600(tmp_path):
+    """A plain open() under umask 022 gives 0644; the atomic writers must do the same (not mkstemp's 0600)."""
+    import os
+    import stat
+
+    from fiberpipe.artifacts import write_text_atomic
+
+    old = os.umask(0o022)
+    try:
+        fib = write_fibers(tmp_path / "fibers.h5", _fibers())
+        txt = tmp_path / "summary.json"
+        write_text_atomic(txt, "{}")
+        os.umask(0o027)
+        group = write_fibers(tmp_path / "group.h5", _fibers())
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(fib.stat().st_mode) == 0o644
+    assert stat.S_IMODE(txt.stat().st_mode) == 0o644
+    assert stat.S_IMODE(group.stat().st_mode) == 0o640
