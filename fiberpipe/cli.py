@@ -192,14 +192,42 @@ def phantom(out, from_simulation, frame, **kw):
         click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {frame}, shape {figures['shape']}")
         return
 
+    from pydantic import ValidationError
+
     kw["shape"] = list(kw["shape"])
-    kw["voxel_size"] = kw["voxel_size"]
     try:
         pcfg = PhantomConfig(**kw)
-    except Exception as exc:  # pydantic ValidationError
-        raise ConfigError(str(exc).splitlines()[-1] if str(exc) else "invalid phantom options") from None
+    except ValidationError as exc:
+        raise ConfigError(_phantom_option_error(exc)) from None
     figures = run_phantom(pcfg, Path(out))
     click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: {figures['fibers']} fibers, shape {figures['shape']}")
+
+
+#: The phantom command's option for each PhantomConfig field.
+_PHANTOM_OPTIONS = {
+    "n_fibers": "--n-fibers", "shape": "--shape", "radius_vox": "--radius-vox", "voxel_size": "--voxel-size",
+    "touching_fraction": "--touching-fraction", "contrast_to_noise": "--cnr", "blur_sigma_vox": "--blur", "seed": "--seed",
+}
+
+
+def _phantom_option_error(exc) -> str:
+    """One line from a pydantic ValidationError of PhantomConfig: the option, what is wrong, the value."""
+    errors = exc.errors()
+    lines = []
+    for err in errors:
+        field_name = str(err["loc"][0]) if err.get("loc") else ""
+        opt = _PHANTOM_OPTIONS.get(field_name, field_name or "phantom options")
+        msg = err["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        if "input" in err and "got" not in msg and str(err["input"]) not in msg:
+            msg += f", got {err['input']!r}"
+        if msg.startswith("Input should be "):
+            lines.append(f"{opt} must be {msg[len('Input should be '):]}")
+        else:
+            lines.append(f"{opt}: {msg}")
+    more = f" (and {len(lines) - 1} more problem{'s' if len(lines) > 2 else ''})" if len(lines) > 1 else ""
+    return lines[0] + more if lines else "invalid phantom options"
 
 
 @main.command()

@@ -1,0 +1,56 @@
+"""Defects of the command-line layer found in review: each is a one-line error (or the right
+behaviour) through the CLI, never a traceback or a misleading message."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from fiberpipe.cli import main
+
+TIP = {
+    "name": "tip",
+    "input": {"polylines": [[[0, 0, 0], ["3 mm", 0, 0]], [[0, "1 mm", 0], ["3 mm", "1 mm", 0]]]},
+    "fiber": {"radius": "0.25 mm"},
+    "mesh": {"element_length": "0.3 mm"},
+}
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def one_line_error(result) -> str:
+    assert result.exit_code != 0, result.output
+    assert "Traceback" not in result.output
+    errors = [ln for ln in result.output.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1, result.output
+    return errors[0]
+
+
+def write_cfg(path: Path, cfg: dict) -> Path:
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+# -- 1. out-of-range phantom options name the option and what is wrong ---------------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--radius-vox", "-3"], "--radius-vox must be greater than 0.5, got -3.0"),
+    (["--n-fibers", "0"], "--n-fibers must be greater than or equal to 1, got 0"),
+    (["--cnr", "0"], "--cnr must be greater than 0, got 0.0"),
+    (["--blur", "-1"], "--blur must be greater than or equal to 0, got -1.0"),
+    (["--touching-fraction", "2"], "--touching-fraction must be less than or equal to 1, got 2.0"),
+    (["--shape", "0", "0", "0"], "--shape: shape must be 3 sizes (z y x) of at least 8 voxels"),
+    (["--voxel-size", "3 kg"], "--voxel-size: '3 kg' has units of [mass], but a length"),
+    (["--n-fibers", "0", "--cnr", "0"], "(and 1 more problem)"),
+])
+def test_phantom_option_errors_name_the_option(tmp_path, args, message):
+    line = one_line_error(cli("phantom", "--out", tmp_path / "ph", *args))
+    assert message in line, line
+    assert "pydantic" not in line
+    assert not (tmp_path / "ph").exists()
