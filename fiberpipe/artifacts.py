@@ -2,8 +2,9 @@
 
 Every artifact is one HDF5 file whose root attributes say what it is (``kind``,
 ``schema_version``) and where it came from (``fiberpipe_version``, ``created_utc``,
-``config_sha256``, ``inputs``: JSON of the sha256 of each input artifact). Datasets carry a
-``units`` attribute. Writes are atomic: the file is written under a temporary name in the same
+``config_sha256``, ``inputs``: JSON of the sha256 of each input artifact). Every dataset carries a
+``units`` attribute: an SI symbol, ``"1"`` when dimensionless, ``"index"`` for offsets and
+connectivity, ``"voxel"`` for voxel radii. Writes are atomic: the file is written under a temporary name in the same
 folder and renamed over the target, so a crash never leaves a half-written artifact that a later
 stage trusts. Readers refuse a wrong kind or an unknown schema version.
 """
@@ -35,6 +36,20 @@ SCHEMA_VERSIONS = {
     "mesh": 1,
     "simulation": 1,
     "checkpoint": 1,
+}
+
+
+#: ``units`` of a dimensionless dataset (counts, flags, ratios), as in UDUNITS/CF.
+DIMENSIONLESS = "1"
+#: ``units`` of a dataset of indices into another dataset (offsets, connectivity, fiber ids).
+INDEX = "index"
+
+#: Units of the datasets of the volume-like artifacts (:func:`write_volume`).
+VOLUME_UNITS = {
+    "volume": DIMENSIONLESS,  # grey values, as scanned
+    "mask": DIMENSIONLESS,  # boolean: fiber voxel or not
+    "skeleton": DIMENSIONLESS,  # boolean: skeleton voxel or not
+    "radius_vox": "voxel",  # distance-transform radius, in voxels
 }
 
 
@@ -145,7 +160,9 @@ def write_artifact(
     datasets : dict
         ``{"fibers/points": array, ...}``: dataset paths (groups created as needed) to arrays.
     units : dict, optional
-        ``{"fibers/points": "m"}``; datasets without an entry get ``units = ""`` (dimensionless).
+        ``{"fibers/points": "m"}``. Every dataset gets a ``units`` attribute (SPEC section 4):
+        datasets without an entry, or with ``""``, are dimensionless and get
+        :data:`DIMENSIONLESS` (``"1"``: counts, flags, ratios).
     attrs : dict, optional
         Extra root attributes (scalars, strings; dicts and lists are stored as JSON).
     group_attrs : dict, optional
@@ -181,7 +198,7 @@ def write_artifact(
                 if compression and arr.size > 4096:
                     kw = {"compression": compression, "shuffle": True, "chunks": True}
                 ds = f.create_dataset(name, data=arr, **kw)
-                ds.attrs["units"] = units.get(name, "")
+                ds.attrs["units"] = units.get(name) or DIMENSIONLESS
             for name, gattrs in (group_attrs or {}).items():
                 obj = f.require_group(name.strip("/")) if name.strip("/") not in f else f[name.strip("/")]
                 for k, v in gattrs.items():
@@ -267,7 +284,7 @@ def write_fibers(path, polylines, **kw) -> Path:
             "fibers/offsets": polylines.offsets,
             "fibers/radius": polylines.radius_m,
         },
-        units={"fibers/points": "m", "fibers/radius": "m"},
+        units={"fibers/points": "m", "fibers/offsets": INDEX, "fibers/radius": "m"},
         **kw,
     )
 
@@ -298,7 +315,13 @@ def write_mesh(path, mesh, *, material: dict | None = None, **kw) -> Path:
             "mesh/element_fiber": mesh.element_fiber(),
             "mesh/radius": mesh.radius_m,
         },
-        units={"mesh/nodes": "m", "mesh/radius": "m"},
+        units={
+            "mesh/nodes": "m",
+            "mesh/node_offsets": INDEX,
+            "mesh/elements": INDEX,
+            "mesh/element_fiber": INDEX,
+            "mesh/radius": "m",
+        },
         attrs=attrs,
         **kw,
     )
@@ -316,10 +339,16 @@ def read_mesh(path):
 
 
 def write_volume(path, kind: str, volume: np.ndarray, voxel_size_m, *, name: str | None = None, **kw) -> Path:
-    """Write a ``volume``, ``mask`` or ``skeleton`` artifact (gzip-compressed, voxel size attribute)."""
+    """Write a ``volume``, ``mask`` or ``skeleton`` artifact (gzip-compressed, voxel size attribute).
+
+    Units come from :data:`VOLUME_UNITS` (``mask``/``skeleton`` "1", ``radius_vox`` "voxel"),
+    overridden by ``units=``.
+    """
     name = name or kind
     attrs = dict(kw.pop("attrs", {}) or {})
     attrs["voxel_size_m"] = list(np.broadcast_to(np.asarray(voxel_size_m, float), (3,)))
     datasets = {name: volume}
     datasets.update(kw.pop("extra", {}) or {})
-    return write_artifact(path, kind, datasets, attrs=attrs, compression="gzip", **kw)
+    units = {k: VOLUME_UNITS[k.strip("/")] for k in datasets if k.strip("/") in VOLUME_UNITS}
+    units.update(kw.pop("units", {}) or {})
+    return write_artifact(path, kind, datasets, units=units, attrs=attrs, compression="gzip", **kw)
