@@ -158,3 +158,27 @@ def test_axial_lock_holds_a_fiber_under_an_axial_load(write_yaml, lock):
     else:
         assert d[0, 2] == 0.0 and d[-1, 2] == 0.0
         assert np.max(np.abs(d[:, 2])) < 1e-9  # the fiber's axial stiffness holds the rest
+
+
+def test_duplicate_key_is_refused_with_its_line_and_file(tmp_path, write_yaml):
+    p = write_yaml("name: a\n" + TIP.lstrip("\n"), "dup.yaml")  # 'name:' at lines 1 and 2
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert str(err.value).startswith(f"duplicate key 'name' at line 2 of {p}")
+    # nested, in a flow mapping on one line
+    p = write_yaml(TIP.replace('fiber: {radius: "0.25 mm"}', 'fiber: {radius: "0.25 mm", radius: "0.3 mm"}'), "flow.yaml")
+    with pytest.raises(ConfigError, match=r"duplicate key 'radius' at line 7 of .*flow.yaml"):
+        load_config(p)
+    # also in a file pulled in by extends:, named as that file
+    base = write_yaml(TIP.replace("scene:\n", "scene:\n  damping: {alpha: 1}\n"), "base.yaml")
+    child = write_yaml("extends: base.yaml\nname: child\n", "child.yaml")
+    with pytest.raises(ConfigError, match=rf"duplicate key 'damping' at line \d+ of {base}"):
+        load_config(child)
+
+
+def test_yaml_merge_keys_may_still_be_overridden(write_yaml):
+    text = TIP.replace("fiber: {radius: \"0.25 mm\"}", "_r: &r {radius: \"0.25 mm\"}\nfiber: {<<: *r, radius: \"0.3 mm\"}")
+    from fiberpipe.config import load_raw
+
+    data = load_raw(write_yaml(text, "merge.yaml"))
+    assert data["fiber"] == {"radius": "0.3 mm"}
