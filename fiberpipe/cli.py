@@ -45,16 +45,35 @@ class _Group(click.Group):
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fiberpipe")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
-@click.option("--quiet", "-q", is_flag=True, help="No progress bars or per-stage lines.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or per-stage lines (warnings and errors only).")
 @click.pass_context
 def main(ctx, debug, quiet):
     """fiberpipe: from a tomography volume of a fiber bundle to its simulated compaction curve."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
-    ctx.obj["quiet"] = quiet or not sys.stderr.isatty()
+    ctx.obj["quiet"] = quiet
+    # progress bars only on a terminal (CI and logs stay quiet); per-stage lines unless --quiet
+    ctx.obj["progress"] = not quiet and sys.stderr.isatty()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s: %(message)s")
     for handler in logging.getLogger().handlers:  # the console shows warnings; run.log gets everything
         handler.setLevel(logging.WARNING)
+
+
+def _opts() -> dict:
+    ctx = click.get_current_context(silent=True)
+    return (ctx.find_root().obj if ctx is not None else None) or {}
+
+
+def _echo(line: str) -> None:
+    """Per-stage and progress lines: printed unless --quiet; a warning is printed always (stderr)."""
+    if line.startswith("warning:"):
+        click.echo(line, err=True) if _opts().get("quiet") else click.echo(line)
+    elif not _opts().get("quiet"):
+        click.echo(line)
+
+
+def _progress() -> bool:
+    return bool(_opts().get("progress"))
 
 
 def _load(config):
@@ -83,8 +102,8 @@ def run(ctx, config, out, from_stage, to_stage, force):
 
     cfg = _load(config)
     out = Path(out) if out else _default_out(config)
-    run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=click.echo)
-    click.echo(f"run folder: {out}")
+    run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=_echo, progress=_progress())
+    _echo(f"run folder: {out}")
 
 
 def _stage_command(name: str, doc: str):
@@ -97,7 +116,7 @@ def _stage_command(name: str, doc: str):
 
         cfg = _load(config)
         out = Path(out) if out else _default_out(config)
-        run_pipeline(cfg, out, from_stage=name, to_stage=name, force=force, echo=click.echo)
+        run_pipeline(cfg, out, from_stage=name, to_stage=name, force=force, echo=_echo, progress=_progress())
 
     cmd.__doc__ = doc + " Reads its inputs from, and writes into, the run folder."
     return main.command(name=name)(cmd)
@@ -127,8 +146,8 @@ def simulate(config, out, force, resume):
         raise ConfigError("--resume and --force contradict each other (--force discards the checkpoint)")
     cfg = _load(config)
     out = Path(out) if out else _default_out(config)
-    run_pipeline(cfg, out, from_stage="simulate", to_stage="simulate", force=force, echo=click.echo,
-                 resume="require" if resume else None)
+    run_pipeline(cfg, out, from_stage="simulate", to_stage="simulate", force=force, echo=_echo,
+                 resume="require" if resume else None, progress=_progress())
 
 _stage_command("post", "Post-process a simulation: curves, energies, plots, report (post/).")
 
@@ -145,7 +164,7 @@ def trace(config, out, force, truth):
 
     cfg = _load(config)
     out = Path(out) if out else _default_out(config)
-    run_pipeline(cfg, out, from_stage="trace", to_stage="trace", force=force, echo=click.echo)
+    run_pipeline(cfg, out, from_stage="trace", to_stage="trace", force=force, echo=_echo, progress=_progress())
     if truth:
         from fiberpipe.artifacts import read_artifact
         from fiberpipe.stages.skeletonize import eval_list
@@ -262,8 +281,8 @@ def study(study_file, out, workers, scheduler):
     from fiberpipe.studies.sweep import run_study
 
     out = Path(out) if out else Path("runs") / "studies" / Path(study_file).stem
-    run_study(study_file, out, workers=workers, scheduler=scheduler, echo=click.echo)
-    click.echo(f"study folder: {out} (study.csv, study.md, pareto.png)")
+    run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo)
+    _echo(f"study folder: {out} (study.csv, study.md, pareto.png)")
 
 
 @main.command()

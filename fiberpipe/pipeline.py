@@ -117,10 +117,11 @@ def _do_mesh(cfg, run_dir, inputs, key):
     return run_mesh(cfg, inputs["fibers"], run_dir / "mesh.h5", config_sha256=key)
 
 
-def _do_simulate(cfg, run_dir, inputs, key, *, resume="auto", echo=None):
+def _do_simulate(cfg, run_dir, inputs, key, *, resume="auto", echo=None, progress=False):
     from fiberpipe.stages.simulate import run_simulate
 
-    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume, echo=echo)
+    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume, echo=echo,
+                        progress=progress)
 
 
 def _do_post(cfg, run_dir, inputs, key):
@@ -256,6 +257,7 @@ def run_pipeline(
     force: bool = False,
     echo: Callable[[str], None] | None = None,
     resume: str | None = None,
+    progress: bool = False,
 ) -> RunReport:
     """Run the stages of ``cfg`` into ``run_dir``; return what each stage did.
 
@@ -271,6 +273,8 @@ def run_pipeline(
         What the simulate stage does with a checkpoint (``simulation.checkpoint.h5``): ``"auto"``
         (default) resumes from one of the same config and mesh, ``"require"`` insists on one,
         ``"discard"`` deletes it (the default with ``force``).
+    progress : bool
+        Show a progress bar for the long stages (the CLI asks for one on a terminal without --quiet).
     """
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -319,7 +323,7 @@ def run_pipeline(
             log.info("%s: started", name)
             if name == "simulate":
                 mode = resume or ("discard" if force else "auto")
-                figures = stage.func(cfg, run_dir, inputs, key, resume=mode, echo=echo) or {}
+                figures = stage.func(cfg, run_dir, inputs, key, resume=mode, echo=echo, progress=progress) or {}
             else:
                 figures = stage.func(cfg, run_dir, inputs, key) or {}
             wall = time.perf_counter() - t0

@@ -54,3 +54,23 @@ def test_phantom_option_errors_name_the_option(tmp_path, args, message):
     assert message in line, line
     assert "pydantic" not in line
     assert not (tmp_path / "ph").exists()
+
+
+# -- 2. --quiet: no per-stage lines, no progress bars --------------------------------------------
+
+
+def test_quiet_prints_no_stage_lines(tmp_path, monkeypatch):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    r = cli("-q", "run", cfg, "--out", tmp_path / "run")
+    assert r.exit_code == 0, r.output
+    assert r.output == ""
+    assert (tmp_path / "run" / "mesh.h5").exists()
+    r = cli("run", cfg, "--out", tmp_path / "run")  # without it: one line per stage
+    assert "mesh         up to date" in r.output and "run folder:" in r.output
+    # and no progress bar is asked for
+    import fiberpipe.pipeline as P
+
+    seen = {}
+    monkeypatch.setattr(P, "run_pipeline", lambda *a, **kw: seen.update(kw))
+    assert cli("--quiet", "run", cfg, "--out", tmp_path / "run").exit_code == 0
+    assert seen["progress"] is False

@@ -210,9 +210,10 @@ def clear_scene_planes(mesh, cfg: Config) -> float:
 
 
 def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str = "", resume: str = "auto",
-                 echo=None) -> dict:
+                 echo=None, progress: bool = False) -> dict:
     """Run the simulate stage into ``out`` (``simulation.h5``); see the module docstring for
-    checkpoints, signals and ``resume`` (auto | require | discard)."""
+    checkpoints, signals and ``resume`` (auto | require | discard). ``progress``: show a progress
+    bar (on a terminal only)."""
     from fiberpipe.solver.build import build_simulation
     from fiberpipe.solver.checkpoint import CHECKPOINT_NAME, SimulationInterrupted, write_checkpoint
     from fiberpipe.solver.simulate import simulate
@@ -238,7 +239,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     if cfg.solver.settle_time > 0 and ck is None:
         settle = settle_under_gravity(mesh, cfg)
         log.info("simulate: settled for %.3g s, nodes moved by up to %.3g m", cfg.solver.settle_time, settle["max_displacement_m"])
-    bar = _progress_callback()
+    bar = _progress_callback() if progress else None
     try:
         with stop_on_signals() as should_stop:
             result = simulate(model, effects, settings, progress=bar, resume=ck, state=None if settle is None else settle["state"],
