@@ -5,7 +5,8 @@
 # the package sources the stage runs, so that an upgrade or a fix of, say, the solver reruns
 # simulate and post but keeps the traced fibers and the mesh). The key is
 # stored in ``<run>/fiberpipe.lock.json`` beside the outputs; a stage whose key matches and whose
-# outputs exist is skipped (``--force`` reruns). Since artifacts are written atomically and their
+# outputs exist and open as artifacts of the right kind is skipped (``--force`` reruns; a damaged
+# output reruns its stage, saying so). Since artifacts are written atomically and their
 # hashes feed the next key, a rerun upstream invalidates exactly what depends on it.
 """
 
@@ -234,6 +235,39 @@ def stage_key(stage: Stage, cfg: Config, inputs: dict[str, Path]) -> str:
     return h.hexdigest()
 
 
+#: Artifacts a stage writes whose kind is not the stage's own ``artifact_kind``.
+OUTPUT_KINDS = {"truth.h5": "fibers"}
+
+
+def _touch(name, obj) -> None:
+    """Read an HDF5 object's header and attributes (not its data): fails on a damaged file."""
+    dict(obj.attrs)
+
+
+def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
+    """Why the outputs of an up-to-date stage cannot be trusted (None when they can): an HDF5 output
+    must open as an artifact of the right kind and schema version with every object readable, a
+    JSON output must parse, any other output must not be empty. Read-only."""
+    from fiberpipe.artifacts import open_checked
+    from fiberpipe.errors import ArtifactError
+
+    for o in map(Path, outputs):
+        try:
+            if o.suffix == ".h5":
+                kind = OUTPUT_KINDS.get(o.name, stage.artifact_kind)
+                with open_checked(o, kind or tuple(SCHEMA_VERSIONS)) as f:
+                    f.visititems(_touch)
+            elif o.suffix == ".json":
+                json.loads(o.read_text())
+            elif o.stat().st_size == 0:
+                return f"output {o.name} is empty"
+        except ArtifactError as exc:
+            return f"output {exc}"
+        except (OSError, ValueError) as exc:
+            return f"output {o} is unreadable ({exc.__class__.__name__}: {exc})"
+    return None
+
+
 @dataclass
 class RunReport:
     run_dir: Path
@@ -315,10 +349,14 @@ def run_pipeline(
             outputs = stage.outputs(cfg, run_dir)
             entry = lock.get(name, {})
             if not force and entry.get("key") == key and all(Path(o).exists() for o in outputs):
-                log.info("%s: up to date, skipped", name)
-                echo(f"{name:12s} up to date (skipped)")
-                report.stages[name] = {"skipped": True, **summary["stages"].get(name, {})}
-                continue
+                problem = outputs_problem(stage, outputs)
+                if problem is None:
+                    log.info("%s: up to date, skipped", name)
+                    echo(f"{name:12s} up to date (skipped)")
+                    report.stages[name] = {"skipped": True, **summary["stages"].get(name, {})}
+                    continue
+                log.info("%s: %s; rerunning the stage", name, problem)
+                echo(f"{name:12s} {problem}; rerunning")
             t0 = time.perf_counter()
             log.info("%s: started", name)
             if name == "simulate":

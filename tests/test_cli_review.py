@@ -74,3 +74,26 @@ def test_quiet_prints_no_stage_lines(tmp_path, monkeypatch):
     monkeypatch.setattr(P, "run_pipeline", lambda *a, **kw: seen.update(kw))
     assert cli("--quiet", "run", cfg, "--out", tmp_path / "run").exit_code == 0
     assert seen["progress"] is False
+
+
+# -- 3. a damaged or wrong-kind output is not "up to date" ---------------------------------------
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda out: out.joinpath("mesh.h5").write_bytes(out.joinpath("mesh.h5").read_bytes()[:2000]),
+     "mesh.h5: is not a readable HDF5 artifact"),
+    (lambda out: shutil.copy(out / "fibers.h5", out / "mesh.h5"), "mesh.h5: is a fibers artifact, but a mesh artifact is needed"),
+    (lambda out: out.joinpath("model.inp").write_bytes(b""), "output model.inp is empty"),
+])
+def test_damaged_output_is_rerun_not_up_to_date(tmp_path, damage, message):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    out = tmp_path / "run"
+    assert cli("run", cfg, "--out", out).exit_code == 0
+    damage(out)
+    r = cli("run", cfg, "--out", out)
+    assert r.exit_code == 0, r.output
+    line = next(ln for ln in r.output.splitlines() if ln.startswith("mesh "))
+    assert message in line and line.endswith("rerunning"), r.output
+    assert "mesh         done" in r.output and "input        up to date" in r.output
+    assert cli("inspect", "--check", out / "mesh.h5").exit_code == 0
+    assert "mesh         up to date" in cli("run", cfg, "--out", out).output
