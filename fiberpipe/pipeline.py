@@ -201,6 +201,30 @@ def planned_stages(cfg: Config) -> list[str]:
     return names
 
 
+def select_stages(plan: list[str], from_stage: str | None = None, to_stage: str | None = None) -> list[str]:
+    """The slice ``from_stage`` .. ``to_stage`` of ``plan``; a ConfigError names an unknown stage, a
+    stage this config does not run, or a --from that comes after the --to."""
+    runs = f"this config runs the stages {', '.join(plan)}"
+    for label, name in (("--from", from_stage), ("--to", to_stage)):
+        if name is None or name in plan:
+            continue
+        if name not in STAGE_ORDER:
+            known = ", ".join(s for s in STAGE_ORDER if s != "input")
+            raise ConfigError(f"{label} {name}: unknown stage; the stages are {known} ({runs})")
+        hint = ""
+        if name == "skeletonize":
+            hint = "; set skeletonize.enabled: true (or trace.method: skeleton) to compute the skeleton"
+        elif name in ("simulate", "post"):
+            hint = "; give scene.effects (or solver.end_time) to simulate"
+        what = f"the {name} stage" if from_stage == to_stage else f"{label} {name}"
+        raise ConfigError(f"{what}: not part of this config's run, {runs}{hint}")
+    lo = plan.index(from_stage) if from_stage else 0
+    hi = plan.index(to_stage) if to_stage else len(plan) - 1
+    if lo > hi:
+        raise ConfigError(f"--from {from_stage} comes after --to {to_stage}: the stages run in the order {', '.join(plan)}")
+    return plan[lo : hi + 1]
+
+
 def available(name: str) -> bool:
     """Whether the code of a stage exists in this version (simulate and post arrive with the solver)."""
     mod = {"simulate": "fiberpipe.solver.build", "post": "fiberpipe.stages.post"}.get(name)
@@ -313,14 +337,7 @@ def run_pipeline(
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     echo = echo or (lambda s: None)
-    plan = planned_stages(cfg)
-    for label, name in (("--from", from_stage), ("--to", to_stage)):
-        if name is not None and name not in plan:
-            raise ConfigError(f"{label} {name}: this config runs the stages {', '.join(plan)}")
-    if from_stage:
-        plan = plan[plan.index(from_stage) :]
-    if to_stage:
-        plan = plan[: plan.index(to_stage) + 1]
+    plan = select_stages(planned_stages(cfg), from_stage, to_stage)
 
     handler = _setup_run_log(run_dir)
     lock_path = run_dir / "fiberpipe.lock.json"

@@ -97,3 +97,26 @@ def test_damaged_output_is_rerun_not_up_to_date(tmp_path, damage, message):
     assert "mesh         done" in r.output and "input        up to date" in r.output
     assert cli("inspect", "--check", out / "mesh.h5").exit_code == 0
     assert "mesh         up to date" in cli("run", cfg, "--out", out).output
+
+
+# -- 4. --from / --to: unknown names, stages not run, --from after --to -------------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--from", "mesh", "--to", "input"], "--from mesh comes after --to input: the stages run in the order input, mesh"),
+    (["--to", "meshh"], "--to meshh: unknown stage; the stages are phantom, segment, skeletonize, trace, mesh, simulate, post"),
+    (["--from", "simulate"], "--from simulate: not part of this config's run, this config runs the stages input, mesh"),
+])
+def test_from_to_errors(tmp_path, args, message):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    line = one_line_error(cli("run", cfg, "--out", tmp_path / "run", *args))
+    assert message in line, line
+    assert "ValueError" not in line
+
+
+def test_from_to_slice_still_works(tmp_path):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    r = cli("run", cfg, "--out", tmp_path / "run", "--from", "input", "--to", "input")
+    assert r.exit_code == 0 and "input        done" in r.output and "mesh" not in r.output, r.output
+    r = cli("run", cfg, "--out", tmp_path / "run", "--from", "mesh", "--to", "mesh")
+    assert r.exit_code == 0 and "mesh         done" in r.output and "input " not in r.output, r.output
