@@ -196,6 +196,7 @@ def phantom(out, from_simulation, frame, **kw):
     """
     from fiberpipe.config import PhantomConfig
     from fiberpipe.errors import ConfigError
+    from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.stages.phantom import run_phantom
 
     if from_simulation:
@@ -206,6 +207,7 @@ def phantom(out, from_simulation, frame, **kw):
             vs = to_si(kw["voxel_size"], "length")
         except ValueError as exc:
             raise ConfigError(f"--voxel-size: {exc}") from None
+        ensure_output_dir(out)
         figures = render_simulation_frame(Path(from_simulation), frame, vs, Path(out), contrast_to_noise=kw["contrast_to_noise"],
                                           blur_sigma_vox=kw["blur_sigma_vox"], seed=kw["seed"])
         click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {frame}, shape {figures['shape']}")
@@ -218,6 +220,7 @@ def phantom(out, from_simulation, frame, **kw):
         pcfg = PhantomConfig(**kw)
     except ValidationError as exc:
         raise ConfigError(_phantom_option_error(exc)) from None
+    ensure_output_dir(out)
     figures = run_phantom(pcfg, Path(out))
     click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: {figures['fibers']} fibers, shape {figures['shape']}")
 
@@ -254,8 +257,10 @@ def _phantom_option_error(exc) -> str:
 @click.option("--out", "out", type=click.Path(file_okay=False), required=True, help="Folder for comparison.png and comparison.md.")
 def compare(run_dirs, out):
     """Gather the force-displacement curves of several run folders into one plot and table."""
+    from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.post.compare import compare_runs
 
+    ensure_output_dir(out)
     click.echo(compare_runs([Path(d) for d in run_dirs], Path(out)))
 
 
@@ -280,8 +285,17 @@ def study(study_file, out, workers, scheduler):
     """Sweep config keys; table and Pareto plot of error against wall time (SPEC section 9)."""
     from fiberpipe.studies.sweep import run_study
 
+    from fiberpipe.pipeline import ensure_output_dir
+
     out = Path(out) if out else Path("runs") / "studies" / Path(study_file).stem
-    run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo)
+    created = not out.exists()
+    ensure_output_dir(out)
+    try:
+        run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a bad study file leaves no empty folder behind
+        raise
     _echo(f"study folder: {out} (study.csv, study.md, pareto.png)")
 
 

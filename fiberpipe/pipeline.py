@@ -17,6 +17,8 @@ import hashlib
 import importlib.util
 import json
 import logging
+import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +27,7 @@ from typing import Callable
 from fiberpipe import __version__
 from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, write_text_atomic
 from fiberpipe.config import Config
-from fiberpipe.errors import ConfigError, FiberpipeError
+from fiberpipe.errors import ConfigError, FiberpipeError, InputError
 
 log = logging.getLogger("fiberpipe")
 
@@ -298,6 +300,21 @@ class RunReport:
     stages: dict[str, dict] = field(default_factory=dict)
 
 
+def ensure_output_dir(path: str | Path) -> Path:
+    """Create the output folder ``path`` if needed and check a file can be written in it, before
+    anything runs; an InputError says why not (an impossible path, a read-only folder)."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".fiberpipe-write-test.", dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise InputError(f"output folder {path} is not writable: {reason}; choose another --out") from None
+    return path
+
+
 def _setup_run_log(run_dir: Path) -> logging.Handler:
     handler = logging.FileHandler(run_dir / "run.log")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
@@ -334,8 +351,7 @@ def run_pipeline(
     progress : bool
         Show a progress bar for the long stages (the CLI asks for one on a terminal without --quiet).
     """
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = ensure_output_dir(run_dir)
     echo = echo or (lambda s: None)
     plan = select_stages(planned_stages(cfg), from_stage, to_stage)
 

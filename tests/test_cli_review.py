@@ -120,3 +120,38 @@ def test_from_to_slice_still_works(tmp_path):
     assert r.exit_code == 0 and "input        done" in r.output and "mesh" not in r.output, r.output
     r = cli("run", cfg, "--out", tmp_path / "run", "--from", "mesh", "--to", "mesh")
     assert r.exit_code == 0 and "mesh         done" in r.output and "input " not in r.output, r.output
+
+
+# -- 5. an output folder that cannot be written is refused up front ------------------------------
+
+
+def test_impossible_output_folder(tmp_path):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    (tmp_path / "afile").write_text("x")
+    bad = tmp_path / "afile" / "run"
+    line = one_line_error(cli("run", cfg, "--out", bad))
+    assert f"output folder {bad} is not writable: Not a directory" in line, line
+    line = one_line_error(cli("phantom", "--out", bad))
+    assert f"output folder {bad} is not writable" in line, line
+    line = one_line_error(cli("compare", tmp_path, "--out", bad))
+    assert f"output folder {bad} is not writable" in line, line
+    if Path("/proc/self").exists():
+        line = one_line_error(cli("run", cfg, "--out", "/proc/fpx"))
+        assert "output folder /proc/fpx is not writable: No such file or directory; choose another --out" in line, line
+
+
+def test_read_only_output_folder(tmp_path, monkeypatch):
+    """A folder the user may not write to (simulated: the tests may run as root, who may)."""
+    import fiberpipe.pipeline as P
+
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    out = tmp_path / "ro"
+    out.mkdir()
+
+    def refuse(*a, **kw):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(P.tempfile, "mkstemp", refuse)
+    line = one_line_error(cli("run", cfg, "--out", out))
+    assert f"output folder {out} is not writable: Permission denied" in line, line
+    assert list(out.iterdir()) == []
