@@ -415,12 +415,41 @@ class SceneConfig(Section):
         for name, cls in defaults.items():
             if name in self.effects and getattr(self, name) is None:
                 object.__setattr__(self, name, cls())
-        if "plates" in self.effects and self.loading is None:
-            object.__setattr__(self, "loading", LoadingConfig())
+        if "plates" in self.effects:
+            self._check_plates()
+        if "walls" in self.effects and all(getattr(self.walls, ax) is None for ax in "xyz"):
+            raise ValueError("scene.effects lists walls but scene.walls gives no planes: add e.g. "
+                             "scene.walls: {x: ['-1.5 mm', '1.5 mm']} or remove walls from scene.effects")
         for name in ("clamps", "loads", "drives"):
             if name in self.effects and not getattr(self, name):
                 raise ValueError(f"scene.effects lists {name} but scene.{name} is empty")
+        for k, d in enumerate(self.drives if "drives" in self.effects else []):
+            if not any(d.displacement):
+                raise ValueError(f"scene.drives[{k}].displacement is zero: the drive would not move fiber "
+                                 f"{d.fiber}; give the displacement (e.g. [0, 0, '-0.3 mm'])")
         return self
+
+    def _check_plates(self) -> None:
+        """Requirements of ``plates`` that the config alone decides (the rest needs the mesh)."""
+        p = self.plates
+        moving = [k for k in ("lower", "upper") if getattr(p, k) == "moving"]
+        if p.lower == "none" and p.upper == "none":
+            raise ValueError("scene.plates.lower and scene.plates.upper are both none: no plate acts; set one "
+                             "to fixed or moving, or remove plates from scene.effects")
+        if moving and self.loading is None:
+            raise ValueError(
+                f"scene.plates.{moving[0]} is moving but there is no scene.loading to move it: add e.g. "
+                "scene.loading: {displacement: '1 mm', velocity: '1000 mm/min'}, or make the plate fixed")
+        if moving and not self.loading.displacement > 0:
+            raise ValueError(
+                f"scene.loading.displacement must be > 0 for the moving plate (scene.plates.{moving[0]}), "
+                f"got {self.loading.displacement} m; give the plate's travel (e.g. '1 mm') or make it fixed")
+        if self.loading is None:  # fixed plates: the loading's defaults are never used
+            object.__setattr__(self, "loading", LoadingConfig())
+        lo, hi = p.lower_position, p.upper_position
+        if p.lower != "none" and p.upper != "none" and lo is not None and hi is not None and not lo < hi:
+            raise ValueError(f"scene.plates.lower_position ({lo} m) must be below scene.plates.upper_position "
+                             f"({hi} m): they are plane positions along {p.axis}")
 
     def warnings(self) -> list[str]:
         """Effects that are configured but cannot act, as messages for the user."""
@@ -433,6 +462,13 @@ class SceneConfig(Section):
         for name in ("clamps", "loads", "drives"):
             if getattr(self, name) and name not in self.effects:
                 out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
+        if "loading" in self.model_fields_set and not (
+            "plates" in self.effects and "moving" in (self.plates.lower, self.plates.upper)
+        ):
+            out.append("scene.loading is configured but no plate is moving (scene.effects plates with "
+                       "scene.plates lower or upper: moving): it is ignored")
+        if "damping" in self.effects and self.damping.alpha == 0 and self.damping.beta == 0:
+            out.append("scene.effects lists damping but scene.damping.alpha and beta are 0: nothing is damped")
         return out
 
 
@@ -483,6 +519,20 @@ class Config(Section):
 
     # Where the config came from, for messages and relative paths (not part of the YAML).
     source_path: Optional[str] = Field(None, exclude=True)
+
+    @model_validator(mode="after")
+    def _scene_indices(self):
+        if self.input.polylines is not None:  # the fibers are known now: check the indices the scene uses
+            n = len(self.input.polylines)
+            for name in ("clamps", "loads", "drives"):
+                if name not in self.scene.effects:
+                    continue
+                for k, item in enumerate(getattr(self.scene, name)):
+                    if item.fiber >= n:
+                        raise ValueError(
+                            f"scene.{name}[{k}].fiber = {item.fiber}: input.polylines has {n} fiber"
+                            f"{'s' if n != 1 else ''} (indices 0..{n - 1})")
+        return self
 
     def section_sha256(self, *names: str) -> str:
         """Content hash of the validated (SI) sections ``names``, for stage cache keys."""
@@ -643,8 +693,8 @@ def _format_error(err: dict, where: str) -> str:
         msg = msg[len("Value error, ") :]
     if kind == "literal_error":
         return f"'{key}': {msg}, got {err.get('input')!r}"
-    if not key:
-        return msg
+    if not key or msg.startswith(f"{key}.") or msg.startswith(f"{key} "):
+        return msg  # the message names its key itself
     return f"'{key}': {msg}"
 
 

@@ -35,6 +35,46 @@ def _ramp_code(ramp: str, what: str) -> int:
     return _RAMPS[ramp]
 
 
+def _plain(v):
+    """A value as the user wrote it (numpy scalars shown as plain numbers in messages)."""
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def _check_fiber(model: Model, key: str, fiber) -> int:
+    """``fiber`` as an index of the model, or an error naming the config key (``scene.clamps[0]``)."""
+    fiber = _plain(fiber)
+    n = int(model.n_fibers)
+    try:
+        i = int(fiber)
+    except (TypeError, ValueError):
+        i = -1
+    if not 0 <= i < n or i != fiber:
+        raise FiberpipeError(f"{key}.fiber = {fiber!r}: the model has {n} fiber{'s' if n != 1 else ''} "
+                             f"(indices 0..{n - 1})")
+    return i
+
+
+def _node_of(model: Model, key: str, fiber, at) -> int:
+    """Global node of ``at`` (start | end | local index, negative from the end) on ``fiber``; errors
+    name the config key (``scene.clamps[0].at``) and the valid range."""
+    i = _check_fiber(model, key, fiber)
+    at = _plain(at)
+    if at in ("start", "end"):
+        return model.fiber_node_index(i, at)
+    m = int(model.node_offsets[i + 1] - model.node_offsets[i])
+    try:
+        k = int(at)
+    except (TypeError, ValueError):
+        k = None
+    if k is None or isinstance(at, bool) or k != at:
+        raise FiberpipeError(f"{key}.at = {at!r}: give start, end or a node index (0..{m - 1}, or -{m}..-1 "
+                             f"from the end)")
+    if not -m <= k < m:
+        raise FiberpipeError(f"{key}.at = {at}: fiber {i} has {m} nodes (indices 0..{m - 1}, or -{m}..-1 from "
+                             "the end; the count follows mesh.element_length)")
+    return model.fiber_node_index(i, k)
+
+
 class SceneArrays:
     """The arrays the step kernel reads for the effects (sizes 0 when an effect is absent)."""
 
@@ -191,8 +231,8 @@ class Clamps(Effect):
 
     def setup(self, model, scene):
         m = scene.mask()
-        for c in self.clamps:
-            i = model.fiber_node_index(int(c.fiber), c.at)
+        for k, c in enumerate(self.clamps):
+            i = _node_of(model, f"scene.clamps[{k}]", c.fiber, c.at)
             if c.dofs == "all":
                 m[i] |= FIX_X | FIX_Y | FIX_Z | FIX_ROT
             else:
@@ -275,12 +315,11 @@ class Loads(Effect):
 
     def setup(self, model, scene):
         f = scene.ext()
-        for ld in self.loads:
+        for k, ld in enumerate(self.loads):
             if isinstance(ld, PointLoad):
-                f[model.fiber_node_index(int(ld.fiber), ld.at)] += ld.force_n
+                f[_node_of(model, f"scene.loads[{k}]", ld.fiber, ld.at)] += ld.force_n
             else:
-                if not 0 <= ld.fiber < model.n_fibers:
-                    raise FiberpipeError(f"line load on fiber {ld.fiber}: no such fiber")
+                _check_fiber(model, f"scene.loads[{k}]", ld.fiber)
                 sel = model.el_fiber == ld.fiber
                 n1 = model.el_n1[sel]
                 half = 0.5 * model.el_L0[sel]
@@ -436,7 +475,7 @@ class Drives(Effect):
         m = scene.mask()
         vec, Ts, tas, modes = [], [], [], []
         for k, d in enumerate(self.drives):
-            sl = model.fiber_nodes(int(d.fiber))
+            sl = model.fiber_nodes(_check_fiber(model, f"scene.drives[{k}]", d.fiber))
             m[sl] |= DRIVEN
             scene.node_drive[sl] = k
             T = max(self.duration_s(d), 1e-30)
