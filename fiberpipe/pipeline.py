@@ -300,6 +300,29 @@ class RunReport:
     stages: dict[str, dict] = field(default_factory=dict)
 
 
+def _checkpoint_to_resume(name: str, run_dir: Path, key: str, resume: str | None) -> bool:
+    """Whether the simulate stage has a checkpoint to resume even though its output is up to date: a
+    ``--force`` rerun interrupted by Ctrl-C leaves the earlier simulation.h5 beside the checkpoint,
+    and its resume command must resume rather than skip. ``--resume`` takes any checkpoint (a bad one
+    is then refused by the stage, saying why); ``fiberpipe run`` one of this stage key."""
+    if name != "simulate" or resume == "discard":
+        return False
+    from fiberpipe.artifacts import open_checked
+    from fiberpipe.solver.checkpoint import CHECKPOINT_NAME
+
+    ck = run_dir / CHECKPOINT_NAME
+    if not ck.exists():
+        return False
+    if resume == "require":
+        return True
+    try:
+        with open_checked(ck, "checkpoint") as f:
+            got = f.attrs.get("config_sha256")
+    except FiberpipeError:
+        return False
+    return (got.decode() if isinstance(got, bytes) else got) == key
+
+
 def ensure_output_dir(path: str | Path) -> Path:
     """Create the output folder ``path`` if needed and check a file can be written in it, before
     anything runs; an InputError says why not (an impossible path, a read-only folder)."""
@@ -381,7 +404,8 @@ def run_pipeline(
             key = stage_key(stage, cfg, inputs)
             outputs = stage.outputs(cfg, run_dir)
             entry = lock.get(name, {})
-            if not force and entry.get("key") == key and all(Path(o).exists() for o in outputs):
+            if (not force and entry.get("key") == key and all(Path(o).exists() for o in outputs)
+                    and not _checkpoint_to_resume(name, run_dir, key, resume)):
                 problem = outputs_problem(stage, outputs)
                 if problem is None:
                     log.info("%s: up to date, skipped", name)

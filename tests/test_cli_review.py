@@ -155,3 +155,109 @@ def test_read_only_output_folder(tmp_path, monkeypatch):
     line = one_line_error(cli("run", cfg, "--out", out))
     assert f"output folder {out} is not writable: Permission denied" in line, line
     assert list(out.iterdir()) == []
+
+
+# -- 6. an interrupted --force rerun resumes with the command its message gives -------------------
+
+SMALL = {
+    "name": "small",
+    "input": {"polylines": [
+        [[0, 0, 0], ["3 mm", 0, 0]],
+        [[0, 0, "0.5 mm"], ["3 mm", "0.05 mm", "0.5 mm"]],
+        [[0, "0.05 mm", "1 mm"], ["3 mm", 0, "1 mm"]],
+    ]},
+    "fiber": {"radius": "0.25 mm"},
+    "mesh": {"element_length": "0.3 mm"},
+    "material": {"youngs_modulus": "15 GPa", "poisson_ratio": 0.3, "density": "1380 kg/m^3"},
+    "scene": {
+        "effects": ["gravity", "damping", "contact", "friction", "plates", "walls"],
+        "gravity": {"acceleration": [0, 0, "-9.81 m/s^2"]},
+        "damping": {"alpha": "1e4 1/s"},
+        "contact": {"law": "hertz_oriented"},
+        "friction": {"mu": 0.2},
+        "plates": {"axis": "z", "lower": "moving", "upper": "fixed"},
+        "walls": {"y": ["-0.4 mm", "0.4 mm"]},
+        "loading": {"displacement": "0.01 mm", "velocity": "60 mm/min", "ramp": "smooth"},
+    },
+    "solver": {"output_frames": 4, "checkpoint_every": 5000},
+    "post": {"plots": False},
+}
+
+
+def _datasets(path: Path) -> dict:
+    import h5py
+
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
+    return out
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("small")
+    cfg = write_cfg(d / "small.yaml", SMALL)
+    r = cli("run", cfg, "--out", d / "run", "--to", "simulate")
+    assert r.exit_code == 0, r.output
+    return cfg, d / "run"
+
+
+def test_interrupted_force_rerun_resumes(tmp_path, small_run, monkeypatch):
+    import signal
+    from contextlib import contextmanager
+
+    import numpy as np
+
+    import fiberpipe.stages.simulate as S
+
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    polls = {"n": 0}
+
+    @contextmanager
+    def ctrl_c_soon():  # a Ctrl-C after two chunks, as the signal handler reports it
+        def stop():
+            polls["n"] += 1
+            return signal.SIGINT if polls["n"] == 3 else None
+        yield stop
+
+    monkeypatch.setattr(S, "stop_on_signals", ctrl_c_soon)
+    r = cli("simulate", cfg, "--out", run, "--force")
+    assert r.exit_code == 130, r.output
+    line = one_line_error(r)
+    resume = f"fiberpipe simulate {cfg} --out {run} --resume"
+    assert resume in line, line
+    ck = run / "simulation.checkpoint.h5"
+    assert ck.exists() and (run / "simulation.h5").exists()  # the earlier result is kept
+    monkeypatch.undo()
+    r = cli(*resume.split()[1:])
+    assert r.exit_code == 0, r.output
+    assert "up to date" not in r.output and "resuming from checkpoint" in r.output, r.output
+    assert not ck.exists()
+    a, b = _datasets(ref / "simulation.h5"), _datasets(run / "simulation.h5")
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k], equal_nan=True) for k in a)
+    assert "simulate     up to date" in cli("run", cfg, "--out", run, "--to", "simulate").output
+
+
+def test_run_picks_up_the_checkpoint_of_an_interrupted_force_rerun(tmp_path, small_run, monkeypatch):
+    import signal
+    from contextlib import contextmanager
+
+    import fiberpipe.stages.simulate as S
+
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+
+    @contextmanager
+    def ctrl_c_now():
+        yield lambda: signal.SIGINT
+
+    monkeypatch.setattr(S, "stop_on_signals", ctrl_c_now)
+    assert cli("run", cfg, "--out", run, "--from", "simulate", "--to", "simulate", "--force").exit_code == 130
+    monkeypatch.undo()
+    assert (run / "simulation.checkpoint.h5").exists()
+    r = cli("run", cfg, "--out", run, "--to", "simulate")
+    assert r.exit_code == 0 and "resuming from checkpoint" in r.output, r.output
+    assert not (run / "simulation.checkpoint.h5").exists()
