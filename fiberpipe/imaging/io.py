@@ -163,17 +163,37 @@ def _find_3d_datasets(h5):
     return found
 
 
+def _attr_numbers(v) -> np.ndarray:
+    """An attribute holding numbers: an array, a scalar, or JSON text (fiberpipe artifacts store
+    lists as JSON, e.g. ``voxel_size_m = "[1e-05, 1e-05, 1e-05]"``)."""
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, str):
+        import json
+
+        try:
+            v = json.loads(v)
+        except ValueError:
+            raise ValueError(f"not a number or a list of numbers: {v!r}") from None
+    return np.asarray(v, dtype=np.float64)
+
+
 def _h5_voxel_size(ds) -> np.ndarray | None:
     for obj in (ds, ds.file):
         a = obj.attrs
         if "voxel_size_m" in a:
-            return voxel_size_zyx(np.asarray(a["voxel_size_m"], dtype=np.float64))
+            return voxel_size_zyx(_attr_numbers(a["voxel_size_m"]))
         if "voxel_size" in a:
             f = _unit_to_m(a.get("units", a.get("unit", "m"))) or 1.0
             return voxel_size_zyx(np.asarray(a["voxel_size"], dtype=np.float64) * f)
         if "element_size_um" in a:  # Fiji/ilastik HDF5 convention, z y x
             return voxel_size_zyx(np.asarray(a["element_size_um"], dtype=np.float64) * 1e-6)
     return None
+
+
+#: Kinds of fiberpipe artifacts that hold an image (read as a volume); the others (fibers, mesh,
+#: simulation, ...) are refused as a volume input instead of reading one of their arrays.
+_IMAGE_KINDS = ("volume", "mask")
 
 
 def _read_h5(path: Path, dataset: str | None):
@@ -184,6 +204,13 @@ def _read_h5(path: Path, dataset: str | None):
     except OSError as exc:
         raise InputError(f"cannot open HDF5 file ({exc}); not HDF5 or truncated", where=str(path)) from None
     with h5:
+        kind = h5.attrs.get("kind")
+        kind = kind.decode() if isinstance(kind, bytes) else kind
+        if dataset is None and isinstance(kind, str) and kind not in _IMAGE_KINDS:
+            raise InputError(
+                f"is a fiberpipe {kind} artifact, not a volume; input.volume takes a CT volume (TIFF, folder "
+                f"of slices, .npy, HDF5 image, raw)" + (", and input.fibers a fibers artifact" if kind == "fibers" else ""),
+                where=str(path))
         if dataset is None:
             names = _find_3d_datasets(h5)
             if len(names) != 1:
@@ -193,7 +220,10 @@ def _read_h5(path: Path, dataset: str | None):
         if dataset not in h5:
             raise InputError(f"no dataset {dataset!r}", where=str(path))
         ds = h5[dataset]
-        vs = _h5_voxel_size(ds)
+        try:
+            vs = _h5_voxel_size(ds)
+        except (ValueError, TypeError):  # an unreadable attribute is no voxel size (give voxel_size)
+            vs = None
         try:
             vol = ds[()]
         except Exception as exc:
@@ -217,13 +247,21 @@ def _read_raw(path: Path, shape, dtype):
 # ----------------------------------------------------------------------------------------------
 # validation
 # ----------------------------------------------------------------------------------------------
+#: Fewest voxels along any axis of a volume the imaging stages accept. Tracing differentiates
+#: the (smoothed) mask along every axis (``np.gradient``: at least 2 samples; ``trace.dominant_axis``)
+#: and a fiber's cross-section is resolved only with a voxel each side of its centre: 3.
+MIN_VOXELS_PER_AXIS = 3
+
+
 def validate_volume(vol: np.ndarray, where: str) -> np.ndarray:
-    """Check a volume is a non-empty, finite, non-constant 3D real array; returns it (squeezed).
+    """Check a volume is a non-empty, finite, non-constant 3D real array of at least
+    :data:`MIN_VOXELS_PER_AXIS` voxels along each axis; returns it (squeezed).
 
     Raises
     ------
     InputError
-        2D image, not 3D, empty, complex, any NaN (or all NaN), infinite values, constant.
+        2D image, not 3D, empty, complex, any NaN (or all NaN), infinite values, thinner than
+        3 voxels along an axis (e.g. a single slice), constant.
     """
     vol = np.asarray(vol)
     if vol.ndim > 3:
@@ -253,9 +291,23 @@ def validate_volume(vol: np.ndarray, where: str) -> np.ndarray:
             raise InputError(f"the volume has {n_nan} NaN voxels", where=where)
         if n_inf:
             raise InputError(f"the volume has {n_inf} infinite voxels", where=where)
-    if vol.min() == vol.max():
-        raise InputError(f"the volume is constant (all voxels {vol.flat[0]!r})", where=where)
+    if min(vol.shape) < MIN_VOXELS_PER_AXIS:
+        axis = "zyx"[int(np.argmin(vol.shape))]
+        raise InputError(
+            f"the volume is too thin: {min(vol.shape)} voxel{'' if min(vol.shape) == 1 else 's'} along {axis} (shape {vol.shape}, z y x); fibers "
+            f"are traced in 3D and need at least {MIN_VOXELS_PER_AXIS} voxels along each axis: give a 3D stack",
+            where=where)
+    lo, hi = vol.min(), vol.max()
+    if lo == hi:
+        raise InputError(f"the volume is constant (all voxels {_plain_number(lo)}): no fiber can be "
+                         "told from the background", where=where)
     return vol
+
+
+def _plain_number(v) -> str:
+    """A voxel value as a plain number (``0``, ``7.5``), never ``np.uint8(0)``."""
+    v = np.asarray(v).item()
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def load_volume(path, *, voxel_size_m=None, dataset: str | None = None, shape=None, dtype=None):
@@ -307,8 +359,9 @@ def load_volume(path, *, voxel_size_m=None, dataset: str | None = None, shape=No
     elif suffix == ".npy":
         try:
             vol = np.load(p, allow_pickle=False)
-        except Exception as exc:
-            raise InputError(f"cannot read .npy ({exc}); not a .npy file or truncated", where=where) from None
+        except Exception:  # numpy's reasons (e.g. "allow_pickle=False") do not help a user
+            raise InputError("is not a readable .npy volume (damaged, truncated, another format, or an array "
+                             "of Python objects); save the volume with numpy.save", where=where) from None
         vs = None
         source = f"npy:{p}"
     elif suffix in _H5_SUFFIXES:

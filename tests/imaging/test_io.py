@@ -116,3 +116,60 @@ def test_no_voxel_size(tmp_path, vol):
                                "PhysicalSizeZ": 20.0})
     _, vs, _ = load_volume(tmp_path / "v.ome.tif")
     assert np.allclose(vs, VS)
+
+
+@pytest.mark.parametrize("shape, axis", [((1, 64, 64), "z"), ((2, 64, 64), "z"), ((16, 2, 16), "y"), ((16, 16, 1), "x")])
+def test_too_thin_volume_is_refused_at_load(tmp_path, shape, axis):
+    """One slice passed segment and skeletonize and then failed in trace (np.gradient needs >= 2
+    samples per axis); it is refused when loaded, naming the axis."""
+    v = np.random.default_rng(1).integers(0, 255, size=shape).astype(np.uint8)
+    np.save(tmp_path / "thin.npy", v)
+    _err(tmp_path / "thin.npy", rf"too thin: {min(shape)} voxels? along {axis} .*at least 3 voxels along each axis",
+         voxel_size_m=1e-5)
+    ok = np.random.default_rng(1).integers(0, 255, size=(3, 3, 3)).astype(np.uint8)
+    np.save(tmp_path / "ok.npy", ok)
+    assert load_volume(tmp_path / "ok.npy", voxel_size_m=1e-5)[0].shape == (3, 3, 3)
+
+
+def test_constant_volume_message_shows_a_plain_number(tmp_path):
+    np.save(tmp_path / "zero.npy", np.zeros((3, 4, 4), np.uint8))
+    with pytest.raises(InputError) as e:
+        load_volume(tmp_path / "zero.npy", voxel_size_m=1e-5)
+    assert "all voxels 0)" in str(e.value) and "np." not in str(e.value)
+    np.save(tmp_path / "half.npy", np.full((3, 4, 4), 0.5, np.float32))
+    _err(tmp_path / "half.npy", r"all voxels 0\.5\)", voxel_size_m=1e-5)
+
+
+def test_garbage_npy_is_not_a_readable_npy_volume(tmp_path):
+    (tmp_path / "bad.npy").write_bytes(b"garbage")
+    _err(tmp_path / "bad.npy", "is not a readable .npy volume", voxel_size_m=1e-5)
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(InputError) as e:
+        load_volume(tmp_path / "obj.npy", voxel_size_m=1e-5)
+    assert "is not a readable .npy volume" in str(e.value) and "allow_pickle" not in str(e.value)
+
+
+def test_fiberpipe_artifact_given_as_a_volume_is_named(tmp_path):
+    from fiberpipe.artifacts import write_fibers, write_mesh, write_volume
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.polylines import Polylines
+
+    fibers = Polylines.from_list([np.array([[0, 0, 0], [1e-3, 0, 0]]), np.array([[0, 1e-3, 0], [1e-3, 1e-3, 0]])], 1e-4)
+    write_mesh(tmp_path / "mesh.h5", mesh_polylines(fibers, 0.3e-3))
+    _err(tmp_path / "mesh.h5", "is a fiberpipe mesh artifact, not a volume")
+    write_fibers(tmp_path / "fibers.h5", fibers)
+    _err(tmp_path / "fibers.h5", "is a fiberpipe fibers artifact, not a volume.*input.fibers")
+    sk = np.zeros((4, 5, 6), bool)
+    sk[1, 2, :] = True
+    write_volume(tmp_path / "skeleton.h5", "skeleton", sk, 1e-5, extra={"radius_vox": sk.astype(np.float32)})
+    _err(tmp_path / "skeleton.h5", "is a fiberpipe skeleton artifact, not a volume")
+    # a mask artifact is an image: read as one
+    write_volume(tmp_path / "mask.h5", "mask", sk, 1e-5)
+    vol, vs, _ = load_volume(tmp_path / "mask.h5")
+    assert vol.shape == (4, 5, 6) and np.allclose(vs, 1e-5)
+    # a plain HDF5 file without a 3D dataset keeps its own message
+    import h5py
+
+    with h5py.File(tmp_path / "plain.h5", "w") as f:
+        f["a"] = np.zeros((3, 3))
+    _err(tmp_path / "plain.h5", "no 3D dataset; give the dataset name")
