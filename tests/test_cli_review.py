@@ -261,3 +261,23 @@ def test_run_picks_up_the_checkpoint_of_an_interrupted_force_rerun(tmp_path, sma
     r = cli("run", cfg, "--out", run, "--to", "simulate")
     assert r.exit_code == 0 and "resuming from checkpoint" in r.output, r.output
     assert not (run / "simulation.checkpoint.h5").exists()
+
+
+# -- 7. the effects the config lists are the effects recorded (friction included) -----------------
+
+
+def test_recorded_effects_are_the_configs(tmp_path, small_run):
+    import h5py
+
+    cfg, ref = small_run
+    asked = SMALL["scene"]["effects"]
+    with h5py.File(ref / "simulation.h5", "r") as f:
+        assert json.loads(f.attrs["effects"]) == asked
+    assert json.loads((ref / "summary.json").read_text())["stages"]["simulate"]["effects"] == asked
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    r = cli("post", cfg, "--out", run)
+    assert r.exit_code == 0, r.output
+    summary = json.loads((run / "post" / "summary.json").read_text())
+    assert summary["effects"] == asked, summary.get("effects")
+    assert ", ".join(asked) in (run / "post" / "report.md").read_text()

@@ -45,8 +45,13 @@ HISTORY_UNITS = {
 }
 
 
-def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", inputs=None, extra_attrs=None) -> Path:
-    """Write a :class:`SimulationResult` (complete or partial) as a ``simulation`` artifact."""
+def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", inputs=None, extra_attrs=None,
+                     effects=None) -> Path:
+    """Write a :class:`SimulationResult` (complete or partial) as a ``simulation`` artifact.
+
+    ``effects``: the ``effects`` attribute, the config's ``scene.effects`` as the user listed them
+    (default: the solver's effect objects, which fold friction into the contact hook).
+    """
     datasets = {
         "frames/time": np.asarray(result.frames_time, dtype=np.float64),
         "frames/positions": np.asarray(result.frames_positions, dtype=np.float64),
@@ -73,7 +78,7 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
         "steps": int(result.steps),
         "elements": int(mesh.n_elements),
         "wall_time_s": float(result.wall_time_s),
-        "effects": list(result.effects),
+        "effects": list(result.effects if effects is None else effects),
     }
     attrs.update(extra_attrs or {})
     return write_artifact(path, "simulation", datasets, units=units, attrs=attrs, config_sha256=config_sha256, inputs=inputs)
@@ -227,6 +232,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     inputs = input_hashes({"mesh": Path(mesh_path)})
     plane_overlap = clear_scene_planes(mesh, cfg)
     model, effects, settings = build_simulation(mesh, cfg)
+    asked = list(cfg.scene.effects)  # what the user asked for is what is recorded (friction included)
     ck = load_resume_checkpoint(ck_path, config_sha256, resume, echo)
     saved = {"step": None}
 
@@ -256,7 +262,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
         if partial is not None and len(partial.frames_time):
             keep = out.with_name("simulation_diverged.h5")
             write_simulation(keep, mesh, partial, config_sha256=config_sha256, inputs=inputs,
-                             extra_attrs={"diverged": str(exc), "completed": False})
+                             extra_attrs={"diverged": str(exc), "completed": False}, effects=asked)
             write_frames_vtk(run_dir, mesh, partial.frames_time, partial.frames_positions,
                              stem="simulation_diverged", frames_dir_name="frames_diverged")
             kept.append(f"last good frames kept in {keep}")
@@ -272,7 +278,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
 
         contact = frame_contact_forces(mesh, np.asarray(result.frames_positions), cfg.scene, cfg.material)
         result.fields = {**(getattr(result, "fields", None) or {}), **contact}
-    write_simulation(out, mesh, result, config_sha256=config_sha256, inputs=inputs)
+    write_simulation(out, mesh, result, config_sha256=config_sha256, inputs=inputs, effects=asked)
     write_frames_vtk(run_dir, mesh, result.frames_time, result.frames_positions,
                      contact_force=None if contact is None else contact["contact_force"])
     if ck_path.exists():
@@ -284,7 +290,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
         "elements": int(mesh.n_elements),
         "solver_wall_time_s": float(result.wall_time_s),
         "element_steps_per_s": float(steps * mesh.n_elements / max(result.wall_time_s, 1e-12)),
-        "effects": list(result.effects),
+        "effects": asked,
         "frames": int(len(result.frames_time)),
         "initial_plane_overlap_max_m": plane_overlap,
     }
