@@ -7,8 +7,10 @@ one line on stderr with a non-zero exit status; ``--debug`` shows the traceback 
 
 from __future__ import annotations
 
+import io
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -23,7 +25,12 @@ class _Group(click.Group):
 
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            rv = super().invoke(ctx)
+            sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+            return rv
+        except BrokenPipeError:  # `fiberpipe inspect X | head`: the reader is gone, stop quietly
+            _silence_stdout()
+            sys.exit(141)  # 128 + SIGPIPE, as a tool killed by the signal
         except FiberpipeError as exc:
             if ctx.obj and ctx.obj.get("debug"):
                 raise
@@ -40,6 +47,15 @@ class _Group(click.Group):
                 raise
             click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
             sys.exit(2)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that flushing it at exit does not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

@@ -281,3 +281,24 @@ def test_recorded_effects_are_the_configs(tmp_path, small_run):
     summary = json.loads((run / "post" / "summary.json").read_text())
     assert summary["effects"] == asked, summary.get("effects")
     assert ", ".join(asked) in (run / "post" / "report.md").read_text()
+
+
+# -- 8. `inspect ... | head`: a closed pipe ends quietly -----------------------------------------
+
+
+def test_broken_pipe_exits_quietly(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    assert cli("run", cfg, "--out", tmp_path / "run").exit_code == 0
+    r, w = os.pipe()
+    os.close(r)  # the reader (head) has gone before the first line is written
+    try:
+        proc = subprocess.run([sys.executable, "-m", "fiberpipe.cli", "inspect", str(tmp_path / "run" / "mesh.h5")],
+                              stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
