@@ -106,6 +106,16 @@ class PhantomConfig(Section):
             raise ValueError(f"shape must be 3 sizes (z y x) of at least 8 voxels, got {v}")
         return v
 
+    @model_validator(mode="after")
+    def _fibers_fit(self):
+        need = math.ceil(2 * self.radius_vox + 3)  # as fiberpipe.imaging.phantom.min_cross_section_vox
+        if min(self.shape[1], self.shape[2]) < need:
+            raise ValueError(
+                f"input.phantom.radius_vox = {self.radius_vox:g} voxels does not fit input.phantom.shape (y and x "
+                f"need at least {need} voxels: the diameter plus a margin; got shape {self.shape}, z y x): enlarge "
+                f"the shape or lower radius_vox to at most {(min(self.shape[1:]) - 3) / 2:g}")
+        return self
+
 
 class InputConfig(Section):
     """What the run starts from: a volume file, a phantom, a fibers artifact or inline polylines."""

@@ -108,6 +108,35 @@ def render_polylines(polylines: Polylines, shape, voxel_size_m, *, blur_sigma_vo
                        foreground=foreground, dtype=dtype)
 
 
+def min_cross_section_vox(radius_vox: float) -> int:
+    """Smallest y and x size (voxels) a phantom of fibers of ``radius_vox`` needs: the fiber
+    diameter plus the one-voxel margin (and the rendering's one-voxel ramp) each side, the room
+    :func:`make_phantom` places fiber centres in (``r + 1 .. size - 2 - r``)."""
+    return int(np.ceil(2.0 * float(radius_vox) + 3.0))
+
+
+def check_phantom_fits(shape, radius_vox: float, n_fibers: int = 1) -> None:
+    """Raise :class:`InputError` if fibers of ``radius_vox`` cannot fit the phantom's ``shape``."""
+    try:
+        dims = [int(v) for v in shape]
+    except (TypeError, ValueError):
+        dims = []
+    if len(dims) != 3 or min(dims) < 1:
+        raise InputError(f"phantom: shape must be 3 positive sizes (z y x) in voxels, got {shape!r}")
+    r = float(radius_vox)
+    if not (r > 0 and np.isfinite(r)):
+        raise InputError(f"phantom: radius_vox must be positive, got {radius_vox!r}")
+    if int(n_fibers) < 1:
+        raise InputError(f"phantom: n_fibers must be at least 1, got {n_fibers!r}")
+    need = min_cross_section_vox(r)
+    _, ny, nx = dims
+    if min(ny, nx) < need:
+        raise InputError(
+            f"phantom: fibers of radius {r:g} voxels do not fit the {ny}x{nx} (y x) cross-section of shape "
+            f"{tuple(dims)}: a fiber needs at least {need} voxels along y and x (its diameter plus a margin); "
+            f"enlarge the shape or lower radius_vox (at most {(min(ny, nx) - 3) / 2:g} for this shape)")
+
+
 def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float = 5.0,
                  voxel_size_m: float | None = None, touching_fraction: float = 1 / 3,
                  waviness_vox: float = 2.0, wavelength_vox: float | None = None,
@@ -159,7 +188,8 @@ def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float
     Raises
     ------
     InputError
-        If the fibers cannot be placed without overlap (too many for the cross-section).
+        If a fiber does not fit the cross-section at all (:func:`check_phantom_fits`), or the
+        fibers cannot be placed without overlap (too many for the cross-section).
     """
     # Strategy: random sequential addition of "units" (a single fiber, or a touching pair sharing
     # one path) in the cross-section. Each unit's path is base + tilt * z + two sinusoids; a unit is
@@ -168,6 +198,7 @@ def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float
     # partial-volume ramp, then PSF blur, then noise.
     nz, ny, nx = (int(s) for s in shape)
     r = float(radius_vox)
+    check_phantom_fits(shape, r, n_fibers)
     if voxel_size_m is None:
         voxel_size_m = STUDY_FIBER_DIAMETER_M / (2 * r)
     vs = float(np.asarray(voxel_size_m).reshape(-1)[0])

@@ -44,3 +44,34 @@ def test_render_matches_phantom_and_contrast():
 def test_too_many_fibers_is_an_input_error():
     with pytest.raises(InputError, match="cannot place"):
         make_phantom(n_fibers=200, shape=(40, 40, 40), radius_vox=5, max_attempts=200)
+
+
+def test_fibers_that_do_not_fit_the_shape_are_an_input_error():
+    """shape (10, 10, 10) with radius 8 voxels failed inside numpy ("high - low < 0")."""
+    from fiberpipe.imaging.phantom import min_cross_section_vox
+
+    with pytest.raises(InputError) as err:
+        make_phantom(n_fibers=1, shape=(10, 10, 10), radius_vox=8)
+    msg = str(err.value)
+    assert "radius 8 voxels do not fit the 10x10 (y x) cross-section" in msg and "at least 19 voxels" in msg
+    assert "at most 3.5" in msg and "high - low" not in msg
+    assert min_cross_section_vox(8) == 19
+    vol, truth = make_phantom(n_fibers=1, shape=(10, 19, 19), radius_vox=8, waviness_vox=0, max_tilt=0)
+    assert vol.shape == (10, 19, 19) and truth.n_fibers == 1
+    with pytest.raises(InputError, match="shape must be 3 positive sizes"):
+        make_phantom(n_fibers=1, shape=(10, 0, 10), radius_vox=2)
+    with pytest.raises(InputError, match="radius_vox must be positive"):
+        make_phantom(n_fibers=1, shape=(10, 10, 10), radius_vox=0)
+
+
+def test_config_refuses_a_phantom_whose_fibers_do_not_fit(write_yaml):
+    from fiberpipe.config import load_config
+    from fiberpipe.errors import ConfigError
+
+    p = write_yaml("name: p\ninput:\n  phantom: {shape: [10, 10, 10], radius_vox: 8}\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    msg = str(err.value)
+    assert msg.startswith(f"{p}: input.phantom.radius_vox = 8 voxels does not fit input.phantom.shape")
+    assert "at least 19 voxels" in msg and "at most 3.5" in msg
+    load_config(write_yaml("name: p\ninput:\n  phantom: {shape: [10, 19, 19], radius_vox: 8}\n", "ok.yaml"))
