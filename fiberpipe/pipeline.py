@@ -300,6 +300,30 @@ class RunReport:
     stages: dict[str, dict] = field(default_factory=dict)
 
 
+def check_user_inputs(cfg: Config, plan: list[str]) -> None:
+    """The files the config names as inputs of the stages in ``plan`` must exist (before anything
+    runs); the error names the key and the file, not an earlier stage."""
+    given = []
+    if "segment" in plan and cfg.input.phantom is None and cfg.input.volume is not None:
+        given.append(("input.volume", cfg.input.volume))
+    if "trace" in plan and cfg.input.truth:
+        given.append(("input.truth", cfg.input.truth))
+    if "mesh" in plan and cfg.input.fibers is not None:
+        given.append(("input.fibers", cfg.input.fibers))
+    for key, p in given:
+        if not Path(p).exists():
+            raise InputError(f"file {p} does not exist (set in {cfg.source_path}; a relative path is relative "
+                             "to the config's folder)", where=key)
+
+
+def _maker(cfg: Config, run_dir: Path, path: Path) -> str | None:
+    """The stage of this config that writes ``path`` into the run folder, if any."""
+    for name in planned_stages(cfg):
+        if any(Path(o) == path for o in STAGES[name].outputs(cfg, run_dir)):
+            return name
+    return None
+
+
 def _checkpoint_to_resume(name: str, run_dir: Path, key: str, resume: str | None) -> bool:
     """Whether the simulate stage has a checkpoint to resume even though its output is up to date: a
     ``--force`` rerun interrupted by Ctrl-C leaves the earlier simulation.h5 beside the checkpoint,
@@ -374,9 +398,10 @@ def run_pipeline(
     progress : bool
         Show a progress bar for the long stages (the CLI asks for one on a terminal without --quiet).
     """
-    run_dir = ensure_output_dir(run_dir)
     echo = echo or (lambda s: None)
     plan = select_stages(planned_stages(cfg), from_stage, to_stage)
+    check_user_inputs(cfg, plan)
+    run_dir = ensure_output_dir(run_dir)
 
     handler = _setup_run_log(run_dir)
     lock_path = run_dir / "fiberpipe.lock.json"
@@ -398,9 +423,9 @@ def run_pipeline(
             inputs = stage.inputs(cfg, run_dir)
             for iname, p in inputs.items():
                 if not Path(p).exists():
-                    raise FiberpipeError(
-                        f"stage {name} needs {iname} at {p}, which does not exist; run the earlier stages first"
-                    )
+                    maker = _maker(cfg, run_dir, Path(p))
+                    todo = f"run `fiberpipe run {cfg.source_path} --out {run_dir} --to {maker}` first" if maker else "run the earlier stages first"
+                    raise FiberpipeError(f"stage {name} needs {iname} at {p}, which does not exist; {todo}")
             key = stage_key(stage, cfg, inputs)
             outputs = stage.outputs(cfg, run_dir)
             entry = lock.get(name, {})

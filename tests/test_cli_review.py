@@ -302,3 +302,27 @@ def test_broken_pipe_exits_quietly(tmp_path):
         os.close(w)
     assert proc.returncode == 141, proc.stderr
     assert proc.stderr == ""
+
+
+# -- 9. a missing input file is the user's, not an earlier stage's -------------------------------
+
+
+@pytest.mark.parametrize("inp, key, name", [
+    ({"volume": "missing.tif", "voxel_size": "15 um"}, "input.volume", "missing.tif"),
+    ({"fibers": "nofibers.h5"}, "input.fibers", "nofibers.h5"),
+])
+def test_missing_input_file_names_the_key(tmp_path, inp, key, name):
+    cfg = write_cfg(tmp_path / "c.yaml", {"name": "x", "input": inp, "fiber": {"radius": "0.25 mm"}})
+    out = tmp_path / "run"
+    line = one_line_error(cli("run", cfg, "--out", out))
+    assert line.startswith(f"error: {key}: file {tmp_path / name} does not exist"), line
+    assert "earlier stages" not in line
+    assert not out.exists()  # nothing ran, no folder made
+
+
+def test_missing_stage_output_names_the_stage_to_run(tmp_path):
+    cfg = write_cfg(tmp_path / "tip.yaml", TIP)
+    out = tmp_path / "run"
+    line = one_line_error(cli("mesh", cfg, "--out", out))
+    assert f"stage mesh needs fibers at {out / 'fibers.h5'}, which does not exist" in line, line
+    assert f"run `fiberpipe run {cfg} --out {out} --to input` first" in line, line
