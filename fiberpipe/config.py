@@ -143,6 +143,8 @@ class InputConfig(Section):
             for i, line in enumerate(self.polylines):
                 if len(line) < 2:
                     raise ValueError(f"input.polylines[{i}] needs at least 2 points")
+                if all(p == line[0] for p in line[1:]):
+                    raise ValueError(f"input.polylines[{i}] has zero length (all its points coincide): remove it")
         return self
 
     @property

@@ -189,6 +189,8 @@ def mesh_polylines(
         if not np.all(np.isfinite(pts)):
             raise InputError(f"fiber {i} has non-finite coordinates")
         pts = clean_polyline(pts, min_segment_m=1e-3 * element_length_m)
+        if not lengths[i] >= 1e-3 * element_length_m:  # below the cleaning tolerance: one point
+            raise InputError(f"fiber {i} has zero length (all its points coincide): remove it")
         if len(pts) < 2 or lengths[i] < min_len:
             raise InputError(
                 f"fiber {i} is {lengths[i] * 1e3:.3g} mm long, shorter than the minimum "

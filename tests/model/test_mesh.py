@@ -57,3 +57,24 @@ def test_overlapping_fibers_are_pushed_apart_without_stretching():
     np.testing.assert_allclose(mesh.element_lengths_m(), lengths, rtol=1e-9)  # moved normal to the fibers
     with pytest.raises(InputError, match="overlap"):
         resolve_overlaps(mesh_polylines(Polylines.from_list([a, a + [0.1e-3, 0, 0]], 0.25e-3), 0.3e-3), max_shift_m=50e-6)
+
+
+def test_zero_length_fiber_says_remove_it_not_refine():
+    """Refining mesh.element_length cannot help a fiber whose points all coincide."""
+    same = [[1e-3, 2e-3, 3e-3]] * 4
+    with pytest.raises(InputError) as err:
+        mesh_polylines(Polylines.from_list([_arc(), same], 0.25e-3), 0.3e-3)
+    assert str(err.value) == "fiber 1 has zero length (all its points coincide): remove it"
+    # a short but real fiber keeps the advice to refine
+    with pytest.raises(InputError, match="remove it or refine mesh.element_length"):
+        mesh_polylines(Polylines.from_list([[[0, 0, 0], [0, 0, 0.4e-3]]], 0.25e-3), 0.3e-3)
+
+
+def test_zero_length_inline_polyline_is_a_config_error(write_yaml):
+    from fiberpipe.config import load_config
+    from fiberpipe.errors import ConfigError
+
+    p = write_yaml('name: z\ninput:\n  polylines:\n    - [[0, 0, 0], ["3 mm", 0, 0]]\n'
+                   '    - [["1 mm", 0, 0], ["1 mm", 0, 0]]\nfiber: {radius: "0.25 mm"}\n')
+    with pytest.raises(ConfigError, match=r"input.polylines\[1\] has zero length \(all its points coincide\): remove it"):
+        load_config(p)
