@@ -69,8 +69,8 @@ def _fibers_path(cfg: Config, run_dir: Path) -> Path:
 
 
 def _skeleton_needed(cfg: Config) -> bool:
-    enabled = cfg.skeletonize.enabled
-    return True if enabled is None else bool(enabled) or cfg.trace.method == "skeleton"
+    """skeletonize runs when trace.method is skeleton (its input) or skeletonize.enabled is true."""
+    return cfg.trace.method == "skeleton" or bool(cfg.skeletonize.enabled)
 
 
 # -- stage functions (thin adapters from the runner's calling convention to the stage modules) --

@@ -326,3 +326,33 @@ def test_missing_stage_output_names_the_stage_to_run(tmp_path):
     line = one_line_error(cli("mesh", cfg, "--out", out))
     assert f"stage mesh needs fibers at {out / 'fibers.h5'}, which does not exist" in line, line
     assert f"run `fiberpipe run {cfg} --out {out} --to input` first" in line, line
+
+
+# -- 10. skeletonize runs only when the tracer needs it or skeletonize.enabled says so -------------
+
+
+@pytest.mark.parametrize("extra, runs_skeleton", [
+    ({}, False),
+    ({"trace": {"method": "slices"}}, False),
+    ({"trace": {"method": "skeleton"}}, True),
+    ({"skeletonize": {"enabled": True}}, True),
+    ({"skeletonize": {"enabled": False}}, False),
+])
+def test_skeletonize_runs_only_when_asked(extra, runs_skeleton):
+    from fiberpipe.config import validate_config
+    from fiberpipe.pipeline import planned_stages
+
+    cfg = validate_config({"name": "v", "input": {"phantom": {"n_fibers": 2}}, **extra})
+    plan = planned_stages(cfg)
+    assert ("skeletonize" in plan) == runs_skeleton, plan
+    assert plan[:2] == ["phantom", "segment"] and "trace" in plan
+
+
+def test_quickstart_does_not_skeletonize(tmp_path):
+    from fiberpipe.config import load_config
+    from fiberpipe.pipeline import planned_stages
+
+    plan = planned_stages(load_config(Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"))
+    assert plan == ["segment", "trace", "mesh", "simulate", "post"]
+    r = cli("skeletonize", Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml", "--out", tmp_path / "run")
+    assert "set skeletonize.enabled: true" in one_line_error(r)
