@@ -188,7 +188,9 @@ def trace(config, out, force, truth):
         vs = eval_list(read_artifact(out / "mask.h5", "mask", names=()).attrs["voxel_size_m"])[0]
         acc = trace_accuracy_report(out / "fibers.h5", Path(truth), vs, out / "trace_accuracy.json")
         for k, v in acc.items():
-            click.echo(f"{k:28s} {v}")
+            if not isinstance(v, (list, tuple, dict)):  # the per-fiber matches are in the JSON file
+                click.echo(f"{k:28s} {v}")
+        click.echo(f"{'written to':28s} {out / 'trace_accuracy.json'}")
 
 
 @main.command()

@@ -356,3 +356,27 @@ def test_quickstart_does_not_skeletonize(tmp_path):
     assert plan == ["segment", "trace", "mesh", "simulate", "post"]
     r = cli("skeletonize", Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml", "--out", tmp_path / "run")
     assert "set skeletonize.enabled: true" in one_line_error(r)
+
+
+# -- 11. README: the tracing-accuracy example works as written in a fresh folder ------------------
+
+
+def test_readme_trace_example_works_as_written(tmp_path, monkeypatch):
+    import shlex
+    import subprocess
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("## Using it", 1)[1].split("```sh", 1)[1].split("```", 1)[0]
+    lines = [ln.split("  #", 1)[0].strip() for ln in block.splitlines()]
+    first = next(i for i, ln in enumerate(lines) if ln.startswith(".venv/bin/fiberpipe phantom --out ph "))
+    last = next(i for i, ln in enumerate(lines) if "--truth ph/truth.h5" in ln)
+    monkeypatch.chdir(tmp_path)
+    for ln in lines[first : last + 1]:
+        if ln.startswith(".venv/bin/fiberpipe "):
+            r = cli(*shlex.split(ln)[1:])
+            assert r.exit_code == 0, (ln, r.output)
+        else:
+            subprocess.run(ln, shell=True, check=True, cwd=tmp_path)
+    assert "recall" in r.output and "f1" in r.output and "matches" not in r.output, r.output
+    acc = json.loads((tmp_path / "runs" / "ph" / "trace_accuracy.json").read_text())
+    assert acc["n_true"] == 40 and acc["recall"] > 0.9
