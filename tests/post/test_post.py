@@ -94,7 +94,8 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     )
     sim_path = write_simulation(tmp_path / "simulation.h5", mesh, result)
     cfg = validate_config(
-        {"name": "synthetic", "input": {"fibers": "x.h5"}, "scene": {"effects": ["plates"], "plates": {"axis": "y"}, "walls": {"x": [-0.6e-3, 0.6e-3]}}}
+        {"name": "synthetic", "input": {"fibers": "x.h5"}, "scene": {"effects": ["plates"], "plates": {"axis": "y"}, "loading": {"displacement": "0.5 mm"},
+                                                         "walls": {"x": [-0.6e-3, 0.6e-3]}}}
     )
     figures = run_post(cfg, sim_path, tmp_path / "post")
     s = json.loads((tmp_path / "post" / "summary.json").read_text())
