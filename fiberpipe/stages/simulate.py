@@ -41,8 +41,16 @@ HISTORY_UNITS = {
     "plate_force": "N",
     "wall_force": "N",
     "plate_position": "m",
-    "contacts": "",
+    "contacts": "1",
 }
+
+#: Units of ``/history/energy/<name>``: joules, except the relative balance residual
+#: ((E_total - E_total,0) / max(|W_ext|, E_strain + E_kinetic), solver/integrator.py).
+ENERGY_UNITS = {"residual": "1"}
+
+
+def _energy_units(name: str) -> str:
+    return ENERGY_UNITS.get(name, "J")
 
 
 def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", inputs=None, extra_attrs=None,
@@ -59,16 +67,18 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
         "mesh/node_offsets": mesh.node_offsets,
         "mesh/radius": mesh.radius_m,
     }
-    units = {"frames/time": "s", "frames/positions": "m", "mesh/nodes": "m", "mesh/radius": "m"}
+    units = {"frames/time": "s", "frames/positions": "m", "mesh/nodes": "m", "mesh/node_offsets": "index",
+             "mesh/radius": "m"}
     for name, series in result.history.items():
         if isinstance(series, dict):  # e.g. energy/<name>
             for sub, arr in series.items():
                 datasets[f"history/{name}/{sub}"] = np.asarray(arr)
-                units[f"history/{name}/{sub}"] = "J" if name == "energy" else ""
+                units[f"history/{name}/{sub}"] = _energy_units(sub) if name == "energy" else ""
         else:
             key = f"history/{name}"
             datasets[key] = np.asarray(series)
-            units[key] = "J" if name.startswith("energy/") else HISTORY_UNITS.get(name, "")
+            units[key] = (_energy_units(name[len("energy/"):]) if name.startswith("energy/")
+                          else HISTORY_UNITS.get(name, ""))
     field_units = {"contact_force": "N", "max_normal_force": "N", "max_penetration": "m"}
     for name, arr in (getattr(result, "fields", None) or {}).items():
         datasets[f"frames/{name}"] = np.asarray(arr)
