@@ -21,6 +21,7 @@ from skimage.feature import peak_local_max
 
 from ..errors import InputError
 from ..polylines import Polylines
+from .io import MIN_VOXELS_PER_AXIS
 from ._util import resample_polyline, smooth_polyline, voxel_size_zyx, voxel_to_xyz_m
 
 _BIG = 1e9
@@ -51,8 +52,25 @@ def dominant_axis(mask: np.ndarray, voxel_size_m=1.0, *, max_voxels: int = 2_000
     # eigenvector of the summed gradient outer product (the structure tensor) with the smallest
     # eigenvalue is the mean fiber direction.
     v = voxel_size_zyx(voxel_size_m)
-    step = max(1, int(np.ceil((mask.size / max_voxels) ** (1.0 / 3.0))))
-    sub = ndi.gaussian_filter(mask[::step, ::step, ::step].astype(np.float32), 1.0)
+    # One stride per axis, each keeping at least MIN_VOXELS_PER_AXIS (3) samples along its axis
+    # (np.gradient needs 2; a thin volume such as (3, 3000, 3000) had its thin axis cut to 1); the
+    # voxel budget a capped axis leaves is spread over the others.
+    step = np.ones(3, dtype=int)
+    free = [i for i in range(3)]
+    budget = float(max_voxels)
+    while free:
+        s = max(1, int(np.ceil((np.prod([mask.shape[i] for i in free], dtype=float) / budget)
+                               ** (1.0 / len(free)))))
+        cap = {i: max(1, (mask.shape[i] - 1) // (MIN_VOXELS_PER_AXIS - 1)) for i in free}
+        capped = [i for i in free if s > cap[i]]
+        if not capped:
+            step[free] = s
+            break
+        for i in capped:
+            step[i] = cap[i]
+            budget = max(1.0, budget / -(-mask.shape[i] // cap[i]))
+            free.remove(i)
+    sub = ndi.gaussian_filter(mask[::step[0], ::step[1], ::step[2]].astype(np.float32), 1.0)
     g = np.gradient(sub, *(v * step / v.min()))
     J = np.empty((3, 3))
     for i in range(3):
