@@ -1,10 +1,10 @@
 """``fiberpipe study STUDY.yaml``: run a grid of config variants, measure error against a reference
 and wall time, and write a table and a Pareto plot.
 
-A study file::
+A study file (cf. configs/studies/rearrangement-velocity-alpha.yaml)::
 
     name: rearrangement-velocity-alpha
-    base: ../verify/rearrangement.yaml        # any fiberpipe config, relative to this file
+    base: ../verify/study-rearrangement.yaml  # any fiberpipe config, relative to this file
     sweep:                                    # cartesian product of dotted config keys
       scene.drives.0.velocity: ["100 mm/min", "1000 mm/min"]
       scene.damping.alpha: [0, "1e4 1/s", "1e5 1/s"]
@@ -45,7 +45,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from fiberpipe.artifacts import write_text_atomic
-from fiberpipe.config import load_raw, validate_config
+from fiberpipe.config import _DuplicateKey, _StrictLoader, load_raw, validate_config
 from fiberpipe.errors import ConfigError
 
 Measure = Literal["curve", "final_load", "positions", "tip", "rearrangement"]
@@ -103,7 +103,11 @@ def load_study(path: str | Path) -> tuple[StudySpec, dict]:
     if not path.exists():
         raise ConfigError("study file not found", where=str(path))
     try:
-        data = yaml.safe_load(path.read_text())
+        # config.py's loader: a key given twice is refused (PyYAML's safe_load keeps the last)
+        data = yaml.load(path.read_text(), Loader=_StrictLoader)
+    except _DuplicateKey as exc:
+        raise ConfigError(f"duplicate key '{exc.key}' at line {exc.line} (first given at line "
+                          f"{exc.first_line}); keep only one", where=str(path)) from None
     except yaml.YAMLError:
         raise ConfigError("is not valid YAML", where=str(path)) from None
     if not isinstance(data, dict):

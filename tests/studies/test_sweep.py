@@ -59,3 +59,26 @@ def test_unknown_study_key(tmp_path):
     (tmp_path / "study.yaml").write_text(STUDY + "colour: red\n")
     with pytest.raises(ConfigError, match="colour"):
         load_study(tmp_path / "study.yaml")
+
+
+@pytest.mark.parametrize("extra,key,line", [
+    ("  solver.dt_safety: [0.3]\n", "solver.dt_safety", 5),  # a sweep key twice: its first values were dropped
+    ("measures: [curve]\n", "measures", 8),
+])
+def test_duplicate_study_key_is_refused(tmp_path, extra, key, line):
+    (tmp_path / "base.yaml").write_text(BASE)
+    text = STUDY.replace("reference:", extra + "reference:") if extra.startswith("  ") else STUDY + extra
+    (tmp_path / "study.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=rf"duplicate key '{key}' at line \d+ \(first given at line {line}\)"):
+        load_study(tmp_path / "study.yaml")
+
+
+def test_docstring_example_base_exists():
+    import re
+    from pathlib import Path
+
+    import fiberpipe.studies.sweep as sweep
+
+    base = re.search(r"^\s*base: (\S+)", sweep.__doc__, re.M).group(1)
+    studies = Path(__file__).resolve().parents[2] / "configs" / "studies"
+    assert (studies / base).is_file(), base
