@@ -533,6 +533,14 @@ class Config(Section):
     source_path: Optional[str] = Field(None, exclude=True)
 
     @model_validator(mode="after")
+    def _skeleton_for_the_skeleton_tracer(self):
+        if self.trace.method == "skeleton" and self.skeletonize.enabled is False:
+            raise ValueError(
+                "skeletonize.enabled is false but trace.method is skeleton, which traces the skeleton: "
+                "remove skeletonize.enabled (or set it true), or use trace.method: slices")
+        return self
+
+    @model_validator(mode="after")
     def _scene_indices(self):
         if self.input.polylines is not None:  # the fibers are known now: check the indices the scene uses
             n = len(self.input.polylines)

@@ -182,3 +182,31 @@ def test_yaml_merge_keys_may_still_be_overridden(write_yaml):
 
     data = load_raw(write_yaml(text, "merge.yaml"))
     assert data["fiber"] == {"radius": "0.3 mm"}
+
+
+PHANTOM = """
+name: ph
+input:
+  phantom: {n_fibers: 2, shape: [40, 24, 24], radius_vox: 3}
+"""
+
+
+def test_skeleton_tracer_with_skeletonize_disabled_is_refused(write_yaml):
+    p = write_yaml(PHANTOM + "skeletonize: {enabled: false}\ntrace: {method: skeleton}\n", "sk.yaml")
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    msg = str(err.value)
+    assert "sk.yaml" in msg
+    assert "skeletonize.enabled is false but trace.method is skeleton" in msg
+    assert "trace.method: slices" in msg
+
+
+@pytest.mark.parametrize("extra", [
+    "trace: {method: skeleton}\n",
+    "skeletonize: {enabled: true}\ntrace: {method: skeleton}\n",
+    "skeletonize: {enabled: false}\ntrace: {method: slices}\n",
+    "skeletonize: {enabled: true}\n",
+])
+def test_consistent_skeletonize_and_trace_settings_are_accepted(write_yaml, extra):
+    cfg = load_config(write_yaml(PHANTOM + extra, "ok.yaml"))
+    assert cfg.trace.method in ("slices", "skeleton")
