@@ -252,14 +252,25 @@ _PHANTOM_OPTIONS = {
 
 def _phantom_option_error(exc) -> str:
     """One line from a pydantic ValidationError of PhantomConfig: the option, what is wrong, the value."""
+    import re
+
     errors = exc.errors()
     lines = []
     for err in errors:
         field_name = str(err["loc"][0]) if err.get("loc") else ""
-        opt = _PHANTOM_OPTIONS.get(field_name, field_name or "phantom options")
         msg = err["msg"]
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, "):]
+        if not field_name:
+            # a check across fields (does the fiber fit the shape?) names the config keys: on this
+            # command they are options ("input.phantom.radius_vox = 8" -> "--radius-vox 8")
+            msg, n = re.subn(r"\binput\.phantom\.(\w+)( = )?",
+                             lambda m: _PHANTOM_OPTIONS.get(m[1], m[1]) + (" " if m[2] else ""), msg)
+            msg, k = re.subn(r"\b(" + "|".join(f for f in _PHANTOM_OPTIONS if "_" in f) + r")\b",
+                             lambda m: _PHANTOM_OPTIONS[m[1]], msg)
+            lines.append(msg if n + k else f"phantom options: {msg}")
+            continue
+        opt = _PHANTOM_OPTIONS.get(field_name, field_name)
         if "input" in err and "got" not in msg and str(err["input"]) not in msg:
             msg += f", got {err['input']!r}"
         if msg.startswith("Input should be "):

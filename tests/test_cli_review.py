@@ -56,6 +56,15 @@ def test_phantom_option_errors_name_the_option(tmp_path, args, message):
     assert not (tmp_path / "ph").exists()
 
 
+def test_phantom_that_does_not_fit_names_the_options(tmp_path):
+    # the check across fields is worded for input.phantom in a config; the command names its options
+    line = one_line_error(cli("phantom", "--out", tmp_path / "ph", "--shape", "10", "10", "10", "--radius-vox", "8"))
+    assert line.startswith("error: --radius-vox 8 voxels does not fit --shape (y and x need at least 19 voxels"), line
+    assert line.endswith("lower --radius-vox to at most 3.5"), line
+    assert "input.phantom" not in line and "radius_vox" not in line and "phantom options" not in line
+    assert not (tmp_path / "ph").exists()
+
+
 # -- 2. --quiet: no per-stage lines, no progress bars --------------------------------------------
 
 
