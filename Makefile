@@ -18,6 +18,7 @@ help:
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 15 min)"
 	@echo "make contact-ensemble  the study's contact models over 8 paper-40 specimens (≈ 25 min on 2 cores)"
+	@echo "make law-branch  the contact law's own effect: every law from the same state at U = 0.95 mm (≈ 20 min on 2 cores)"
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,7 +47,7 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
-.PHONY: bench-contact bench-pyelastica fast-settings contact-ensemble
+.PHONY: bench-contact bench-pyelastica fast-settings contact-ensemble law-branch
 bench-contact: setup
 	$(PY) benchmarks/bench_contact.py
 
@@ -85,6 +86,10 @@ fast-settings: setup
 
 contact-ensemble: setup
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/contact_ensemble.py --seeds 0-7 --jobs 2 --out runs/contact_ensemble/table.md
+
+# the same specimens, every law continued from one state (benchmarks/law_branch.py)
+law-branch: setup
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/law_branch.py --seeds 0-7 --jobs 2
 
 clean:
 	rm -rf runs .pytest_cache

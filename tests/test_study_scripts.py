@@ -116,3 +116,22 @@ def test_more_twins_join_their_settings(fast):
     fams = {fast._family(n) for n in names}
     assert fams == {fast._family(fast.REFERENCE[0]), "mass scaling 25, α = 4e3 1/s"}
     assert fast._twins(1) == []
+
+
+def test_law_branch_table_reads_the_pairs():
+    """benchmarks/law_branch.py: the paired rows come from the right columns (a +10 % law effect on
+    every specimen, controls that differ by ±1 %), and chance is the controls' spread."""
+    lb = _load("law_branch")
+    figs = []
+    for s, base in enumerate((0.5, 0.8, 1.0)):
+        sign = 1 if s % 2 else -1
+        figs.append({"seed": s, "branch_U_m": 0.95e-3, "unbranched": base, "control": base * (1 + 0.01 * sign),
+                     "control_g": base, "parallel": base * 1.1, "oblique": base,
+                     "parallel_delta_max_m": 0.3e-6, "oblique_delta_max_m": 0.5e-6, "control_delta_max_m": 0.6e-6})
+    text = lb.table(figs)
+    d = 2 * 0.1 / 2.1
+    law_row = next(ln for ln in text.splitlines() if ln.startswith("| parallel − oblique"))
+    assert f"{100 * d:+.2f} %" in law_row and "3 of 3" in law_row
+    assert "| seed 1 | 0.800 | 0.808 | 0.800 | 0.880 | 0.800 | +9.5 % | 0.30 / 0.50 / 0.60 |" in text
+    chance = 2 * 0.01 / 2.01  # |control_g − control| relative, the same on every specimen
+    assert f"median {100 * chance:.1f} %" in text and "from the same state at U = 0.95 mm" in text
