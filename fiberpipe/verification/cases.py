@@ -9,7 +9,7 @@ default test suite.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,7 +31,14 @@ OMEGA1 = 1.8751**2 * math.sqrt(EI / (RHO * A_M2 * L_M**4))  # rad/s, clamped-fre
 
 @dataclass
 class Row:
-    """One verification result."""
+    """One verification result.
+
+    ``passed``: ``error < tolerance``, or ``error > tolerance`` for a row whose criterion is to
+    depart (``must_exceed``, e.g. the undamped rearrangement run must leave the reference's band).
+    ``informational``: a documented comparison the code is known not to reproduce (its note says
+    what was measured); it is printed as such and does not set the exit status, and its test
+    asserts the measured behaviour instead.
+    """
 
     case: str
     reference: float
@@ -40,10 +47,21 @@ class Row:
     tolerance: float
     unit: str = ""
     note: str = ""
+    must_exceed: bool = False
+    informational: bool = False
+    data: dict = field(default_factory=dict)  # measured figures behind the note, for tests
 
     @property
     def passed(self) -> bool:
-        return bool(np.isfinite(self.error) and self.error < self.tolerance)
+        if not np.isfinite(self.error):
+            return False
+        return bool(self.error > self.tolerance if self.must_exceed else self.error < self.tolerance)
+
+    @property
+    def status(self) -> str:
+        if self.informational:
+            return "reproduced (info)" if self.passed else "NOT REPRODUCED (info)"
+        return "PASS" if self.passed else "FAIL"
 
 
 def straight_fiber(n_el: int = N_EL, length_m: float = L_M, axis: int = 0):

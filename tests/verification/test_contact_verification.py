@@ -2,17 +2,36 @@
 
 Default suite: the quick variants; ``-m slow``: the full cases (longer settling, more loads, the
 study's 15 mm beams and the slow rearrangement reference run).
+
+Checked rows must pass. Informational rows (``Row.informational``: comparisons the code is known
+not to reproduce, printed as such by ``python -m fiberpipe.verification``) are held to their
+measured behaviour instead, so a change in it (better or worse) shows up here.
 """
 
 import pytest
 
-from fiberpipe.verification.contact_cases import CONTACT_CASES, kinematic_uy, johnson_delta
+from fiberpipe.verification.contact_cases import CONTACT_CASES, johnson_delta, johnson_line_load, kinematic_uy
+
+
+def _check_informational(r):
+    if r.case.startswith("3-beam static α = 0"):
+        lo, hi = r.data["nf_over_ref"]
+        # measured (quick): NF/ref ∈ [0.81, 1.12] over the last quarter of 0.6 ms, RF error 67 %
+        assert not r.passed and r.error > 0.05 and lo < 0.95 and hi > 1.05, (
+            f"undamped 3-beam case from the set-up: NF/ref ∈ [{lo:.3f}, {hi:.3f}] over the last quarter, "
+            f"error {100 * r.error:.2f} % (measured: does not settle, NF/ref ∈ [0.81, 1.12]); if it now settles "
+            f"within 1 %, make the row a checked one ({r.note})")
+    else:
+        raise AssertionError(f"unexpected informational row {r.case!r}: {r.note}")
 
 
 def _check(rows):
     rows = rows if isinstance(rows, list) else [rows]
     assert rows
     for r in rows:
+        if r.informational:
+            _check_informational(r)
+            continue
         assert r.passed, f"{r.case}: reference {r.reference:.6g}, measured {r.measured:.6g}, error {r.error:.3g} ≥ {r.tolerance} ({r.note})"
 
 
@@ -32,8 +51,35 @@ def test_contact_case_full(name):
     _check(CONTACT_CASES[name](quick=False))
 
 
+def test_three_beam_static_uses_the_setup_angle_and_can_fail():
+    """β₀ is the set-up's 30°, not the settled β; the settled one differs by ~1e-3°."""
+    rows = CONTACT_CASES["three_beam_static"](quick=True, alphas=(1e5,))
+    d = rows[0].data
+    assert d["beta0_deg"] == pytest.approx(30.0, abs=1e-9)
+    assert 0 < abs(d["settled_beta_minus_beta0_deg"]) < 0.01, d
+    assert all(r.passed and not r.informational and r.error > 0 for r in rows), [r.note for r in rows]
+
+
 def test_references():
-    # Johnson: 66 N/m → 32.05 nm (our fibres); kinematic rearrangement curve starts at 0
+    # Johnson: 66 N/m → 32.05 nm (our fibres) and back; kinematic rearrangement curve starts at 0
     assert johnson_delta(66.0) == pytest.approx(3.2049e-8, rel=1e-3)
+    assert johnson_line_load(3.2049e-8) == pytest.approx(66.0, rel=1e-3)
     assert kinematic_uy(0.0) == pytest.approx(0.0, abs=1e-15)
     assert kinematic_uy(3**0.5 * 0.25e-3) == pytest.approx(0.25e-3)
+
+
+def test_table_marks_informational_rows_and_exit_status_ignores_them(monkeypatch, capsys):
+    from fiberpipe.verification import __main__ as vm
+    from fiberpipe.verification.cases import Row
+
+    rows = [Row("checked", 1.0, 1.001, 1e-3, 0.01),
+            Row("departs", 1.0, 1.02, 0.02, 0.05, must_exceed=True, informational=True, note="2 % only")]
+    assert rows[0].passed and not rows[1].passed
+    assert Row("departs", 1.0, 1.1, 0.1, 0.05, must_exceed=True).passed
+    monkeypatch.setattr(vm, "run_all", lambda quick=False, only=None: rows)
+    assert vm.main([]) == 0
+    out = capsys.readouterr().out
+    assert "NOT REPRODUCED (info)" in out and "> 5 %" in out and "2 % only" in out
+    assert "1/1 passed; informational (not counted): 1 row, 1 not reproduced" in out
+    rows.append(Row("broken", 1.0, 2.0, 1.0, 0.01))
+    assert vm.main([]) == 1
