@@ -14,7 +14,17 @@ from fiberpipe.verification.contact_cases import CONTACT_CASES, johnson_delta, j
 
 
 def _check_informational(r):
-    if r.case.startswith("3-beam static α = 0"):
+    if r.case.startswith("rearrangement α = 0"):
+        d = r.data
+        # measured (quick and full): curve error 2.1 %, contact with beam 1 lost in 55/61 frames (gap ≤ 2.5 % r)
+        assert not r.passed and 0.01 < d["curve_error"] < 0.05, (
+            f"undamped rearrangement: curve error {100 * d['curve_error']:.3f} % (measured 2.1 %, inside the 5 % band: "
+            f"the study's departure not reproduced); if it now exceeds 5 %, make the row a checked one ({r.note})")
+        assert d["curve_error"] > 100 * d["damped_curve_error"], r.note
+        assert d["frames_contact_lost"] > d["frames"] // 2 and 0 < d["max_gap_m"] < 0.05 * 0.25e-3, (
+            f"undamped rearrangement: beams 2/3 off beam 1 in {d['frames_contact_lost']}/{d['frames']} frames, "
+            f"gap up to {d['max_gap_m'] * 1e6:.3g} µm (measured 55/61 frames, 6.1–6.2 µm)")
+    elif r.case.startswith("3-beam static α = 0"):
         lo, hi = r.data["nf_over_ref"]
         # measured (quick): NF/ref ∈ [0.81, 1.12] over the last quarter of 0.6 ms, RF error 67 %
         assert not r.passed and r.error > 0.05 and lo < 0.95 and hi > 1.05, (
