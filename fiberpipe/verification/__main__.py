@@ -30,7 +30,7 @@ def format_table(rows) -> str:
     for r in rows:
         unit = f" {r.unit}" if r.unit else ""
         tol = f"{'> ' if r.must_exceed else ''}{100 * r.tolerance:.3g} %"
-        lines.append(f"| {r.case} | {r.reference:.6g}{unit} | {r.measured:.6g}{unit} | {100 * r.error:.3f} % | "
+        lines.append(f"| {r.case} | {r.reference:.6g}{unit} | {r.measured:.6g}{unit} | {100 * r.error:.3g} % | "
                      f"{tol} | {r.status} | {r.note} |")
     return "\n".join(lines)
 
