@@ -1,9 +1,11 @@
 """Verification cases of SPEC section 8 (beams), each returning one table row.
 
-Every case runs the real solver (``simulate``) on the study's fiber: r = 0.25 mm, E = 15 GPa,
-ν = 0.3, ρ = 1380 kg/m³, L = 15 mm, 0.3 mm elements (50), at the stable time step × 0.9.
-``quick=True`` runs a shorter variant of the same case (fewer periods / faster loading) for the
-default test suite.
+Every case runs the real solver (``simulate``) on the scene of its config in ``configs/verify/``
+(:mod:`fiberpipe.verification.case_config`: material, radius, element length, the fiber, clamps,
+loads, damping, plates, end time), the study's fiber: r = 0.25 mm, E = 15 GPa, ν = 0.3,
+ρ = 1380 kg/m³, L = 15 mm, 0.3 mm elements (50), at the stable time step × 0.9; the references
+are computed from the same config values. ``quick=True`` runs a shorter variant of the same case
+(fewer periods / faster loading) for the default test suite.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..solver import (Clamp, Clamps, Damping, Loads, Material, Plates, PointLoad, SimulationSettings,
-                      State, build_model, simulate)
+from ..solver import Clamp, Clamps, Damping, Material, Plates, State, build_model, simulate
+from .case_config import CaseSetup, case_setup
 
+# The study's fiber (SPEC 7), as its configs give it; the contact references (K_CROSSED_SPEC) hold for it.
 E_PA = 15e9
 NU = 0.3
 RHO = 1380.0
@@ -70,15 +73,30 @@ def straight_fiber(n_el: int = N_EL, length_m: float = L_M, axis: int = 0):
     return build_model(x, [0, n_el + 1], R_M, MATERIAL)
 
 
+def _tip_force_z(s: CaseSetup) -> float:
+    """Downward tip force P (N) of the case's single point load ``at: end`` along −z."""
+    ld = s.load(0)
+    if ld.force is None or ld.at != "end" or abs(ld.force[0]) + abs(ld.force[1]) > 0:
+        raise ValueError(f"{s.path}: the case needs one point load at the fiber's end along z")
+    return -float(ld.force[2])
+
+
+def _omega1(s: CaseSetup) -> float:
+    """Clamped-free first natural frequency 1.8751² √(EI/(ρ A L⁴)), rad/s."""
+    return 1.8751**2 * math.sqrt(s.EI / (s.rho * s.A * s.lengths()[0] ** 4))
+
+
 def cantilever_small(quick: bool = False) -> Row:
     """Tip deflection of a clamped fiber under a small tip load vs P L³/(3 E I) (< 1 %).
 
     ``quick`` is ignored: the case already takes a few seconds, so its slow variant repeats it."""
-    m = straight_fiber()
-    P = 1e-3
-    eff = [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]), Damping(1.4 * OMEGA1)]
-    res = simulate(m, eff, SimulationSettings(end_time_s=4e-3, output_frames=2))
-    ref = P * L_M**3 / (3 * EI)
+    s = case_setup("cantilever_small")
+    m = s.model()
+    L = s.lengths()[0]
+    P = _tip_force_z(s)
+    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha)]
+    res = simulate(m, eff, s.settings())
+    ref = P * L**3 / (3 * s.EI)
     meas = -res.frames_positions[-1, -1, 2]
     return Row("cantilever small tip load: deflection", ref, meas, abs(meas - ref) / ref, 0.01, "m")
 
@@ -105,25 +123,30 @@ def elastica_tip(lam: float) -> tuple[float, float]:
     return 1.0 - x, w
 
 
-def cantilever_large(quick: bool = False, lam: float = 2.0) -> Row:
-    """Large tip deflection vs the elastica (λ = P L²/EI = 2), vertical tip deflection (< 2 %).
+def cantilever_large(quick: bool = False) -> Row:
+    """Large tip deflection vs the elastica (λ = P L²/EI = 2 in the config), vertical tip deflection (< 2 %).
 
     ``quick`` is ignored: the case already takes a few seconds, so its slow variant repeats it."""
-    m = straight_fiber()
-    P = lam * EI / L_M**2
-    eff = [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]), Damping(1.4 * OMEGA1)]
-    res = simulate(m, eff, SimulationSettings(end_time_s=5e-3, output_frames=2))
+    s = case_setup("cantilever_large")
+    m = s.model()
+    L = s.lengths()[0]
+    P = _tip_force_z(s)
+    lam = P * L**2 / s.EI
+    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha)]
+    res = simulate(m, eff, s.settings())
     _, w_ref = elastica_tip(lam)
-    meas = -res.frames_positions[-1, -1, 2] / L_M
-    return Row(f"cantilever large deflection (PL²/EI = {lam:g}): w/L vs elastica", w_ref, meas,
+    meas = -res.frames_positions[-1, -1, 2] / L
+    return Row(f"cantilever large deflection (PL²/EI = {lam:.4g}): w/L vs elastica", w_ref, meas,
                abs(meas - w_ref) / w_ref, 0.02)
 
 
-def _mode1_state(model, amplitude_m: float) -> State:
-    """State with the clamped-free first Euler–Bernoulli mode shape (transverse z) imposed, at rest."""
-    b = 1.8751040687 / L_M
-    sig = (math.cosh(b * L_M) + math.cos(b * L_M)) / (math.sinh(b * L_M) + math.sin(b * L_M))
-    xs = model.nodes_m[:, 0]
+def _mode1_state(model, amplitude_m: float, length_m: float = L_M) -> State:
+    """State with the clamped-free first Euler–Bernoulli mode shape (transverse z) imposed, at rest
+    (fiber along x from x = 0)."""
+    L = length_m
+    b = 1.8751040687 / L
+    sig = (math.cosh(b * L) + math.cos(b * L)) / (math.sinh(b * L) + math.sin(b * L))
+    xs = model.nodes_m[:, 0] - model.nodes_m[0, 0]
     w = np.cosh(b * xs) - np.cos(b * xs) - sig * (np.sinh(b * xs) - np.sin(b * xs))
     dw = b * (np.sinh(b * xs) + np.sin(b * xs) - sig * (np.cosh(b * xs) - np.cos(b * xs)))
     scale = amplitude_m / w[-1]
@@ -154,18 +177,29 @@ def _period_from_zero_crossings(t, y):
     return float((tc[-1] - tc[0]) / (tc.size - 1))
 
 
+def _along_x(s: CaseSetup) -> float:
+    """Length of the case's single fiber, which must run along +x (mode shapes, axial velocity)."""
+    (a, b), = s.fibers()
+    d = b - a
+    if abs(d[1]) + abs(d[2]) > 1e-12 * abs(d[0]) or d[0] <= 0:
+        raise ValueError(f"{s.path}: the case needs one fiber along +x")
+    return float(d[0])
+
+
 def cantilever_frequency(quick: bool = False) -> Row:
     """First natural frequency of the cantilever vs 1.8751² √(EI/ρAL⁴) (< 1 %), free vibration
     from the first mode shape, period by upward zero crossings of the tip deflection."""
-    m = straight_fiber()
+    s = case_setup("cantilever_frequency")
+    m = s.model()
+    L = _along_x(s)
+    om1 = _omega1(s)
     periods = 3 if quick else 10
-    T1 = 2 * math.pi / OMEGA1
-    st = _mode1_state(m, 1e-5)
+    T1 = 2 * math.pi / om1
+    st = _mode1_state(m, 1e-5, L)
     frames = 60 * periods + 1
-    res = simulate(m, [Clamps([Clamp(0, "start")])], SimulationSettings(end_time_s=(periods + 0.3) * T1,
-                   output_frames=frames), state=st)
+    res = simulate(m, [s.clamps()], s.settings(end_time_s=(periods + 0.3) * T1, output_frames=frames), state=st)
     T = _period_from_zero_crossings(res.frames_time, res.frames_positions[:, -1, 2])
-    f_ref = OMEGA1 / (2 * math.pi)
+    f_ref = om1 / (2 * math.pi)
     f = 1.0 / T
     return Row("cantilever first natural frequency", f_ref, f, abs(f - f_ref) / f_ref, 0.01, "Hz")
 
@@ -173,74 +207,84 @@ def cantilever_frequency(quick: bool = False) -> Row:
 def axial_wave_speed(quick: bool = False) -> Row:
     """Bar wave speed √(E/ρ) (< 2 %) from the fundamental axial mode of a free–free fiber,
     c = 2 L f, started with the velocity field v = v₀ cos(π x/L)."""
-    m = straight_fiber()
-    c = MATERIAL.wave_speed_m_s
-    T = 2 * L_M / c
+    s = case_setup("axial_wave_speed")
+    m = s.model()
+    L = _along_x(s)
+    c = math.sqrt(s.E / s.rho)
+    T = 2 * L / c
     periods = 5 if quick else 20
     st = State.at_rest(m)
-    st.v[:, 0] = 1e-3 * np.cos(math.pi * m.nodes_m[:, 0] / L_M)
-    res = simulate(m, [], SimulationSettings(end_time_s=(periods + 0.3) * T, output_frames=40 * periods + 1), state=st)
-    u = res.frames_positions[:, -1, 0] - L_M
+    x0 = m.nodes_m[:, 0] - m.nodes_m[0, 0]
+    st.v[:, 0] = 1e-3 * np.cos(math.pi * x0 / L)
+    res = simulate(m, [], s.settings(end_time_s=(periods + 0.3) * T, output_frames=40 * periods + 1), state=st)
+    u = res.frames_positions[:, -1, 0] - m.nodes_m[-1, 0]
     Tm = _period_from_zero_crossings(res.frames_time, u)
-    cm = 2 * L_M / Tm
+    cm = 2 * L / Tm
     return Row("axial wave speed", c, cm, abs(cm - c) / c, 0.02, "m/s")
 
 
 def energy_drift(quick: bool = False) -> Row:
     """Undamped free vibration: max |ETOTAL − ETOTAL₀| / ETOTAL₀ over 1e5 steps (< 0.5 %).
 
-    The cantilever is first deflected statically (damped) by a tip load with P L²/EI = 0.5
-    (tip deflection ≈ 16 % of L: geometrically nonlinear), then the load and damping are removed
-    and it vibrates freely; ETOTAL is then KE + SE (clamp reactions do no work)."""
+    The cantilever is first deflected statically (damped) by the config's tip load (P L²/EI = 0.5:
+    tip deflection ≈ 16 % of L, geometrically nonlinear), then the load and damping are removed and
+    it vibrates freely; ETOTAL is then KE + SE (clamp reactions do no work)."""
     from ..solver import choose_time_step
 
-    m = straight_fiber()
-    P = 0.5 * EI / L_M**2
-    pre = simulate(m, [Clamps([Clamp(0, "start")]), Loads([PointLoad(0, [0, 0, -P], "end")]),
-                       Damping(1.4 * OMEGA1)], SimulationSettings(end_time_s=4e-3, output_frames=2))
+    s = case_setup("energy_drift")
+    m = s.model()
+    _tip_force_z(s)
+    pre = simulate(m, [s.clamps(), s.loads(), Damping(s.damping_alpha)], s.settings(output_frames=2))
     st = pre.final_state.copy()
     st.v[:] = 0.0
     st.w[:] = 0.0
     st.t, st.step, st.acc[:] = 0.0, 0, 0.0
     n_steps = 20_000 if quick else 100_000
-    dt, _ = choose_time_step(m, [], SimulationSettings())
-    res = simulate(m, [Clamps([Clamp(0, "start")])],
-                   SimulationSettings(end_time_s=n_steps * dt * (1 - 1e-12), output_frames=2, history_every=50),
+    dt, _ = choose_time_step(m, [], s.settings())
+    res = simulate(m, [s.clamps()],
+                   s.settings(end_time_s=n_steps * dt * (1 - 1e-12), output_frames=2, history_every=50),
                    state=st)
     h = res.history
     tot = h["energy/total"]
     e0 = h["energy/strain"][0] + h["energy/kinetic"][0]
     drift = float(np.max(np.abs(tot - tot[0])) / e0)
-    span = " (SPEC: 1e5 steps, the slow variant only)" if quick else ""
+    span = "; the SPEC's 1e5 steps in the slow variant only" if quick else ""
     return Row(f"energy drift, undamped free vibration ({res.steps} steps{span})", 0.0, drift, drift, 0.005)
 
 
 def euler_buckling(quick: bool = False) -> Row:
     """Critical load of a pinned–pinned fiber compressed between plates vs π² E I / L² (< 2 %).
 
-    The fiber stands along z with a stress-free half-sine imperfection e₀ = L/2000; both end nodes
-    are pinned laterally (x, y fixed, rotations free), the lower plate is fixed and the upper one
-    closes slowly (damped). Pcr from a Southwell fit δ/P = δ/Pcr + e₀/Pcr of the mid-span
-    additional deflection δ against the upper plate force P."""
-    n = N_EL
-    z = np.linspace(0, L_M, n + 1)
-    e0 = L_M / 2000
-    x = np.column_stack([e0 * np.sin(math.pi * z / L_M), np.zeros_like(z), z])
-    m = build_model(x, [0, n + 1], R_M, MATERIAL)
-    Pcr = math.pi**2 * EI / L_M**2
-    T_load = 0.02 if quick else 0.04
-    U = 25e-6
-    om_pp = math.pi**2 / L_M**2 * math.sqrt(EI / (RHO * A_M2))
+    The fiber stands along z (the config's) with a stress-free half-sine imperfection e₀ = L/2000
+    along x; both end nodes are pinned laterally (x, y fixed, rotations free), the lower plate is
+    fixed and the upper one closes slowly (damped; the config's travel and speed, twice as fast in
+    the quick variant, smoothstep ramp). Pcr from a Southwell fit δ/P = δ/Pcr + e₀/Pcr of the
+    mid-span additional deflection δ against the upper plate force P."""
+    s = case_setup("euler_buckling")
+    (a, b), = s.fibers()
+    L = float(np.linalg.norm(b - a))
+    if abs(b[0] - a[0]) + abs(b[1] - a[1]) > 1e-12 * L or b[2] <= a[2] or s.plates.axis != "z":
+        raise ValueError(f"{s.path}: the case needs one fiber along +z between plates normal to z")
+    n = s.n_elements(L)
+    t = np.linspace(0.0, 1.0, n + 1)
+    e0 = L / 2000
+    x = a + t[:, None] * (b - a)
+    x[:, 0] += e0 * np.sin(math.pi * t)
+    m = s.model(nodes_m=x)
+    Pcr = math.pi**2 * s.EI / L**2
+    U = float(s.loading.displacement)
+    v = float(s.loading.velocity) * (2.0 if quick else 1.0)
+    p = s.plates
     eff = [Clamps([Clamp(0, "start", "xy"), Clamp(0, "end", "xy")]),
-           Plates(axis="z", lower="fixed", upper="moving", displacement_m=U, velocity_m_s=U / T_load,
-                  ramp="smoothstep"),
-           Damping(1.0 * om_pp)]
-    res = simulate(m, eff, SimulationSettings(output_frames=401))
+           Plates(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=U, velocity_m_s=v, ramp="smoothstep",
+                  lower_position_m=p.lower_position, upper_position_m=p.upper_position),
+           Damping(s.damping_alpha)]
+    res = simulate(m, eff, s.settings())
     tf = res.frames_time
-    a = res.frames_positions[:, n // 2, 0]
+    a_mid = res.frames_positions[:, n // 2, 0]
     h = res.history
     P = np.interp(tf, h["time"], h["plate_force"][:, 1])
-    d = a - e0
+    d = a_mid - a[0] - e0
     sel = (d > 2 * e0) & (d < 20 * e0) & (P > 0)
     if np.count_nonzero(sel) < 5:
         return Row("Euler buckling load (Southwell)", Pcr, float("nan"), float("nan"), 0.02, "N",

@@ -1,14 +1,17 @@
 """Verification cases of SPEC section 8, cases 5–8 (fiber–fiber contact and friction), through the dynamics.
 
 Every case runs the real solver (``simulate``) with the contact hook of
-:mod:`fiberpipe.solver.contact_effect` on the study's fiber (r = 0.25 mm, E = 15 GPa, ν = 0.3,
-ρ = 1380 kg/m³, 0.3 mm elements) at 0.9 × the stable step, and returns :class:`Row` (or a list).
-``quick=True`` is a shorter variant of the same case for the default test suite.
+:mod:`fiberpipe.solver.contact_effect` on the scene of its config in ``configs/verify/``
+(:mod:`fiberpipe.verification.case_config`: material, radius, element length, fibers, loads, damping,
+gravity, friction, plates, walls, drives, contact law, end time) — the study's fiber (r = 0.25 mm,
+E = 15 GPa, ν = 0.3, ρ = 1380 kg/m³, 0.3 mm elements) at 0.9 × the stable step — and returns
+:class:`Row` (or a list). ``quick=True`` is a shorter variant of the same case for the default test
+suite. ``sliding_parallel`` (not a SPEC 8 case: two element lengths, an initial velocity) has no config.
 
 * ``contact_pair_*``: two fibers pressed together (parallel: a line load; crossed at Φ: a point
   load over the crossing), damped to rest; δ read from the settled centre lines, F = the applied
   load (equilibrium); reference: Johnson's line law / exact elliptical Hertz K(Φ)δ^{3/2}.
-* ``three_beam_static``: the study's Fig. 11 / appendix Eqs. 6–7 with measured β.
+* ``three_beam_static``: the study's Fig. 11 / appendix Eqs. 6–7, β from the set-up.
 * ``rearrangement``: the study's Figs. 8–10: beam 1 driven down onto beams 2 and 3 (μ = 0.2);
   u_y(u_z) against the quasi-static kinematic curve and a slow reference run.
 * ``inclined_plate``: gravity tilted by θ on a flat plate, μ = 0.2: stick / a = g(sin θ − μ cos θ).
@@ -23,17 +26,16 @@ import time
 
 import numpy as np
 
-from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates, PointLoad,
+from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates,
                       SimulationSettings, State, Walls, build_model, choose_time_step, simulate)
 from ..solver.contact import contact_forces, gauss_points
 from ..solver.contact_effect import make_contact_hook
 from ..solver.laws import make_law
 from ..solver.neighbours import build_pairs
-from .cases import A_M2, E_PA, MATERIAL, NU, R_M, RHO, Row
+from .case_config import CaseSetup, case_setup
+from .cases import E_PA, MATERIAL, NU, R_M, Row
 
-G = 9.81
 E_STAR = E_PA / (2 * (1 - NU**2))
-LE = 0.3e-3
 
 
 def _fiber_nodes(p0, p1, n_el):
@@ -50,13 +52,13 @@ def _model(polys):
     return build_model(np.vstack(xs), off, R_M, MATERIAL)
 
 
-def johnson_delta(p_n_per_m, r=R_M):
+def johnson_delta(p_n_per_m, r=R_M, e_star=E_STAR):
     """Approach δ [m] of two equal parallel cylinders under line load P (Johnson 1985, line contact)."""
-    b = math.sqrt(4 * p_n_per_m * (r / 2) / (math.pi * E_STAR))
-    return p_n_per_m / (math.pi * E_STAR) * (2 * math.log(4 * r / b) - 1)
+    b = math.sqrt(4 * p_n_per_m * (r / 2) / (math.pi * e_star))
+    return p_n_per_m / (math.pi * e_star) * (2 * math.log(4 * r / b) - 1)
 
 
-def johnson_line_load(delta_m, r=R_M):
+def johnson_line_load(delta_m, r=R_M, e_star=E_STAR):
     """Line load P [N/m] at approach δ [m]: :func:`johnson_delta` inverted numerically (brentq), so the
     reference does not go through the contact law under test (its Lambert-W inverse is checked
     against this in tests/verification/test_contact_references.py)."""
@@ -65,8 +67,8 @@ def johnson_line_load(delta_m, r=R_M):
     if not 0.0 < delta_m < 8 * r / math.e**2:
         raise ValueError(f"δ = {delta_m} m is outside the line-contact range (0, 8R/e²)")
     # δ(P) increases monotonically on P < 8πE*R/e² (dδ/dP ∝ ln(8πE*R/P) − 2)
-    hi = 8 * math.pi * E_STAR * r / math.e**2
-    return brentq(lambda p: johnson_delta(p, r) - delta_m, 1e-30 * hi, hi, xtol=1e-300, rtol=1e-14, maxiter=200)
+    hi = 8 * math.pi * e_star * r / math.e**2
+    return brentq(lambda p: johnson_delta(p, r, e_star) - delta_m, 1e-30 * hi, hi, xtol=1e-300, rtol=1e-14, maxiter=200)
 
 
 # Exact elliptical Hertz K(Φ) [N/m^1.5] (F = K δ^{3/2}) of two of the study's fibres (E = 15 GPa,
@@ -117,57 +119,84 @@ def pair_force(model, x, law, fa, fb, n_gauss=2):
 # Case 5: two fibers pressed together
 # ---------------------------------------------------------------------------------------------
 
+def _line_load_z(s: CaseSetup, fiber: int) -> float:
+    """Downward line load (N/m) of the case's single ``scene.loads`` entry, a line force along −z on ``fiber``."""
+    ld = s.load(0)
+    if ld.line_force is None or ld.fiber != fiber or abs(ld.line_force[0]) + abs(ld.line_force[1]) > 0:
+        raise ValueError(f"{s.path}: the case needs one line load along z on fiber {fiber}")
+    return -float(ld.line_force[2])
+
+
+def _check_spec_fiber(s: CaseSetup) -> None:
+    """The SPEC's contact references (K_CROSSED_SPEC) hold for the study's fiber only."""
+    if not (math.isclose(s.E, E_PA, rel_tol=1e-9) and math.isclose(s.nu, NU, rel_tol=1e-9)
+            and math.isclose(s.r, R_M, rel_tol=1e-9)):
+        raise ValueError(f"{s.path}: SPEC 7's K(Φ) values are for E = 15 GPa, ν = 0.3, r = 0.25 mm; the config "
+                         f"gives E = {s.E:g} Pa, ν = {s.nu:g}, r = {s.r:g} m")
+
+
 def contact_pair_parallel(quick: bool = False) -> list[Row]:
-    """Parallel fibers (15 mm), lower clamped, upper pressed by a line load p, damped to rest.
+    """Parallel fibers (15 mm), lower clamped, upper pressed by a line load p, damped to rest
+    (configs/verify/contact-parallel.yaml; the full variant also runs p/10 and 10 p).
 
     F(δ) against Johnson's line contact (SPEC 7), independent of the contact law the run uses:
     reference = Johnson's P at the simulated δ (:func:`johnson_line_load`), measured = the applied p
     (at rest the contact carries it). δ = 2r − centre-line distance, mean over the inner nodes."""
-    loads = [66.0] if quick else [6.6, 66.0, 660.0]
-    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    s = case_setup("contact_parallel")
+    (a0, a1), (b0, b1) = s.fibers()
+    if not (np.allclose(a1 - a0, b1 - b0) and np.allclose((b0 - a0)[:2], 0.0) and b0[2] > a0[2]):
+        raise ValueError(f"{s.path}: the case needs two equal parallel fibers, fiber 1 above fiber 0 along z")
+    p0 = _line_load_z(s, 1)
+    loads = [p0] if quick else [p0 / 10, p0, 10 * p0]
+    law = s.law()
     rows = []
-    L = 15e-3
     for p in loads:
-        m = _model([((0, 0, 0), (L, 0, 0), 50), ((0, 0, 2 * R_M), (L, 0, 2 * R_M), 50)])
-        eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]), Damping(2e6),
-               make_contact_hook(m, law=law)]
-        res = simulate(m, eff, SimulationSettings(end_time_s=0.3e-3, output_frames=2))
+        m = s.model()
+        eff = [s.clamps(), s.loads(p / p0), Damping(s.damping_alpha), make_contact_hook(m, law=law)]
+        res = simulate(m, eff, s.settings())
         x = res.frames_positions[-1]
-        d = 2 * R_M - (x[m.node_fiber == 1, 2] - x[m.node_fiber == 0, 2])
+        d = 2 * s.r - (x[m.node_fiber == 1, 2] - x[m.node_fiber == 0, 2])
         delta = float(np.mean(d[1:-1]))
-        ref = johnson_line_load(delta)
+        ref = johnson_line_load(delta, s.r, s.E_star)
         rows.append(Row(f"contact parallel, p = {p:g} N/m: Johnson P(δ = {delta * 1e9:.2f} nm)", ref, p,
                         abs(p - ref) / ref, 0.02, "N/m",
-                        f"Johnson δ(p) = {johnson_delta(p) * 1e9:.2f} nm; δ spread {np.ptp(d[1:-1]) / delta:.1e}"))
+                        f"Johnson δ(p) = {johnson_delta(p, s.r, s.E_star) * 1e9:.2f} nm; "
+                        f"δ spread {np.ptp(d[1:-1]) / delta:.1e}"))
     return rows
 
 
-def contact_pair_crossed(phi_deg: float, quick: bool = False, force_n: float = 1e-3) -> Row:
-    """Crossed fibers at Φ: lower clamped, upper pressed at the crossing by a point force F, damped
-    to rest; F against K(Φ)δ^{3/2} with the exact Hertz K(Φ) of SPEC 7 (:data:`K_CROSSED_SPEC`,
-    numbers, not the law under test), δ from the settled centre lines."""
+def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
+    """Crossed fibers at Φ (configs/verify/contact-crossed-<Φ>.yaml): lower clamped, upper pressed
+    at the crossing by a point force F, damped to rest; F against K(Φ)δ^{3/2} with the exact Hertz
+    K(Φ) of SPEC 7 (:data:`K_CROSSED_SPEC`, numbers, not the law under test), δ from the settled
+    centre lines. The quick variant settles for half the config's end time."""
     if phi_deg not in K_CROSSED_SPEC:
         raise ValueError(f"no reference K for Φ = {phi_deg}°: SPEC 7 gives {sorted(K_CROSSED_SPEC)}")
-    L = 15e-3
-    n_el = 50
-    c = L / 2
-    ph = math.radians(phi_deg)
-    u = np.array([math.cos(ph), math.sin(ph), 0.0])
-    mid = np.array([c, 0.0, 2 * R_M])
-    m = _model([((0, 0, 0), (L, 0, 0), n_el), (mid - u * L / 2, mid + u * L / 2, n_el)])
-    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
+    s = case_setup(f"contact_crossed_{phi_deg:g}")
+    _check_spec_fiber(s)
+    (a0, a1), (b0, b1) = s.fibers()
+    ta, tb = (a1 - a0) / np.linalg.norm(a1 - a0), (b1 - b0) / np.linalg.norm(b1 - b0)
+    phi_cfg = math.degrees(math.acos(min(1.0, abs(float(ta @ tb)))))
+    if abs(phi_cfg - phi_deg) > 1e-6:
+        raise ValueError(f"{s.path}: its fibers cross at {phi_cfg:.6g}°, not {phi_deg:g}°")
+    ld = s.load(0)
+    if ld.force is None or ld.fiber != 1 or not isinstance(ld.at, int):
+        raise ValueError(f"{s.path}: the case needs one point load on a node of fiber 1 (the crossing)")
+    force_n = -float(ld.force[2])
+    m = s.model()
+    law = s.law()
     K = K_CROSSED_SPEC[phi_deg]
-    eff = [Clamps(_clamp_all(m, 0)), Loads([PointLoad(1, [0, 0, -force_n], n_el // 2)]), Damping(5e4),
-           make_contact_hook(m, law=law)]
-    T = 0.6e-3 if quick else 1.2e-3
-    res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=2))
+    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha), make_contact_hook(m, law=law)]
+    T = s.end_time / 2 if quick else s.end_time
+    res = simulate(m, eff, s.settings(end_time_s=T))
     x = res.frames_positions[-1]
-    # δ at the crossing: distance from B's middle node (the loaded crossing) to A's (clamped, straight) axis
-    a0, a1 = x[0], x[n_el]
-    pb = x[n_el + 1 + n_el // 2]
-    ta = (a1 - a0) / np.linalg.norm(a1 - a0)
-    dist = float(np.linalg.norm(np.cross(pb - a0, ta)))
-    delta = 2 * R_M - dist
+    # δ at the crossing: distance from B's loaded node (over the crossing) to A's (clamped, straight) axis
+    ia = np.nonzero(m.node_fiber == 0)[0]
+    pa0, pa1 = x[ia[0]], x[ia[-1]]
+    pb = x[int(m.node_offsets[1]) + ld.at]
+    ua = (pa1 - pa0) / np.linalg.norm(pa1 - pa0)
+    dist = float(np.linalg.norm(np.cross(pb - pa0, ua)))
+    delta = 2 * s.r - dist
     ref = K * delta**1.5
     f_meas = pair_force(m, x, law, 0, 1)[2]
     return Row(f"contact crossed Φ = {phi_deg:g}°: K(Φ)δ^1.5, K = {K:.4g} N/m^1.5 (SPEC), δ = {delta * 1e9:.2f} nm",
@@ -179,15 +208,7 @@ def contact_pair_crossed(phi_deg: float, quick: bool = False, force_n: float = 1
 # Case 6: the study's static 3-beam case (Fig. 11, appendix Eqs. 6-7)
 # ---------------------------------------------------------------------------------------------
 
-def _three_beams(L, n_el, z1_extra=0.0):
-    """Beam 1 (fiber 0) on beams 2 (fiber 1, y = −r) and 3 (fiber 2, y = +r), lying on z = 0."""
-    h = math.sqrt(3.0) * R_M
-    return _model([((0, 0, R_M + h + z1_extra), (L, 0, R_M + h + z1_extra), n_el),
-                   ((0, -R_M, R_M), (L, -R_M, R_M), n_el),
-                   ((0, R_M, R_M), (L, R_M, R_M), n_el)])
-
-
-def three_beam_static(quick: bool = False, alphas=(1e5, 0.0)) -> list[Row]:
+def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
     """The study's static 3-beam case (Fig. 11, appendix Eqs. 6–7), β from the set-up geometry.
 
     Beam 1 (fiber 0) lies on beams 2 and 3 (fibers 1, 2; y = ∓r), which lie on a fixed plate (z = 0)
@@ -206,30 +227,39 @@ def three_beam_static(quick: bool = False, alphas=(1e5, 0.0)) -> list[Row]:
 
     α = 0 rows are informational: the undamped run (no dissipation: nothing brings the suddenly
     loaded beams to rest) does not settle in T; the note gives its NF range.
+
+    Scene, loads, α, T and frames from configs/verify/three-beam-static.yaml (15 mm beams, q = 66 N/m);
+    ``alphas`` defaults to (the config's α, 0); quick: 6 mm beams, q only; full: q/4, q/2, q.
     """
-    L = 15e-3 if not quick else 6e-3
-    n_el = int(round(L / LE))
-    qs = [66.0] if quick else [16.5, 33.0, 66.0]
-    T = 0.6e-3
-    frames = 41
-    law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
-    w_line = RHO * A_M2 * G
+    s = case_setup("three_beam_static")
+    L = 6e-3 if quick else s.lengths()[0]
+    q0 = _line_load_z(s, 0)
+    qs = [q0] if quick else [q0 / 4, q0 / 2, q0]
+    alphas = (s.damping_alpha, 0.0) if alphas is None else alphas
+    T = s.end_time
+    frames = s.output_frames
+    law = s.law()
+    g = s.gravity
+    if abs(g[0]) + abs(g[1]) > 0 or s.plates.axis != "z" or set(s.walls) != {"y"}:
+        raise ValueError(f"{s.path}: the case needs gravity along z, plates normal to z and walls normal to y")
+    w_line = s.rho * s.A * -g[2]
+    p = s.plates
     rows = []
     for alpha in alphas:
         err = {"NF": [], "RF": []}
         for q in qs:
-            m = _three_beams(L, n_el)
+            m = s.model(L)
             b1, b2 = m.node_fiber == 0, m.node_fiber == 1
             x0 = m.nodes_m
             beta0 = math.atan2(x0[b1, 1].mean() - x0[b2, 1].mean(), x0[b1, 2].mean() - x0[b2, 2].mean())
-            eff = [Gravity([0, 0, -G]), Loads([LineLoad(0, [0, 0, -q])]),
-                   Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-                   Walls({"y": (-2 * R_M, 2 * R_M)}), make_contact_hook(m, law=law)]
+            eff = [Gravity(g), s.loads(q / q0),
+                   Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
+                          upper_position_m=p.upper_position),
+                   Walls(s.walls), make_contact_hook(m, law=law)]
             if alpha > 0:
                 eff.append(Damping(alpha))
             xs = []
-            res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=frames),
-                           on_frame=lambda k, t, x: xs.append(x.copy()))
+            res = simulate(m, eff, s.settings(), on_frame=lambda k, t, x: xs.append(x.copy()))
             QW = (q + w_line) * L
             nf_ref = QW / (2 * math.cos(beta0))
             rf_ref = math.hypot(0.5 * QW * math.tan(beta0), 0.5 * (q + 3 * w_line) * L)
@@ -283,18 +313,25 @@ def kinematic_uy(uz, r=R_M):
     return np.sqrt(np.maximum(4 * r * r - h * h, 0.0)) - r
 
 
-def rearrangement_run(velocity_m_s, alpha, *, length_m=15e-3, uz_m=0.3e-3, mu=0.2, frames=61):
-    """Beam 1 driven down by ``uz_m`` at ``velocity_m_s`` onto beams 2/3 lying on a fixed plate.
+def rearrangement_run(velocity_m_s=None, alpha=None, *, length_m=None, setup: CaseSetup | None = None):
+    """Beam 1 driven down onto beams 2/3 lying on a fixed plate (configs/verify/study-rearrangement.yaml:
+    material, geometry, gravity, plate, drive, μ, α, law, frames); ``velocity_m_s`` (default: the
+    drive's), ``alpha`` (default: the config's) and ``length_m`` (default: the config's beams) vary it.
     Returns (u_z (K,), u_y (K,) mean of beams 2 and 3 (outward), wall time s, result)."""
-    n_el = int(round(length_m / LE))
-    m = _three_beams(length_m, n_el)
-    eff = [Gravity([0, 0, -G]), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-           Drives([Drive(0, [0, 0, -uz_m], velocity_m_s)]),
-           make_contact_hook(m, law=make_law("hertz_oriented", E_pa=E_PA, nu=NU), friction=True, mu=mu)]
+    s = setup or case_setup("rearrangement")
+    (d,) = s.drives
+    v = float(d.velocity) if velocity_m_s is None else velocity_m_s
+    alpha = s.damping_alpha if alpha is None else alpha
+    m = s.model(length_m)
+    p = s.plates
+    eff = [Gravity(s.gravity), Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
+                                      upper_position_m=p.upper_position),
+           Drives([Drive(d.fiber, [float(c) for c in d.displacement], v)]),
+           make_contact_hook(m, law=s.law(), friction=True, mu=s.mu)]
     if alpha > 0:
         eff.append(Damping(alpha))
     t0 = time.perf_counter()
-    res = simulate(m, eff, SimulationSettings(output_frames=frames))
+    res = simulate(m, eff, s.settings())
     wall = time.perf_counter() - t0
     X = res.frames_positions
     x0 = X[0]
@@ -310,6 +347,12 @@ def _curve_error(uz, uy, uz_ref, uy_ref):
     ref = np.interp(uz, np.asarray(uz_ref)[o], np.asarray(uy_ref)[o])
     sel = uz <= np.max(uz_ref) + 1e-12
     return float(np.max(np.abs(uy[sel] - ref[sel])) / np.max(np.abs(uy_ref)))
+
+
+def _num(x: float) -> str:
+    """1e5 for powers of ten, else %g (row labels)."""
+    e = round(math.log10(x)) if x > 0 else 0
+    return f"1e{e}" if x > 0 and math.isclose(x, 10.0**e, rel_tol=1e-9) and abs(e) >= 3 else f"{x:g}"
 
 
 def contact_gaps(model, X, a: int = 0, b: int = 1) -> np.ndarray:
@@ -334,51 +377,57 @@ def rearrangement(quick: bool = False) -> list[Row]:
     Its note gives how far beams 2/3 separate from beam 1: they do lose contact (in 55 of the 61
     frames, by up to 2.5 % of r), but run only slightly ahead of the quasi-static curve.
     """
-    v_fast = 1.0 / 60.0  # 1e3 mm/min
-    L = 3e-3 if quick else 15e-3
-    runs = {"α = 1e5, 1e3 mm/min": (v_fast, 1e5), "α = 0, 1e3 mm/min": (v_fast, 0.0)}
+    s = case_setup("rearrangement")
+    (d,) = s.drives
+    v_fast = float(d.velocity)  # the config's 1e3 mm/min
+    a_cfg = s.damping_alpha  # the config's 1e5 1/s
+    L = None if quick else 15e-3  # quick: the config's 3 mm beams; full: the study's 15 mm
+    damped = f"α = {_num(a_cfg)}, {_num(v_fast * 6e4)} mm/min"
+    undamped = f"α = 0, {_num(v_fast * 6e4)} mm/min"
+    slow = f"α = {_num(a_cfg)}, {_num(v_fast * 6e3)} mm/min (reference)"
+    runs = {damped: (v_fast, a_cfg), undamped: (v_fast, 0.0)}
     if not quick:
-        runs["α = 1e5, 100 mm/min (reference)"] = (v_fast / 10, 1e5)
-    out = {k: rearrangement_run(v, a, length_m=L) for k, (v, a) in runs.items()}
-    model = _three_beams(L, int(round(L / LE)))
+        runs[slow] = (v_fast / 10, a_cfg)
+    out = {k: rearrangement_run(v, a, length_m=L, setup=s) for k, (v, a) in runs.items()}
+    model = s.model(L)
     rows = []
     if quick:
         ref_name = "kinematic"
-        ref = lambda uz: kinematic_uy(uz)  # noqa: E731
+        ref = lambda uz: kinematic_uy(uz, s.r)  # noqa: E731
     else:
         ref_name = "slow run"
-        uz_r, uy_r = out["α = 1e5, 100 mm/min (reference)"][:2]
+        uz_r, uy_r = out[slow][:2]
         ref = lambda uz: np.interp(uz, uz_r[np.argsort(uz_r)], uy_r[np.argsort(uz_r)])  # noqa: E731
     errs = {}
-    for k in ("α = 1e5, 1e3 mm/min", "α = 0, 1e3 mm/min"):
+    for k in (damped, undamped):
         uz, uy, wall, res = out[k]
         yref = ref(uz)
         err = float(np.max(np.abs(uy - yref)) / np.max(np.abs(yref)))
-        kin = float(np.max(np.abs(uy - kinematic_uy(uz))) / np.max(np.abs(kinematic_uy(uz))))
+        kin = float(np.max(np.abs(uy - kinematic_uy(uz, s.r))) / np.max(np.abs(kinematic_uy(uz, s.r))))
         errs[k] = err
         gap = np.maximum(contact_gaps(model, res.frames_positions, 0, 1),
                          contact_gaps(model, res.frames_positions, 0, 2))
         lost = np.any(gap.min(axis=1, keepdims=True) > 1e-12, axis=1)  # beam 2 or 3 wholly off beam 1
         note = (f"max curve error {100 * err:.3f} %, vs kinematic {100 * kin:.3f} %, u_y(end) {uy[-1] * 1e3:.4f} mm, "
-                f"surface gap beam 1–beams 2/3 up to {gap.max() * 1e6:.3g} µm ({100 * gap.max() / R_M:.3g} % r), "
+                f"surface gap beam 1–beams 2/3 up to {gap.max() * 1e6:.3g} µm ({100 * gap.max() / s.r:.3g} % r), "
                 f"contact lost in {np.count_nonzero(lost)}/{len(lost)} frames; wall {wall:.1f} s, {res.steps} steps")
-        if k.startswith("α = 0"):
-            note += (f"; the damped run's error {100 * errs['α = 1e5, 1e3 mm/min']:.3f} %. Not reproduced: departs "
+        if k == undamped:
+            note += (f"; the damped run's error {100 * errs[damped]:.3f} %. Not reproduced: departs "
                      f"less than the 5 % band (no rolling: docs/contact.md)" if err <= 0.05 else "")
             rows.append(Row(f"rearrangement {k}: departs from the {ref_name} (the study's Fig. 8(c)): "
                             f"max |u_y − ref| / max u_y,ref beyond the 5 % band (informational)",
                             float(yref[-1]), float(uy[-1]), err, 0.05, "m", note, must_exceed=True,
                             informational=True,
-                            data={"curve_error": err, "damped_curve_error": errs["α = 1e5, 1e3 mm/min"],
+                            data={"curve_error": err, "damped_curve_error": errs[damped],
                                   "max_gap_m": float(gap.max()), "frames_contact_lost": int(np.count_nonzero(lost)),
                                   "frames": len(lost)}))
         else:
             rows.append(Row(f"rearrangement {k}: max |u_y − ref| / max u_y,ref vs {ref_name}",
                             float(yref[-1]), float(uy[-1]), err, 0.05, "m", note))
     if not quick:
-        uz, uy, wall, res = out["α = 1e5, 100 mm/min (reference)"]
-        kin = float(np.max(np.abs(uy - kinematic_uy(uz))) / np.max(np.abs(kinematic_uy(uz))))
-        rows.append(Row("rearrangement reference (100 mm/min, α = 1e5) vs kinematic curve", float(kinematic_uy(uz[-1])),
+        uz, uy, wall, res = out[slow]
+        kin = float(np.max(np.abs(uy - kinematic_uy(uz, s.r))) / np.max(np.abs(kinematic_uy(uz, s.r))))
+        rows.append(Row(f"rearrangement reference ({slow.replace(' (reference)', '')}) vs kinematic curve", float(kinematic_uy(uz[-1], s.r)),
                         float(uy[-1]), kin, 0.05, "m", f"wall {wall:.1f} s, {res.steps} steps"))
     return rows
 
@@ -387,35 +436,43 @@ def rearrangement(quick: bool = False) -> list[Row]:
 # Case 8: friction on an inclined plate
 # ---------------------------------------------------------------------------------------------
 
-def inclined_plate(theta_deg: float, quick: bool = False, mu: float = 0.2) -> Row:
-    """A 3 mm fiber on a flat plate under gravity tilted by θ (equivalent to an inclined plate).
-    tan θ < μ: sticks (displacement vs ½ g sin θ T², must be < 1 % of it);
-    else a = g(sin θ − μ cos θ) from a quadratic fit of the mean position (< 1 %)."""
-    L = 3e-3
-    n_el = 10
-    th = math.radians(theta_deg)
-    gvec = [G * math.sin(th), 0.0, -G * math.cos(th)]
-    probe = _model([((0, 0, R_M), (L, 0, R_M), n_el)])
-    eff0 = [Gravity(gvec), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0)]
-    dt, _ = choose_time_step(probe, eff0, SimulationSettings())
+def inclined_plate(case: str = "friction_inclined_slide", quick: bool = False) -> Row:
+    """A 3 mm fiber on a flat plate under gravity tilted by θ (equivalent to an inclined plate), μ
+    (configs/verify/friction-inclined-stick.yaml, θ = 5°, and -slide.yaml, θ = 20°; θ and g from the
+    config's gravity, μ from its friction). tan θ < μ: sticks (displacement vs ½ g sin θ T², must be
+    < 1 % of it); else a = g(sin θ − μ cos θ) from a quadratic fit of the mean position (< 1 %).
+    T = the config's end time (a third of it in the quick variant)."""
+    s = case_setup(case)
+    gvec = s.gravity
+    if gvec[1] != 0 or not gvec[2] < 0 or s.plates.axis != "z":
+        raise ValueError(f"{s.path}: the case needs gravity in the x-z plane, downwards, and a plate normal to z")
+    g = math.hypot(gvec[0], gvec[2])
+    th = math.atan2(gvec[0], -gvec[2])
+    theta_deg = math.degrees(th)
+    mu = s.mu
+    probe = s.model()
+    p = s.plates
+    plates = dict(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
+                  upper_position_m=p.upper_position)
+    eff0 = [Gravity(gvec), Plates(**plates)]
+    dt, _ = choose_time_step(probe, eff0, s.settings())
     # start at the static penetration of the plate penalty (k = 0.1 m (2/Δt)², same δ on every node)
-    d_s = G * math.cos(th) / (0.1 * (2.0 / dt) ** 2)
-    m = _model([((0, 0, R_M - d_s), (L, 0, R_M - d_s), n_el)])
-    eff = [Gravity(gvec), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-           make_contact_hook(m, contact=False, friction=True, mu=mu)]
-    T = 1e-3 if quick else 3e-3
-    res = simulate(m, eff, SimulationSettings(end_time_s=T, output_frames=41))
+    d_s = g * math.cos(th) / (0.1 * (2.0 / dt) ** 2)
+    m = s.model(nodes_m=probe.nodes_m - np.array([0.0, 0.0, d_s]))
+    eff = [Gravity(gvec), Plates(**plates), make_contact_hook(m, contact=False, friction=True, mu=mu)]
+    T = s.end_time / 3 if quick else s.end_time
+    res = simulate(m, eff, s.settings(end_time_s=T))
     t = res.frames_time
     xm = res.frames_positions[:, :, 0].mean(axis=1) - m.nodes_m[:, 0].mean()
     if math.tan(th) < mu:
-        scale = 0.5 * G * math.sin(th) * T**2
-        return Row(f"friction inclined θ = {theta_deg:g}° (tan θ < μ = {mu:g}): sticks, |u|/(½ g sin θ T²)",
+        scale = 0.5 * g * math.sin(th) * T**2
+        return Row(f"friction inclined θ = {theta_deg:.4g}° (tan θ < μ = {mu:g}): sticks, |u|/(½ g sin θ T²)",
                    0.0, float(abs(xm[-1])), float(abs(xm[-1]) / scale), 0.01, "m")
     sel = t > 0.1 * T
     c = np.polyfit(t[sel], xm[sel], 2)
     a = 2 * c[0]
-    ref = G * (math.sin(th) - mu * math.cos(th))
-    return Row(f"friction inclined θ = {theta_deg:g}° (tan θ > μ = {mu:g}): a = g(sin θ − μ cos θ)", ref, a,
+    ref = g * (math.sin(th) - mu * math.cos(th))
+    return Row(f"friction inclined θ = {theta_deg:.4g}° (tan θ > μ = {mu:g}): a = g(sin θ − μ cos θ)", ref, a,
                abs(a - ref) / ref, 0.01, "m/s²")
 
 
@@ -460,8 +517,8 @@ CONTACT_CASES = {
     "contact_crossed_90": _crossed(90.0),
     "three_beam_static": three_beam_static,
     "rearrangement": rearrangement,
-    "friction_inclined_stick": lambda quick=False: inclined_plate(5.0, quick),
-    "friction_inclined_slide": lambda quick=False: inclined_plate(20.0, quick),
+    "friction_inclined_stick": lambda quick=False: inclined_plate("friction_inclined_stick", quick),
+    "friction_inclined_slide": lambda quick=False: inclined_plate("friction_inclined_slide", quick),
     "sliding_parallel": sliding_parallel,
 }
 
