@@ -282,6 +282,11 @@ class ContactConfig(Section):
     overlap_release: Optional[Time] = Field(
         None, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time (default 1e-4 s)"
     )
+    blend_length: Optional[Length] = Field(
+        None, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
+        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (default 1 mm; "
+        "half the element length keeps crossings spanning several elements off the point law, docs/contact.md)"
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -296,6 +301,10 @@ class ContactConfig(Section):
         if self.angle is not None and not (0 <= self.angle <= math.pi / 2 + 1e-12):
             raise ValueError("contact.angle must be between 0 and 90 deg")
         _positive("contact.overlap_release", self.overlap_release)
+        if self.blend_length is not None:
+            _positive("contact.blend_length", self.blend_length)
+            if self.law != "hertz_oriented":
+                raise ValueError(f"contact.blend_length applies to law 'hertz_oriented' only (the law is {self.law!r})")
         return self
 
 

@@ -301,6 +301,8 @@ def law_from_config(contact_cfg, material):
                         S0=float(contact_cfg.s0), K_def=float(contact_cfg.k_def), **kw)
     if name == "hertz_crossed":
         return make_law("hertz_crossed", phi_deg=math.degrees(float(contact_cfg.angle)), **kw)
+    if name == "hertz_oriented" and getattr(contact_cfg, "blend_length", None) is not None:
+        kw["blend_length_m"] = float(contact_cfg.blend_length)
     return make_law(name, **kw)
 
 

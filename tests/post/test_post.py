@@ -11,7 +11,7 @@ from fiberpipe.model.mesh import mesh_polylines
 from fiberpipe.polylines import Polylines
 from fiberpipe.post.compaction import fit_van_wyk
 from fiberpipe.post.curves import curve_error
-from fiberpipe.post.energies import energy_balance, quasi_static_ratio
+from fiberpipe.post.energies import contact_energy_created, energy_balance, quasi_static_ratio
 from fiberpipe.post.geometry import projected_curvature, volume_fraction
 from fiberpipe.post.positions import position_error
 from fiberpipe.post.report import run_post
@@ -63,6 +63,20 @@ def test_energy_balance_and_quasi_static_ratio():
     assert energy_balance(e)[-1] == pytest.approx(0.1 / 1.2)
 
 
+def test_contact_energy_created_bounds_what_the_contact_made():
+    """ALLPW − ALLFD is minus the stored contact energy for a sound contact (nothing created) and
+    grows by whatever the contact adds on top (the bound reads it back exactly)."""
+    t = np.linspace(0, 1, 11)
+    stored = 0.2 * t**2  # penalty + tangential springs, J
+    loss = 0.3 * t  # friction loss booked in ALLFD and (as Abaqus does) in ALLPW
+    sound = {"contact": -stored + loss, "friction": loss, "external": t}
+    assert np.all(contact_energy_created(sound) == 0.0)
+    made = 0.05 * t  # energy the discretisation creates
+    bad = {"contact": -stored + loss + made + stored, "friction": loss, "external": t}  # stored released too
+    assert contact_energy_created(bad) == pytest.approx(made + 0 * t)
+    assert contact_energy_created({"contact": 0.1 * t, "external": t})[-1] == pytest.approx(0.1)  # no friction
+
+
 def test_curve_error():
     U = np.linspace(0, 1e-3, 50)
     assert curve_error(U, U * 10, U, U * 10) == pytest.approx(0)
@@ -101,6 +115,9 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     s = json.loads((tmp_path / "post" / "summary.json").read_text())
     assert s["final_load_N"] == pytest.approx(0.2)
     assert s["energy_balance_residual_max"] < 1e-9
+    assert s["contact_energy_created_J"] == 0.0 and s["contact_energy_created_over_external"] == 0.0
+    report = (tmp_path / "post" / "report.md").read_text()
+    assert "energy created by the contact, at least" in report and "above 5 %" not in report
     assert s["contacts_per_fiber_final"] == pytest.approx(3.0)
     # v_f = fiber volume / (1.2 mm walls × plate gap × fiber length + 2r)
     vol = np.pi * (0.25e-3) ** 2 * 6e-3 * 2
@@ -123,3 +140,11 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     cells = dict(zip([c.strip() for c in head.strip("|").split("|")], [c.strip() for c in row.strip("|").split("|")]))
     assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
     assert (tmp_path / "cmp" / "comparison.png").exists()
+
+
+def test_report_flags_energy_created_by_the_contact():
+    from fiberpipe.post.report import _created
+
+    assert "above 5 %" in _created({"contact_energy_created_J": 0.13, "contact_energy_created_over_external": 10.6})
+    assert "above 5 %" not in _created({"contact_energy_created_J": 1e-6, "contact_energy_created_over_external": 0.01})
+    assert _created({}) == "n/a"

@@ -1,0 +1,33 @@
+"""scene.contact.blend_length: the hertz_oriented law's ℓ_blend from the config (issue 5 follow-up,
+docs/contact.md §11)."""
+
+import pytest
+
+from fiberpipe.config import validate_config
+from fiberpipe.errors import ConfigError
+from fiberpipe.solver.contact_effect import law_from_config
+from fiberpipe.solver.laws import P_LBLEND
+from fiberpipe.solver.model import Material
+
+
+def _scene(contact):
+    return validate_config({"name": "b", "input": {"fibers": "x.h5"},
+                            "scene": {"effects": ["contact"], "contact": contact}}).scene
+
+
+def test_blend_length_reaches_the_law():
+    mat = Material(youngs_modulus_pa=15e9, poisson_ratio=0.3, density_kg_m3=1380.0)
+    law = law_from_config(_scene({"law": "hertz_oriented", "blend_length": "0.15 mm"}).contact, mat)
+    assert law.params()[P_LBLEND] == pytest.approx(0.15e-3)
+    default = law_from_config(_scene({"law": "hertz_oriented"}).contact, mat)
+    assert default.params()[P_LBLEND] == pytest.approx(1e-3)
+
+
+@pytest.mark.parametrize("contact, msg", [
+    ({"law": "hertz_oriented", "blend_length": "-1 mm"}, "blend_length"),
+    ({"law": "hertz_parallel", "blend_length": "0.15 mm"}, "hertz_oriented"),
+    ({"law": "hertz_oriented", "blend_length": "3 kg"}, "blend_length"),
+])
+def test_blend_length_is_checked(contact, msg):
+    with pytest.raises(ConfigError, match=msg):
+        _scene(contact)
