@@ -80,10 +80,26 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:07 UTC `make reproduce`
 
 ![paper-40 specimens under the three contact models](img/contact_ensemble.png)
 
+- **The laws themselves, from the same state** (`make law-branch`, `benchmarks/law_branch.py`,
+  sixth session): each specimen compacted once with the shipped law at the study's settings,
+  checkpointed at U = 0.95 mm, then continued to 1.15 mm with each law from that one state, beside
+  two controls with the shipped law (restarted; restarted with gravity × (1 + 1e-8)). Over the eight
+  specimens **parallel − oblique 6° = −0.95 % ± 0.83 %** (mean ± s.e., p = 0.29, parallel above in
+  3 of 8), against a restart's +0.99 % ± 0.68 % and chance alone of 0.8 % (median; 5.1 % at most)
+  over the same 0.2 mm. At these penetrations the study's oblique model is the stiffer one
+  (largest penetration at the end 0.10–0.53 µm against 0.16–0.67 µm for the parallel model), and
+  both carry 1–23 % more than the orientation-aware law (0.27–0.75 µm) from the same state. So the study's
+  +57 % is not an effect of its two laws on a bundle like ours at U ≤ 1.15 mm; without the study's
+  scan we cannot tell what in its specimen made the difference.
+
 - **Compacted to U = 3 mm (`paper-40/compaction*`, 1e4 mm/min)**: rearrangement until U = 1.26–1.62 mm,
   a steep, bursty rise from U = 2.48–2.83 mm (steepness 2.6–6.8) to peaks of 40–105 N
   (v_f 0.386 → 0.710 by the post stage's measure); the final values are single points of a bursty
-  curve (12.1–27.9 N).
+  curve (12.1–27.9 N). **These peaks are not quasi-static**: at those loads the point contact law
+  created energy (ALLPW − ALLFD = +0.05 to +0.16 J against 0.014–0.022 J of plate work) and the
+  bundle rattled; docs/contact.md §11 (sixth session) has the measurements, the post stage now
+  reports the bound (`contact_energy_created_J`) and `scene.contact.blend_length` removes it for
+  the orientation-aware law.
 - **Undamped (α = 0)** the run completes with K_e/S_e up to 6.05 (not quasi-static, as the study
   found) and an energy residual of 0.032; α = 1e4: K_e/S_e 1.19, residual 0.0008.
 - Every case of the study runs to the end; energy residuals are below 0.06 everywhere.
@@ -184,6 +200,10 @@ def main(argv=None):
         if t.exists():
             text += [f"## Contact models over specimens, {title} (`benchmarks/contact_ensemble.py`)", "",
                      t.read_text().strip(), ""]
+    t = ROOT / "runs" / "contact_ensemble" / "branch-0.95mm.md"  # make law-branch, if run
+    if t.exists():
+        text += ["## The contact laws from the same state, the study's settings (`benchmarks/law_branch.py`)", "",
+                 t.read_text().strip(), ""]
     if diverged:
         text += ["## Runs that diverged", ""]
         for d in diverged:
