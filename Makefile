@@ -18,7 +18,7 @@ help:
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 15 min)"
 	@echo "make contact-ensemble  the study's contact models over 8 paper-40 specimens (≈ 25 min on 2 cores)"
-	@echo "make law-branch  the contact law's own effect: every law from the same state at U = 0.95 mm (≈ 20 min on 2 cores)"
+	@echo "make law-branch  the contact law's own effect: every law from the same state at U = 0.95 mm (≈ 40 min on 2 busy cores)"
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)

@@ -22,7 +22,8 @@ law's deterministic effect and the trajectory's chance are mixed. Here every law
 
 The specimens are those of ``contact_ensemble.py`` (seed 0: the shipped ``data-samples/paper-40``;
 others are made, ≈ 4.5 min each, and kept in ``DIR/seed-N``, default ``runs/contact_ensemble``).
-A seed costs one study-settings run (≈ 150 s on one core) plus four continuations (≈ 25 s each).
+A seed costs one study-settings run plus four continuations: measured 237–410 s and 27–149 s each with
+the two cores busy (8 seeds in 38 min with ``--jobs 2``, 2026-11-22).
 Results per seed go to ``DIR/seed-N/branch-<U>.json``; ``--reuse`` only rewrites the table.
 """
 
