@@ -247,7 +247,7 @@ def test_effects_parameter_checks():
     with pytest.raises(FiberpipeError):
         Walls({"x": (1.0, 0.0)})
     m = build_model(straight(10), [0, 11], R, MAT)
-    with pytest.raises(FiberpipeError, match="fiber 3"):
+    with pytest.raises(FiberpipeError, match=r"clamps\[0\]\.fiber = 3: the model has 1 fiber"):
         simulate(m, [Clamps([Clamp(3, "start")])], SimulationSettings(end_time_s=1e-6))
 
 
