@@ -23,33 +23,14 @@ from fiberpipe.solver import (Damping, Drive, Drives, LineLoad, Loads, Material,
                               Walls, build_model, simulate)
 from fiberpipe.solver.integrator import STATUS_LEFT_BOX, STATUS_PENETRATION
 
+from _scenes import SMALL_SCENE
+
 REPO = Path(__file__).resolve().parents[1]
 MAT = Material(15e9, 1380.0, 0.3)
 R = 0.25e-3
 
-# a small compaction scene: plates, walls, gravity, mass- and stiffness-proportional damping
-SCENE = {
-    "name": "small",
-    "input": {"polylines": [
-        [[0, 0, 0], ["3 mm", 0, 0]],
-        [[0, 0, "0.5 mm"], ["3 mm", "0.05 mm", "0.5 mm"]],
-        [[0, "0.05 mm", "1 mm"], ["3 mm", 0, "1 mm"]],
-        [[0, 0, "1.5 mm"], ["3 mm", 0, "1.5 mm"]],
-    ]},
-    "fiber": {"radius": "0.25 mm"},
-    "mesh": {"element_length": "0.3 mm"},
-    "material": {"youngs_modulus": "15 GPa", "poisson_ratio": 0.3, "density": "1380 kg/m^3"},
-    "scene": {
-        "effects": ["gravity", "damping", "plates", "walls"],
-        "gravity": {"acceleration": [0, 0, "-9.81 m/s^2"]},
-        "damping": {"alpha": "1e4 1/s", "beta": "1e-9 s"},
-        "plates": {"axis": "z", "lower": "moving", "upper": "fixed"},
-        "walls": {"y": ["-0.4 mm", "0.4 mm"]},
-        "loading": {"displacement": "0.015 mm", "velocity": "60 mm/min", "ramp": "smooth"},
-    },
-    "solver": {"output_frames": 6, "checkpoint_every": 5000},
-    "post": {"plots": False},
-}
+# a small compaction scene: plates, walls, gravity, mass- and stiffness-proportional damping (tests/_scenes.py)
+SCENE = SMALL_SCENE
 
 
 def write_cfg(path: Path, cfg: dict) -> Path:

@@ -86,16 +86,18 @@ def _omega1(s: CaseSetup) -> float:
     return 1.8751**2 * math.sqrt(s.EI / (s.rho * s.A * s.lengths()[0] ** 4))
 
 
+def _cantilever_run(case: str):
+    """The clamped fiber of ``case`` under its tip load, damped to rest: (setup, L [m], P [N], result)."""
+    s = case_setup(case)
+    res = simulate(s.model(), [s.clamps(), s.loads(), Damping(s.damping_alpha)], s.settings())
+    return s, s.lengths()[0], _tip_force_z(s), res
+
+
 def cantilever_small(quick: bool = False) -> Row:
     """Tip deflection of a clamped fiber under a small tip load vs P L³/(3 E I) (< 1 %).
 
     ``quick`` is ignored: the case already takes a few seconds, so its slow variant repeats it."""
-    s = case_setup("cantilever_small")
-    m = s.model()
-    L = s.lengths()[0]
-    P = _tip_force_z(s)
-    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha)]
-    res = simulate(m, eff, s.settings())
+    s, L, P, res = _cantilever_run("cantilever_small")
     ref = P * L**3 / (3 * s.EI)
     meas = -res.frames_positions[-1, -1, 2]
     return Row("cantilever small tip load: deflection", ref, meas, abs(meas - ref) / ref, 0.01, "m")
@@ -127,13 +129,8 @@ def cantilever_large(quick: bool = False) -> Row:
     """Large tip deflection vs the elastica (λ = P L²/EI = 2 in the config), vertical tip deflection (< 2 %).
 
     ``quick`` is ignored: the case already takes a few seconds, so its slow variant repeats it."""
-    s = case_setup("cantilever_large")
-    m = s.model()
-    L = s.lengths()[0]
-    P = _tip_force_z(s)
+    s, L, P, res = _cantilever_run("cantilever_large")
     lam = P * L**2 / s.EI
-    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha)]
-    res = simulate(m, eff, s.settings())
     _, w_ref = elastica_tip(lam)
     meas = -res.frames_positions[-1, -1, 2] / L
     return Row(f"cantilever large deflection (PL²/EI = {lam:.4g}): w/L vs elastica", w_ref, meas,

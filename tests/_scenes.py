@@ -1,0 +1,37 @@
+"""Small scenes shared by the tests (a module, not a test file: pytest does not collect it)."""
+
+from __future__ import annotations
+
+import copy
+
+# four straight fibers 3 mm long in a 0.8 mm wide box, pressed by 0.015 mm along z: plates, walls,
+# gravity, mass- and stiffness-proportional damping; seconds to run, checkpoints every 5000 steps
+SMALL_SCENE = {
+    "name": "small",
+    "input": {"polylines": [
+        [[0, 0, 0], ["3 mm", 0, 0]],
+        [[0, 0, "0.5 mm"], ["3 mm", "0.05 mm", "0.5 mm"]],
+        [[0, "0.05 mm", "1 mm"], ["3 mm", 0, "1 mm"]],
+        [[0, 0, "1.5 mm"], ["3 mm", 0, "1.5 mm"]],
+    ]},
+    "fiber": {"radius": "0.25 mm"},
+    "mesh": {"element_length": "0.3 mm"},
+    "material": {"youngs_modulus": "15 GPa", "poisson_ratio": 0.3, "density": "1380 kg/m^3"},
+    "scene": {
+        "effects": ["gravity", "damping", "plates", "walls"],
+        "gravity": {"acceleration": [0, 0, "-9.81 m/s^2"]},
+        "damping": {"alpha": "1e4 1/s", "beta": "1e-9 s"},
+        "plates": {"axis": "z", "lower": "moving", "upper": "fixed"},
+        "walls": {"y": ["-0.4 mm", "0.4 mm"]},
+        "loading": {"displacement": "0.015 mm", "velocity": "60 mm/min", "ramp": "smooth"},
+    },
+    "solver": {"output_frames": 6, "checkpoint_every": 5000},
+    "post": {"plots": False},
+}
+
+
+def small_scene(**scene) -> dict:
+    """A deep copy of SMALL_SCENE with the given ``scene`` keys replaced."""
+    cfg = copy.deepcopy(SMALL_SCENE)
+    cfg["scene"].update(copy.deepcopy(scene))
+    return cfg
