@@ -1,8 +1,14 @@
-"""Small scenes shared by the tests (a module, not a test file: pytest does not collect it)."""
+"""Small scenes and CLI helpers shared by the tests (a module, not a test file: pytest does not collect it)."""
 
 from __future__ import annotations
 
 import copy
+from pathlib import Path
+
+import yaml
+from click.testing import CliRunner
+
+from fiberpipe.cli import main
 
 # four straight fibers 3 mm long in a 0.8 mm wide box, pressed by 0.015 mm along z: plates, walls,
 # gravity, mass- and stiffness-proportional damping; seconds to run, checkpoints every 5000 steps
@@ -35,3 +41,14 @@ def small_scene(**scene) -> dict:
     cfg = copy.deepcopy(SMALL_SCENE)
     cfg["scene"].update(copy.deepcopy(scene))
     return cfg
+
+
+def write_cfg(path: Path, cfg: dict) -> Path:
+    """Write a config dict as YAML; returns the path."""
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def cli(*args):
+    """``fiberpipe ARGS...`` in process (click's runner); paths may be Path objects."""
+    return CliRunner().invoke(main, [str(a) for a in args])

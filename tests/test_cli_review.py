@@ -6,12 +6,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-import yaml
-from click.testing import CliRunner
 
-from fiberpipe.cli import main
 
-from _scenes import small_scene
+from _scenes import small_scene, cli, write_cfg
 
 TIP = {
     "name": "tip",
@@ -21,21 +18,12 @@ TIP = {
 }
 
 
-def cli(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
 def one_line_error(result) -> str:
     assert result.exit_code != 0, result.output
     assert "Traceback" not in result.output
     errors = [ln for ln in result.output.splitlines() if ln.startswith("error:")]
     assert len(errors) == 1, result.output
     return errors[0]
-
-
-def write_cfg(path: Path, cfg: dict) -> Path:
-    path.write_text(yaml.safe_dump(cfg))
-    return path
 
 
 # -- 1. out-of-range phantom options name the option and what is wrong ---------------------------

@@ -15,15 +15,13 @@ import h5py
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner
 
-from fiberpipe.cli import main
 from fiberpipe.errors import FiberpipeError, SimulationDiverged
 from fiberpipe.solver import (Damping, Drive, Drives, LineLoad, Loads, Material, PointLoad, SimulationSettings,
                               Walls, build_model, simulate)
 from fiberpipe.solver.integrator import STATUS_LEFT_BOX, STATUS_PENETRATION
 
-from _scenes import SMALL_SCENE
+from _scenes import SMALL_SCENE, cli, write_cfg
 
 REPO = Path(__file__).resolve().parents[1]
 MAT = Material(15e9, 1380.0, 0.3)
@@ -31,15 +29,6 @@ R = 0.25e-3
 
 # a small compaction scene: plates, walls, gravity, mass- and stiffness-proportional damping (tests/_scenes.py)
 SCENE = SMALL_SCENE
-
-
-def write_cfg(path: Path, cfg: dict) -> Path:
-    path.write_text(yaml.safe_dump(cfg))
-    return path
-
-
-def cli(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def one_line_error(result, code=None):
