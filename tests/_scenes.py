@@ -52,3 +52,12 @@ def write_cfg(path: Path, cfg: dict) -> Path:
 def cli(*args):
     """``fiberpipe ARGS...`` in process (click's runner); paths may be Path objects."""
     return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def run_small(d: Path, cfg: dict, to: str = "simulate") -> tuple[Path, Path]:
+    """``fiberpipe run`` of ``cfg`` (written to ``d/small.yaml``) into ``d/run`` up to stage ``to``;
+    asserts it succeeded; returns (config path, run folder)."""
+    path = write_cfg(d / "small.yaml", cfg)
+    r = cli("run", path, "--out", d / "run", "--to", to)
+    assert r.exit_code == 0, r.output
+    return path, d / "run"

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 
-from _scenes import small_scene, cli, write_cfg
+from _scenes import cli, run_small, small_scene, write_cfg
 
 TIP = {
     "name": "tip",
@@ -177,11 +177,7 @@ def _datasets(path: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
-    d = tmp_path_factory.mktemp("small")
-    cfg = write_cfg(d / "small.yaml", SMALL)
-    r = cli("run", cfg, "--out", d / "run", "--to", "simulate")
-    assert r.exit_code == 0, r.output
-    return cfg, d / "run"
+    return run_small(tmp_path_factory.mktemp("small"), SMALL)
 
 
 def test_interrupted_force_rerun_resumes(tmp_path, small_run, monkeypatch):

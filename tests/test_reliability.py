@@ -21,7 +21,7 @@ from fiberpipe.solver import (Damping, Drive, Drives, LineLoad, Loads, Material,
                               Walls, build_model, simulate)
 from fiberpipe.solver.integrator import STATUS_LEFT_BOX, STATUS_PENETRATION
 
-from _scenes import SMALL_SCENE, cli, write_cfg
+from _scenes import SMALL_SCENE, cli, run_small, write_cfg
 
 REPO = Path(__file__).resolve().parents[1]
 MAT = Material(15e9, 1380.0, 0.3)
@@ -64,12 +64,9 @@ def snapshot(run_dir: Path) -> dict:
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """The uninterrupted run (in process) of SCENE up to simulate."""
-    d = tmp_path_factory.mktemp("ref")
-    cfg = write_cfg(d / "small.yaml", SCENE)
-    r = cli("run", cfg, "--out", d / "run", "--to", "simulate")
-    assert r.exit_code == 0, r.output
-    assert not (d / "run" / "simulation.checkpoint.h5").exists()  # removed once simulation.h5 is written
-    return d / "run"
+    _, run = run_small(tmp_path_factory.mktemp("ref"), SCENE)
+    assert not (run / "simulation.checkpoint.h5").exists()  # removed once simulation.h5 is written
+    return run
 
 
 # -- 1. checkpoint and resume ----------------------------------------------------------------------
