@@ -64,7 +64,7 @@ bench: setup
 # The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
 REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/alpha-0 paper-40/alpha-1e4 \
                  paper-40/compaction paper-40/compaction-parallel paper-40/compaction-oblique-6 \
-                 paper-40/compaction-identified
+                 paper-40/compaction-identified paper-40/compaction-blend
 REPRO_RUNS := $(addprefix runs/reproduce/,$(subst /,-,$(REPRO_CONFIGS)))
 
 # a run that diverges keeps its diagnosis and last good frames; the batch goes on (results.md lists it)

@@ -10,6 +10,7 @@ import numpy as np
 from fiberpipe.artifacts import write_text_atomic
 from fiberpipe.errors import InputError
 from fiberpipe.post.curves import force_displacement
+from fiberpipe.post.energies import contact_energy_created
 from fiberpipe.post.history import load_simulation
 from fiberpipe.post.phases import compaction_phases
 from fiberpipe.post.plots import plot_force_displacement
@@ -27,7 +28,8 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
             if (d / "simulation_diverged.h5").exists():
                 rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
                              "rearrangement_end_U_mm": float("nan"), "steep_start_U_mm": float("nan"),
-                             "peak_ke_over_se": float("nan"), "energy_residual": float("nan"), "steps": 0,
+                             "peak_ke_over_se": float("nan"), "energy_residual": float("nan"),
+                             "contact_energy_created_over_WK": float("nan"), "steps": 0,
                              "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
                 continue
             raise InputError(f"{d} has no simulation.h5: run it first")
@@ -45,6 +47,10 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
             u1, u2 = (float("nan") if ph[k] is None else 1e3 * ph[k] for k in ("rearrangement_end_U_m", "steep_start_U_m"))
         except KeyError:
             final = peak = u1 = u2 = float("nan")
+        created = float("nan")
+        if sim.energy:
+            wk = float(np.max(np.abs(np.asarray(sim.energy.get("external", [0.0]), dtype=float))))
+            created = float(np.max(contact_energy_created(sim.energy))) / wk if wk > 0 else float("nan")
         rows.append(
             {
                 "run": name,
@@ -54,6 +60,7 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
                 "steep_start_U_mm": u2,
                 "peak_ke_over_se": summary.get("peak_ke_over_se", float("nan")),
                 "energy_residual": summary.get("energy_balance_residual_max", float("nan")),
+                "contact_energy_created_over_WK": created,
                 "steps": int(sim.attrs.get("steps", 0)),
                 "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
                 "note": "",

@@ -28,7 +28,8 @@ def plot_force_displacement(path: Path, curves: dict[str, tuple[np.ndarray, np.n
                             phases: dict | None = None) -> Path:
     """One or several F(U) curves; ``curves`` maps a label to (U in m, F in N). ``phases``
     (:func:`fiberpipe.post.phases.compaction_phases` of the first curve) shades the transition and
-    the steep rise."""
+    the steep rise. Curves whose peaks span more than two decades share a symmetric-log load axis
+    (linear below 1 % of the smallest peak), so that a 1 N run stays readable beside a 1 kN one."""
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, (U, F) in curves.items():
         ax.plot(np.asarray(U) * 1e3, F, label=label)
@@ -43,9 +44,14 @@ def plot_force_displacement(path: Path, curves: dict[str, tuple[np.ndarray, np.n
         ax.legend(fontsize=8)
     ax.set_xlabel("plate displacement U [mm]")
     ax.set_ylabel("compaction load F [N]")
+    peaks = [float(np.max(np.abs(F))) for _, F in curves.values() if np.size(F)]
+    peaks = [p for p in peaks if p > 0]
+    if len(peaks) > 1 and max(peaks) > 100 * min(peaks):
+        ax.set_yscale("symlog", linthresh=0.01 * min(peaks))
+        ax.set_ylabel("compaction load F [N] (symmetric log)")
     ax.grid(alpha=0.3)
     if len(curves) > 1:
-        ax.legend()
+        ax.legend(fontsize=8 if len(curves) > 4 else None, loc="upper left")
     if title:
         ax.set_title(title)
     return _save(fig, path)

@@ -139,6 +139,7 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     assert "rearrangement_end_U_mm" in head and "steep_start_U_mm" in head
     cells = dict(zip([c.strip() for c in head.strip("|").split("|")], [c.strip() for c in row.strip("|").split("|")]))
     assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
+    assert float(cells["contact_energy_created_over_WK"]) == 0.0  # no contact energy in this history
     assert (tmp_path / "cmp" / "comparison.png").exists()
 
 
