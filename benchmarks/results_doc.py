@@ -96,15 +96,14 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:07 UTC `make reproduce`
   a steep, bursty rise from U = 2.48–2.83 mm (steepness 2.6–6.8) to peaks of 40–105 N
   (v_f 0.386 → 0.710 by the post stage's measure); the final values are single points of a bursty
   curve (12.1–27.9 N). **These peaks are not quasi-static**: at those loads the point contact law
-  created energy (ALLPW − ALLFD = +0.05 to +0.16 J against 0.014–0.022 J of plate work) and the
+  created energy (ALLPW − ALLFD = +0.05 to +0.16 J against 0.014–0.022 J of external work, ALLWK) and the
   bundle rattled; docs/contact.md §11 (sixth session) has the measurements, the post stage now
   reports the bound (`contact_energy_created_J`; column `contact_energy_created_over_WK` above:
-  2.5–11× the plate work) and `scene.contact.blend_length` removes it for the orientation-aware
-  law. With it (`paper-40/compaction-blend`, ℓ_blend = 0.15 mm, created energy 1e-8 of the plate
-  work) the same compaction rearranges with a near-zero load to U = 2.64 mm and then locks: the
+  2.5–11× ALLWK) and `scene.contact.blend_length` removes it for the orientation-aware
+  law. With it (`paper-40/compaction-blend`, ℓ_blend = 0.15 mm, bound 1e-8 of ALLWK) the same compaction rearranges with a near-zero load to U = 2.64 mm and then locks: the
   load rises steeply from 2.88 mm to **1534 N** at U = 3 mm (v_f 0.71 by the post stage's measure,
   34 MPa on the 3 × 15 mm plate), against 28 N for the rattling run: the rattling kept the bundle
-  loose. Its plate work is 0.195 J (0.022 J for the rattling run), 147 s of solver.
+  loose. Its ALLWK is 0.195 J (0.022 J for the rattling run), 147 s of solver.
 - **Undamped (α = 0)** the run completes with K_e/S_e up to 6.05 (not quasi-static, as the study
   found) and an energy residual of 0.032; α = 1e4: K_e/S_e 1.19, residual 0.0008.
 - Every case of the study runs to the end; energy residuals are below 0.06 everywhere.

@@ -69,7 +69,7 @@ def main(ctx, debug, quiet):
     ctx.obj["debug"] = debug
     ctx.obj["quiet"] = quiet
     # progress bars only on a terminal (CI and logs stay quiet); per-stage lines unless --quiet
-    ctx.obj["progress"] = not quiet and sys.stderr.isatty()
+    ctx.obj["progress"] = not quiet and _stderr_is_terminal()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s: %(message)s")
     for handler in logging.getLogger().handlers:  # the console shows warnings; run.log gets everything
         handler.setLevel(logging.WARNING)
@@ -86,6 +86,10 @@ def _echo(line: str) -> None:
         click.echo(line, err=True) if _opts().get("quiet") else click.echo(line)
     elif not _opts().get("quiet"):
         click.echo(line)
+
+
+def _stderr_is_terminal() -> bool:
+    return sys.stderr.isatty()
 
 
 def _progress() -> bool:

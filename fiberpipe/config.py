@@ -108,7 +108,9 @@ class PhantomConfig(Section):
 
     @model_validator(mode="after")
     def _fibers_fit(self):
-        need = math.ceil(2 * self.radius_vox + 3)  # as fiberpipe.imaging.phantom.min_cross_section_vox
+        from fiberpipe.imaging.phantom import min_cross_section_vox  # lazy: config loads without imaging
+
+        need = min_cross_section_vox(self.radius_vox)
         if min(self.shape[1], self.shape[2]) < need:
             raise ValueError(
                 f"input.phantom.radius_vox = {self.radius_vox:g} voxels does not fit input.phantom.shape (y and x "

@@ -272,8 +272,9 @@ def _touch(name, obj) -> None:
 
 def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
     """Why the outputs of an up-to-date stage cannot be trusted (None when they can): an HDF5 output
-    must open as an artifact of the right kind and schema version with every object readable, a
-    JSON output must parse, any other output must not be empty. Read-only."""
+    must open as an artifact of the right kind and schema version with every object's header and
+    attributes readable (the data themselves are not read: a corruption inside a dataset's data is
+    not seen), a JSON output must parse, any other output must not be empty. Read-only."""
     from fiberpipe.artifacts import open_checked
     from fiberpipe.errors import ArtifactError
 
@@ -289,7 +290,7 @@ def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
                 return f"output {o.name} is empty"
         except ArtifactError as exc:
             return f"output {exc}"
-        except (OSError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 — h5py raises RuntimeError/KeyError on damaged headers too
             return f"output {o} is unreadable ({exc.__class__.__name__}: {exc})"
     return None
 

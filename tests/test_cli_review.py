@@ -66,11 +66,15 @@ def test_quiet_prints_no_stage_lines(tmp_path, monkeypatch):
     assert (tmp_path / "run" / "mesh.h5").exists()
     r = cli("run", cfg, "--out", tmp_path / "run")  # without it: one line per stage
     assert "mesh         up to date" in r.output and "run folder:" in r.output
-    # and no progress bar is asked for
+    # and no progress bar is asked for, even on a terminal (where one is asked for without --quiet)
+    import fiberpipe.cli as C
     import fiberpipe.pipeline as P
 
     seen = {}
     monkeypatch.setattr(P, "run_pipeline", lambda *a, **kw: seen.update(kw))
+    monkeypatch.setattr(C, "_stderr_is_terminal", lambda: True)
+    assert cli("run", cfg, "--out", tmp_path / "run").exit_code == 0
+    assert seen["progress"] is True
     assert cli("--quiet", "run", cfg, "--out", tmp_path / "run").exit_code == 0
     assert seen["progress"] is False
 
@@ -358,3 +362,19 @@ def test_readme_trace_example_works_as_written(tmp_path, monkeypatch):
     assert "recall" in r.output and "f1" in r.output and "matches" not in r.output, r.output
     acc = json.loads((tmp_path / "runs" / "ph" / "trace_accuracy.json").read_text())
     assert acc["n_true"] == 40 and acc["recall"] > 0.9
+
+
+def test_outputs_problem_reports_any_read_error(tmp_path, monkeypatch):
+    """h5py raises RuntimeError (not OSError) on a damaged object header: still 'unreadable', never
+    a traceback out of the up-to-date check."""
+    import fiberpipe.artifacts as A
+    from fiberpipe.pipeline import STAGES, outputs_problem
+
+    def damaged(*a, **kw):
+        raise RuntimeError("Unable to synchronously open object (bad object header version number)")
+
+    monkeypatch.setattr(A, "open_checked", damaged)
+    (tmp_path / "mesh.h5").write_bytes(b"x")
+    stage = STAGES["mesh"]
+    why = outputs_problem(stage, [tmp_path / "mesh.h5"])
+    assert why is not None and "is unreadable (RuntimeError" in why

@@ -10,7 +10,7 @@ import numpy as np
 from fiberpipe.artifacts import write_text_atomic
 from fiberpipe.errors import InputError
 from fiberpipe.post.curves import force_displacement
-from fiberpipe.post.energies import contact_energy_created
+from fiberpipe.post.energies import contact_energy_created_figures
 from fiberpipe.post.history import load_simulation
 from fiberpipe.post.phases import compaction_phases
 from fiberpipe.post.plots import plot_force_displacement
@@ -47,10 +47,8 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
             u1, u2 = (float("nan") if ph[k] is None else 1e3 * ph[k] for k in ("rearrangement_end_U_m", "steep_start_U_m"))
         except KeyError:
             final = peak = u1 = u2 = float("nan")
-        created = float("nan")
-        if sim.energy:
-            wk = float(np.max(np.abs(np.asarray(sim.energy.get("external", [0.0]), dtype=float))))
-            created = float(np.max(contact_energy_created(sim.energy))) / wk if wk > 0 else float("nan")
+        # from the run's history, not its summary.json: runs post-processed before the figure existed have it too
+        created = contact_energy_created_figures(sim.energy)[1] if sim.energy else float("nan")
         rows.append(
             {
                 "run": name,

@@ -44,15 +44,24 @@ def contact_energy_created(energy: dict[str, np.ndarray]) -> np.ndarray:
     """A lower bound of the energy the contact discretisation created so far, J, (T,).
 
     The contact and friction forces' work is booked as work (ALLPW = their work on the fibers + the
-    friction loss ALLFD, docs/contact.md), so the balance residual closes whatever the contact does.
-    For a conservative normal law and a dissipative friction, ``ALLPW − ALLFD`` is minus the energy
-    stored in the penalties and tangential springs (≤ 0) plus whatever the discretisation created;
-    the stored energies are ≥ 0, so ``max(0, ALLPW − ALLFD)`` bounds the created energy from below.
-    It stays ≤ 0 in a sound run (paper-40: −1.7e-4 J against 5.6e-4 J of plate work); a point contact
-    law applied to crossings whose Hertz ellipse spans several elements creates energy at high loads
-    (the fibers rattle at the time step's frequency and the damping eats it): docs/contact.md §11.
+    friction loss ALLFD as the return map books it, docs/contact.md), so the balance residual closes
+    whatever the contact does. ``ALLPW − ALLFD`` is the work of the normal and friction forces on the
+    fibers: the created energy minus the energy stored in the penalties and tangential springs
+    (≥ 0) minus the friction's true loss (≥ 0). So ``max(0, ALLPW − ALLFD)`` bounds the created
+    energy from below: tight, up to the stored energy, in a run without friction; with friction it
+    misses creation up to the friction loss. A point contact law applied to crossings whose Hertz
+    ellipse spans several elements creates energy at high loads (the fibers rattle at the time
+    step's frequency and the damping eats it): docs/contact.md §11.
     """
     z = np.zeros_like(next(iter(energy.values())), dtype=float)
     pw = np.asarray(energy.get("contact", z), dtype=float)
     fd = np.asarray(energy.get("friction", z), dtype=float)
     return np.maximum(pw - fd, 0.0)
+
+
+def contact_energy_created_figures(energy: dict[str, np.ndarray]) -> tuple[float, float]:
+    """(largest :func:`contact_energy_created` over the run [J], that over max |ALLWK| [–]; NaN
+    without external work) — the figures of ``summary.json`` and ``fiberpipe compare``."""
+    created = float(np.max(contact_energy_created(energy)))
+    wk = float(np.max(np.abs(np.asarray(energy.get("external", [0.0]), dtype=float))))
+    return created, (created / wk if wk > 0 else float("nan"))

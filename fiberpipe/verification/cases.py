@@ -29,7 +29,6 @@ MATERIAL = Material(E_PA, RHO, NU)
 I_M4 = math.pi * R_M**4 / 4
 A_M2 = math.pi * R_M**2
 EI = E_PA * I_M4
-OMEGA1 = 1.8751**2 * math.sqrt(EI / (RHO * A_M2 * L_M**4))  # rad/s, clamped-free first mode
 
 
 @dataclass
