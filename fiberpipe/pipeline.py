@@ -425,7 +425,8 @@ def run_pipeline(
             for iname, p in inputs.items():
                 if not Path(p).exists():
                     maker = _maker(cfg, run_dir, Path(p))
-                    todo = f"run `fiberpipe run {cfg.source_path} --out {run_dir} --to {maker}` first" if maker else "run the earlier stages first"
+                    conf = cfg.source_path or "CONFIG"
+                    todo = f"run `fiberpipe run {conf} --out {run_dir} --to {maker}` first" if maker else "run the earlier stages first"
                     raise FiberpipeError(f"stage {name} needs {iname} at {p}, which does not exist; {todo}")
             key = stage_key(stage, cfg, inputs)
             outputs = stage.outputs(cfg, run_dir)

@@ -18,7 +18,6 @@ import numpy as np
 
 from ..config import Config, load_config
 from ..solver import Clamp, Clamps, LineLoad, Loads, Material, PointLoad, build_model
-from ..solver.laws import make_law
 
 #: configs/verify of the source tree (tests monkeypatch it)
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "verify"
@@ -195,11 +194,12 @@ class CaseSetup:
 
     def law(self):
         """The contact law of ``scene.contact`` (Hertz laws: from the config's material)."""
-        name = self._scene("contact").law
-        if not name.startswith("hertz"):
-            raise ValueError(f"{self.path}: the verification cases run Hertz laws, not {name!r}")
-        kw = {"phi_deg": math.degrees(self.cfg.scene.contact.angle)} if name == "hertz_crossed" else {}
-        return make_law(name, E_pa=self.E, nu=self.nu, **kw)
+        from fiberpipe.solver.contact_effect import law_from_config
+
+        contact = self._scene("contact")
+        if not contact.law.startswith("hertz"):
+            raise ValueError(f"{self.path}: the verification cases run Hertz laws, not {contact.law!r}")
+        return law_from_config(contact, self.material)  # what a run of the config uses
 
     @property
     def plates(self):
