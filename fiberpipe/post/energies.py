@@ -41,22 +41,22 @@ def quasi_static_ratio(energy: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def contact_energy_created(energy: dict[str, np.ndarray]) -> np.ndarray:
-    """A lower bound of the energy the contact discretisation created so far, J, (T,).
+    """A lower bound of the energy the normal contact created so far, J, (T,).
 
-    The contact and friction forces' work is booked as work (ALLPW = their work on the fibers + the
-    friction loss ALLFD as the return map books it, docs/contact.md), so the balance residual closes
-    whatever the contact does. ``ALLPW − ALLFD`` is the work of the normal and friction forces on the
-    fibers: the created energy minus the energy stored in the penalties and tangential springs
-    (≥ 0) minus the friction's true loss (≥ 0). So ``max(0, ALLPW − ALLFD)`` bounds the created
-    energy from below: tight, up to the stored energy, in a run without friction; with friction it
-    misses creation up to the friction loss. A point contact law applied to crossings whose Hertz
-    ellipse spans several elements creates energy at high loads (the fibers rattle at the time
-    step's frequency and the damping eats it): docs/contact.md §11.
+    The contact and friction forces' work is booked as work (ALLPW = the work of the normal and the
+    friction forces on the fibers + the friction loss ALLFD, docs/contact.md), so the balance residual
+    closes whatever the contact does. The normal forces' work is ``W_n = ALLPW − ALLFD − W_f`` with
+    ``W_f`` the friction forces' work (history ``energy/friction_work``), and for a conservative law
+    ``W_n`` is minus the energy stored in the penalties (≥ 0): so ``max(0, W_n)`` bounds the created
+    energy from below, tight up to that stored energy. A history without ``friction_work`` (written
+    before it existed) gives ``max(0, ALLPW − ALLFD)``, which also subtracts the friction's loss and
+    its springs' energy: a weaker bound. docs/contact.md §11 has what creates energy.
     """
     z = np.zeros_like(next(iter(energy.values())), dtype=float)
     pw = np.asarray(energy.get("contact", z), dtype=float)
     fd = np.asarray(energy.get("friction", z), dtype=float)
-    return np.maximum(pw - fd, 0.0)
+    wf = np.asarray(energy.get("friction_work", z), dtype=float)
+    return np.maximum(pw - fd - wf, 0.0)
 
 
 def contact_energy_created_figures(energy: dict[str, np.ndarray]) -> tuple[float, float]:

@@ -41,6 +41,7 @@ ACC_WK = 0   # prescribed-motion work (plates, drives, clamps), J
 ACC_VD = 1   # damping dissipation, J
 ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook), J
 ACC_FD = 3   # friction dissipation (contact hook), J
+ACC_WF = 4   # work of the friction forces on the fibers (part of ACC_PW), J
 ACC_SIZE = 8
 
 # history columns
@@ -54,7 +55,8 @@ H_WK = 8
 H_PW = 9
 H_FD = 10
 H_CONTACTS = 11
-H_WALL = 12        # W columns
+H_WF = 12          # work of the friction forces on the fibers (ACC_WF), J
+H_WALL = 13        # W columns
 
 # node fixity bits
 FIX_X = 1
@@ -138,6 +140,10 @@ def _advance_template(
     # Δt f_n·v̄_n and clears the array, in its own pass over the nodes); (0, 3) for other hooks
     fc = _contact_forces_of(contact_data)
     has_fc = fc.shape[0] == N
+    # its friction forces, apart (the same treatment; their work is also booked on its own, ACC_WF, so
+    # that the normal forces' work can be told from the friction's: post's created-energy bound)
+    ffr = _friction_forces_of(contact_data)
+    has_ffr = ffr.shape[0] == N
     status = STATUS_OK
     bad = -1
     done = 0
@@ -192,6 +198,7 @@ def _advance_template(
         vd = 0.0
         wk_fix = 0.0
         pw_c = 0.0
+        pw_f = 0.0
         vmax2 = 0.0
         # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
         fib = 0
@@ -219,6 +226,19 @@ def _advance_template(
                 fx_i += cfx
                 fy_i += cfy
                 fz_i += cfz
+            ffx = 0.0
+            ffy = 0.0
+            ffz = 0.0
+            if has_ffr:
+                ffx = ffr[i, 0]
+                ffy = ffr[i, 1]
+                ffz = ffr[i, 2]
+                ffr[i, 0] = 0.0
+                ffr[i, 1] = 0.0
+                ffr[i, 2] = 0.0
+                fx_i += ffx
+                fy_i += ffy
+                fz_i += ffz
             mx_i = mom[i, 0] + bmx
             my_i = mom[i, 1] + bmy
             mz_i = mom[i, 2] + bmz
@@ -314,6 +334,7 @@ def _advance_template(
             waz = 0.5 * (w0z + w1z)
             # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
             pw_c += cfx * vax + cfy * vay + cfz * vaz
+            pw_f += ffx * vax + ffy * vay + ffz * vaz
             if use_damp:
                 vd += (m * (vax * vax + vay * vay + vaz * vaz)
                        + jx * wax * wax + jy * way * way + jz * waz * waz)
@@ -369,7 +390,8 @@ def _advance_template(
         if n_pen > 0:
             acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
         if has_fc:
-            acc[ACC_PW] += dt * pw_c
+            acc[ACC_PW] += dt * (pw_c + pw_f)
+            acc[ACC_WF] += dt * pw_f
         done = it + 1
         # ---- history and checks ---------------------------------------------------------
         if record:
@@ -395,6 +417,7 @@ def _advance_template(
             hist[h_row, H_WK] = 0.5 * (acc_before[ACC_WK] + acc[ACC_WK]) + wext
             hist[h_row, H_PW] = 0.5 * (acc_before[ACC_PW] + acc[ACC_PW])
             hist[h_row, H_FD] = 0.5 * (acc_before[ACC_FD] + acc[ACC_FD])
+            hist[h_row, H_WF] = 0.5 * (acc_before[ACC_WF] + acc[ACC_WF])
             hist[h_row, H_CONTACTS] = n_contacts
             h_row += 1
             if not (ke == ke) or not (se == se) or vmax2 == np.inf:
@@ -445,16 +468,19 @@ def no_contact_forces(data):
 
 
 _contact_forces_of = no_contact_forces
+_friction_forces_of = no_contact_forces
 
 
 def _specialise(name: str, hook, cache: bool, parallel: bool = False):
     g = dict(globals())
     g["_contact_hook"] = hook
     g["_contact_forces_of"] = no_contact_forces
+    g["_friction_forces_of"] = no_contact_forces
     if hook is not no_contact:
-        from .contact_effect import contact_forces_of, contact_step
+        from .contact_effect import contact_forces_of, contact_step, friction_forces_of
         if hook is contact_step:
             g["_contact_forces_of"] = contact_forces_of
+            g["_friction_forces_of"] = friction_forces_of
     g["_beam_pass"] = beam_resultants_fibers if parallel else beam_resultants
     tmpl = _advance_template
     fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)

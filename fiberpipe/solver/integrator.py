@@ -368,6 +368,8 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
         "contacts": h[:, K.H_CONTACTS].copy(),
         "energy/kinetic": KE.copy(), "energy/strain": SE.copy(), "energy/damping": VD.copy(),
         "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
+        # the friction forces' work on the fibers (part of ALLPW): ALLPW − ALLFD − this is the normal forces'
+        "energy/friction_work": h[:, K.H_WF].copy(),
         "energy/total": total, "energy/residual": (total - e0) / scale,
     }
     return out
