@@ -92,6 +92,15 @@ READING = """## Reading (measured 2026-11-22, 09:37–10:07 UTC `make reproduce`
   +57 % is not an effect of its two laws on a bundle like ours at U ≤ 1.15 mm; without the study's
   scan we cannot tell what in its specimen made the difference.
 
+- **The normal contact creates energy in `paper-40` too, once friction holds the fibers** (sixth
+  session; docs/contact.md §11): with the friction forces' work now booked apart
+  (`energy/friction_work`), the normal forces' work at U = 1.15 mm is 41–46 % of ALLWK at the study's
+  settings (`fiberpipe run configs/paper-40.yaml` at HEAD: 2.5e-4 J against 5.6e-4 J, flagged in its
+  report; final load 0.756 N, 139 s of solver) and 11.5 % at the fast settings, against 1.6 % without
+  friction; the friction's own bookkeeping is right (ALLFD within 4 % of its forces' work). The mass
+  damping takes that energy. The runs in the table above were made before the split (the same model;
+  only the summation order differs), so their reports do not show the flag. Whether the created
+  energy moves the loads is not known.
 - **Compacted to U = 3 mm (`paper-40/compaction*`, 1e4 mm/min)**: rearrangement until U = 1.26–1.62 mm,
   a steep, bursty rise from U = 2.48–2.83 mm (steepness 2.6–6.8) to peaks of 40–105 N
   (v_f 0.386 → 0.710 by the post stage's measure); the final values are single points of a bursty
