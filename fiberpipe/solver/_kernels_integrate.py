@@ -78,6 +78,20 @@ def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
     return 0
 
 
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _take_row(a, i, present):
+    """Row ``i`` of the (N, 3) array ``a`` (zeros if not ``present``), cleared after reading."""
+    if not present:
+        return 0.0, 0.0, 0.0
+    ax = a[i, 0]
+    ay = a[i, 1]
+    az = a[i, 2]
+    a[i, 0] = 0.0
+    a[i, 1] = 0.0
+    a[i, 2] = 0.0
+    return ax, ay, az
+
+
 def _advance_template(
     # model (static)
     el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
@@ -213,32 +227,12 @@ def _advance_template(
             fx_i = f[i, 0] + bfx
             fy_i = f[i, 1] + bfy
             fz_i = f[i, 2] + bfz
-            cfx = 0.0
-            cfy = 0.0
-            cfz = 0.0
-            if has_fc:
-                cfx = fc[i, 0]
-                cfy = fc[i, 1]
-                cfz = fc[i, 2]
-                fc[i, 0] = 0.0
-                fc[i, 1] = 0.0
-                fc[i, 2] = 0.0
-                fx_i += cfx
-                fy_i += cfy
-                fz_i += cfz
-            ffx = 0.0
-            ffy = 0.0
-            ffz = 0.0
-            if has_ffr:
-                ffx = ffr[i, 0]
-                ffy = ffr[i, 1]
-                ffz = ffr[i, 2]
-                ffr[i, 0] = 0.0
-                ffr[i, 1] = 0.0
-                ffr[i, 2] = 0.0
-                fx_i += ffx
-                fy_i += ffy
-                fz_i += ffz
+            # the contact hook's normal and friction forces (each array read and cleared here)
+            cfx, cfy, cfz = _take_row(fc, i, has_fc)
+            ffx, ffy, ffz = _take_row(ffr, i, has_ffr)
+            fx_i += cfx + ffx
+            fy_i += cfy + ffy
+            fz_i += cfz + ffz
             mx_i = mom[i, 0] + bmx
             my_i = mom[i, 1] + bmy
             mz_i = mom[i, 2] + bmz
