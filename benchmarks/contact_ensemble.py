@@ -246,10 +246,15 @@ def _plot(seeds, res, path: Path) -> None:
 
 
 def _seeds(text: str) -> list[int]:
-    if "-" in text:
-        a, b = text.split("-")
-        return list(range(int(a), int(b) + 1))
-    return [int(v) for v in text.split(",")]
+    """``0-7``, ``1,3,5`` or both (``0-3,6``) as a list of seeds."""
+    out: list[int] = []
+    for part in text.split(","):
+        if "-" in part:
+            a, b = part.split("-")
+            out += list(range(int(a), int(b) + 1))
+        else:
+            out.append(int(part))
+    return out
 
 
 def main(argv=None) -> str:

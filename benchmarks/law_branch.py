@@ -32,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -57,16 +56,6 @@ def _config(overrides: dict):
     from fiberpipe.config import load_config
 
     return load_config(ROOT / "configs" / "paper-40.yaml", overrides)
-
-
-def _mesh(cfg):
-    from fiberpipe.artifacts import read_mesh
-    from fiberpipe.stages.mesh import run_mesh
-
-    with tempfile.TemporaryDirectory() as td:
-        p = Path(td) / "mesh.h5"
-        run_mesh(cfg, Path(cfg.input.fibers), p)
-        return read_mesh(p)
 
 
 def _final_load(h: dict) -> float:
@@ -101,8 +90,10 @@ def run_seed(seed: int, save: str, branch_m: float, fast: bool = False) -> dict:
     base = {**(FAST_OVERRIDES if fast else {}), "solver.output_frames": 2, "input.fibers": str(fibers),
             "post.reference_fibers": str(fibers),
             "scene.plates.upper_position": top}
+    from fiberpipe.bench import config_mesh
+
     cfg = _config(base)
-    mesh = _mesh(cfg)
+    mesh = config_mesh(cfg)
     model, effects, settings = build_simulation(mesh, cfg)
     # the step at which the plate reaches branch_m (the ramp is the config's: read it off a probe run's
     # prescribed displacement, which is exact, instead of inverting the ramp here)
@@ -175,17 +166,6 @@ def table(figs: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _seeds(arg: str) -> list[int]:
-    out: list[int] = []
-    for part in arg.split(","):
-        if "-" in part:
-            a, b = part.split("-")
-            out += list(range(int(a), int(b) + 1))
-        else:
-            out.append(int(part))
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -199,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fast", action="store_true", help="the fast settings (fiberpipe.bench.FAST_OVERRIDES) "
                     "instead of the study's")
     a = ap.parse_args(argv)
-    seeds = _seeds(a.seeds)
+    seeds = ens._seeds(a.seeds)
     branch_m = a.branch_mm * 1e-3
     if not 0.0 < branch_m < 1.15e-3:
         ap.error("--branch-mm must be inside the loading (0, 1.15) mm")

@@ -70,21 +70,26 @@ def load() -> str:
     return f"load average {a:.2f} / {b:.2f} / {c:.2f} (1/5/15 min)"
 
 
-def paper40_run(overrides: dict | None = None, config: Path | None = None) -> dict:
-    """Run ``configs/paper-40.yaml`` (mesh + simulate, in memory) and return the figures."""
-    from fiberpipe.config import load_config
+def config_mesh(cfg):
+    """The mesh stage of ``cfg`` (its ``input.fibers``), run in a temporary folder and read back."""
     from fiberpipe.artifacts import read_mesh
-    from fiberpipe.solver.build import build_simulation
-    from fiberpipe.solver import simulate
     from fiberpipe.stages.mesh import run_mesh
 
-    config = config or ROOT / "configs" / "paper-40.yaml"
-    cfg = load_config(config, overrides or {})
     with tempfile.TemporaryDirectory() as td:
         mesh_path = Path(td) / "mesh.h5"
         run_mesh(cfg, Path(cfg.input.fibers), mesh_path)
-        mesh = read_mesh(mesh_path)
-    model, effects, settings = build_simulation(mesh, cfg)
+        return read_mesh(mesh_path)
+
+
+def paper40_run(overrides: dict | None = None, config: Path | None = None) -> dict:
+    """Run ``configs/paper-40.yaml`` (mesh + simulate, in memory) and return the figures."""
+    from fiberpipe.config import load_config
+    from fiberpipe.solver.build import build_simulation
+    from fiberpipe.solver import simulate
+
+    config = config or ROOT / "configs" / "paper-40.yaml"
+    cfg = load_config(config, overrides or {})
+    model, effects, settings = build_simulation(config_mesh(cfg), cfg)
     first: list = []  # (wall, steps) at the end of the first jitted chunk (it includes compile / cache load)
 
     def progress(t_s, end_s, steps):

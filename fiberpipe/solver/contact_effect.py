@@ -15,7 +15,7 @@ step (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
    rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
 4. The normal contact forces stay in the hook's force array (:func:`contact_forces_of`), the friction
    forces in a second one (:func:`friction_forces_of`): the step loop's update adds them to the nodes,
-   books their work ``Δt f_n·v̄_n`` to ALLPW (the friction's also to ALLWF, history
+   books their work ``Δt f_n·v̄_n`` to ALLPW (the friction's also on its own, ``ACC_WF``, history
    ``energy/friction_work``) and clears the arrays, in the same pass over the nodes. Energies: ALLPW += that work + the friction
    dissipation; ALLFD += friction dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
    elastic contact energy and the friction loss, as Abaqus' ALLPW includes penalty friction).
@@ -277,7 +277,8 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     if plane_fric:
         diss += plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, kt, dt, pl_hist, ff,
                                pl_tforce, step, cand_idx, cand_off)
-    # the forces stay in fc: the step loop's update applies them, books their work and clears fc
+    # the forces stay in fc (normal) and ff (friction): the step loop's update applies them, books their
+    # work and clears both
     acc[ACC_PW] += diss
     acc[ACC_FD] += diss
     # statistics of this step

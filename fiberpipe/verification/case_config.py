@@ -69,11 +69,14 @@ class CaseSetup:
     def rho(self) -> float:
         return float(self.cfg.material.density)
 
+    def _required(self, value, key: str) -> float:
+        if value is None:
+            raise ValueError(f"{self.path}: the verification case needs {key}")
+        return float(value)
+
     @property
     def r(self) -> float:
-        if self.cfg.fiber.radius is None:
-            raise ValueError(f"{self.path}: the verification cases need fiber.radius")
-        return float(self.cfg.fiber.radius)
+        return self._required(self.cfg.fiber.radius, "fiber.radius")
 
     @property
     def A(self) -> float:
@@ -158,9 +161,7 @@ class CaseSetup:
 
     @property
     def end_time(self) -> float:
-        if self.cfg.solver.end_time is None:
-            raise ValueError(f"{self.path}: the case needs solver.end_time")
-        return float(self.cfg.solver.end_time)
+        return self._required(self.cfg.solver.end_time, "solver.end_time")
 
     @property
     def output_frames(self) -> int:
