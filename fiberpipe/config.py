@@ -177,7 +177,8 @@ class SegmentConfig(Section):
 
 class SkeletonizeConfig(Section):
     enabled: Optional[bool] = Field(
-        None, description="compute the skeleton; default: only when trace.method is skeleton"
+        None, description="compute the skeleton (skeleton.h5, SPEC §4); default: yes; false skips it when "
+        "trace.method is slices, which does not read it"
     )
 
 

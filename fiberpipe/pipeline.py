@@ -69,8 +69,9 @@ def _fibers_path(cfg: Config, run_dir: Path) -> Path:
 
 
 def _skeleton_needed(cfg: Config) -> bool:
-    """skeletonize runs when trace.method is skeleton (its input) or skeletonize.enabled is true."""
-    return cfg.trace.method == "skeleton" or bool(cfg.skeletonize.enabled)
+    """skeletonize runs unless ``skeletonize.enabled: false`` (SPEC §4: a run folder holds
+    ``skeleton.h5``); the skeleton tracer always needs it (config validation refuses false there)."""
+    return cfg.trace.method == "skeleton" or cfg.skeletonize.enabled is not False
 
 
 # -- stage functions (thin adapters from the runner's calling convention to the stage modules) --

@@ -310,17 +310,17 @@ def test_missing_stage_output_names_the_stage_to_run(tmp_path):
     assert f"run `fiberpipe run {cfg} --out {out} --to input` first" in line, line
 
 
-# -- 10. skeletonize runs only when the tracer needs it or skeletonize.enabled says so -------------
+# -- 10. skeletonize runs unless skeletonize.enabled: false (SPEC §4's run folder has skeleton.h5) --
 
 
 @pytest.mark.parametrize("extra, runs_skeleton", [
-    ({}, False),
-    ({"trace": {"method": "slices"}}, False),
+    ({}, True),
+    ({"trace": {"method": "slices"}}, True),
     ({"trace": {"method": "skeleton"}}, True),
     ({"skeletonize": {"enabled": True}}, True),
     ({"skeletonize": {"enabled": False}}, False),
 ])
-def test_skeletonize_runs_only_when_asked(extra, runs_skeleton):
+def test_skeletonize_runs_unless_switched_off(extra, runs_skeleton):
     from fiberpipe.config import validate_config
     from fiberpipe.pipeline import planned_stages
 
@@ -330,13 +330,15 @@ def test_skeletonize_runs_only_when_asked(extra, runs_skeleton):
     assert plan[:2] == ["phantom", "segment"] and "trace" in plan
 
 
-def test_quickstart_does_not_skeletonize(tmp_path):
+def test_quickstart_runs_every_stage_and_a_switched_off_skeletonize_says_so(tmp_path):
     from fiberpipe.config import load_config
     from fiberpipe.pipeline import planned_stages
 
-    plan = planned_stages(load_config(Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"))
-    assert plan == ["segment", "trace", "mesh", "simulate", "post"]
-    r = cli("skeletonize", Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml", "--out", tmp_path / "run")
+    quickstart = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
+    plan = planned_stages(load_config(quickstart))
+    assert plan == ["segment", "skeletonize", "trace", "mesh", "simulate", "post"]
+    off = write_cfg(tmp_path / "off.yaml", {"extends": str(quickstart), "skeletonize": {"enabled": False}})
+    r = cli("skeletonize", off, "--out", tmp_path / "run")
     assert "set skeletonize.enabled: true" in one_line_error(r)
 
 
