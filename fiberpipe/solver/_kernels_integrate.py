@@ -41,7 +41,7 @@ ACC_WK = 0   # prescribed-motion work (plates, drives, clamps), J
 ACC_VD = 1   # damping dissipation, J
 ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook), J
 ACC_FD = 3   # friction dissipation (contact hook), J
-ACC_WF = 4   # work of the friction forces on the fibers (part of ACC_PW), J
+ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW), J
 ACC_SIZE = 8
 
 # history columns
@@ -76,20 +76,6 @@ STATUS_ENERGY = 4
 def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
     """The default contact hook: does nothing, returns 0 active contacts."""
     return 0
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _take_row(a, i, present):
-    """Row ``i`` of the (N, 3) array ``a`` (zeros if not ``present``), cleared after reading."""
-    if not present:
-        return 0.0, 0.0, 0.0
-    ax = a[i, 0]
-    ay = a[i, 1]
-    az = a[i, 2]
-    a[i, 0] = 0.0
-    a[i, 1] = 0.0
-    a[i, 2] = 0.0
-    return ax, ay, az
 
 
 def _advance_template(
@@ -154,10 +140,6 @@ def _advance_template(
     # Δt f_n·v̄_n and clears the array, in its own pass over the nodes); (0, 3) for other hooks
     fc = _contact_forces_of(contact_data)
     has_fc = fc.shape[0] == N
-    # its friction forces, apart (the same treatment; their work is also booked on its own, ACC_WF, so
-    # that the normal forces' work can be told from the friction's: post's created-energy bound)
-    ffr = _friction_forces_of(contact_data)
-    has_ffr = ffr.shape[0] == N
     status = STATUS_OK
     bad = -1
     done = 0
@@ -212,7 +194,6 @@ def _advance_template(
         vd = 0.0
         wk_fix = 0.0
         pw_c = 0.0
-        pw_f = 0.0
         vmax2 = 0.0
         # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
         fib = 0
@@ -227,12 +208,19 @@ def _advance_template(
             fx_i = f[i, 0] + bfx
             fy_i = f[i, 1] + bfy
             fz_i = f[i, 2] + bfz
-            # the contact hook's normal and friction forces (each array read and cleared here)
-            cfx, cfy, cfz = _take_row(fc, i, has_fc)
-            ffx, ffy, ffz = _take_row(ffr, i, has_ffr)
-            fx_i += cfx + ffx
-            fy_i += cfy + ffy
-            fz_i += cfz + ffz
+            cfx = 0.0
+            cfy = 0.0
+            cfz = 0.0
+            if has_fc:
+                cfx = fc[i, 0]
+                cfy = fc[i, 1]
+                cfz = fc[i, 2]
+                fc[i, 0] = 0.0
+                fc[i, 1] = 0.0
+                fc[i, 2] = 0.0
+                fx_i += cfx
+                fy_i += cfy
+                fz_i += cfz
             mx_i = mom[i, 0] + bmx
             my_i = mom[i, 1] + bmy
             mz_i = mom[i, 2] + bmz
@@ -328,7 +316,6 @@ def _advance_template(
             waz = 0.5 * (w0z + w1z)
             # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
             pw_c += cfx * vax + cfy * vay + cfz * vaz
-            pw_f += ffx * vax + ffy * vay + ffz * vaz
             if use_damp:
                 vd += (m * (vax * vax + vay * vay + vaz * vaz)
                        + jx * wax * wax + jy * way * way + jz * waz * waz)
@@ -384,8 +371,7 @@ def _advance_template(
         if n_pen > 0:
             acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
         if has_fc:
-            acc[ACC_PW] += dt * (pw_c + pw_f)
-            acc[ACC_WF] += dt * pw_f
+            acc[ACC_PW] += dt * pw_c
         done = it + 1
         # ---- history and checks ---------------------------------------------------------
         if record:
@@ -462,19 +448,16 @@ def no_contact_forces(data):
 
 
 _contact_forces_of = no_contact_forces
-_friction_forces_of = no_contact_forces
 
 
 def _specialise(name: str, hook, cache: bool, parallel: bool = False):
     g = dict(globals())
     g["_contact_hook"] = hook
     g["_contact_forces_of"] = no_contact_forces
-    g["_friction_forces_of"] = no_contact_forces
     if hook is not no_contact:
-        from .contact_effect import contact_forces_of, contact_step, friction_forces_of
+        from .contact_effect import contact_forces_of, contact_step
         if hook is contact_step:
             g["_contact_forces_of"] = contact_forces_of
-            g["_friction_forces_of"] = friction_forces_of
     g["_beam_pass"] = beam_resultants_fibers if parallel else beam_resultants
     tmpl = _advance_template
     fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)

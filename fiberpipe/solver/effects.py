@@ -504,9 +504,8 @@ class ContactHook(Effect):
         ``acc[ACC_PW]`` and its friction dissipation (J) to ``acc[ACC_FD]``, and return the
         number of active contacts. ``data`` is any numba-compatible tuple of arrays (neighbour
         lists, friction history...). (The built-in ``contact_effect.contact_step`` is the one
-        exception: it leaves its forces in ``contact_forces_of(data)`` (normal) and
-        ``friction_forces_of(data)`` (friction), which the step loop's update applies, books and
-        clears in its pass over the nodes.)
+        exception: it leaves its forces in ``contact_forces_of(data)``, which the step loop's
+        update applies, books and clears in its pass over the nodes.)
     data : tuple — passed through unchanged.
     prepare : optional callable ``prepare(model, scene) -> data`` run at setup (e.g. to build the
         neighbour list against ``model`` and size buffers with ``scene.dt``).
