@@ -32,7 +32,7 @@ from bench_solver import bundle  # noqa: E402
 from fiberpipe.solver import (  # noqa: E402
     Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates, State, Walls,
 )
-from fiberpipe.solver.contact_effect import make_contact_hook  # noqa: E402
+from fiberpipe.verification.case_config import contact_hook  # noqa: E402
 from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step, simulate  # noqa: E402
 
 R = 0.25e-3
@@ -90,8 +90,8 @@ def main(argv=None):
                                                     lower_position_m=ymin, upper_position_m=ymax)],
         "walls (x, two planes)": lambda: [Walls({"x": (xmin, xmax)})],
         "drives (one fiber)": lambda: [Drives([Drive(0, [0, -1e-4, 0], 0.1)])],
-        "contact (hertz_oriented)": lambda: [make_contact_hook(m)],
-        "contact + friction": lambda: [make_contact_hook(m, friction=True)],
+        "contact (hertz_oriented)": lambda: [contact_hook(m)],
+        "contact + friction": lambda: [contact_hook(m, friction=True)],
     }
     repeats = 5
     prepared = {"bare": _prepare(m, [], a.steps, repeats)}

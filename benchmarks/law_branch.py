@@ -65,12 +65,11 @@ def _final_load(h: dict) -> float:
 
 
 def _delta_max(effects) -> float:
-    from fiberpipe.solver import contact_effect as ce
 
     for e in effects:
         info = getattr(e, "setup_info", None)
         if info is not None and info.data is not None:
-            return float(info.data[1][ce.FS_DELTA_MAX])
+            return info.max_penetration_m
     return float("nan")
 
 

@@ -271,10 +271,9 @@ class DampingConfig(Section):
 
 
 class ContactConfig(Section):
-    law: Literal["linear", "scaled_stiffness", "hertz_parallel", "hertz_crossed", "hertz_oriented"] = (
-        "hertz_oriented"
-    )
-    stiffness: Optional[float] = Field(None, description="linear law: N/m² per unit length")
+    law: str = Field("hertz_oriented", description="a registered contact law: linear | scaled_stiffness | "
+                     "hertz_parallel | hertz_crossed | hertz_oriented (fiberpipe.solver.laws.LAWS)")
+    stiffness: Optional[float] = Field(None, description="linear law: N/m² per unit length (N/m per contact)")
     preset: Optional[str] = None
     k_def: Optional[float] = None
     s0: Optional[float] = None
@@ -282,38 +281,39 @@ class ContactConfig(Section):
     d: Optional[Length] = None
     angle: Optional[Angle] = None
     skin: Optional[Length] = None
-    overlap_release: Optional[Time] = Field(
-        None, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time (default 1e-4 s)"
+    overlap_release: Time = Field(
+        1e-4, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time"
     )
-    blend_length: Optional[Length] = Field(
-        None, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
-        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (default 1 mm; "
-        "half the element length keeps crossings spanning several elements off the point law, docs/contact.md)"
+    blend_length: Length = Field(
+        1e-3, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
+        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (half the "
+        "element length keeps crossings spanning several elements off the point law, docs/contact.md)"
     )
 
     @model_validator(mode="after")
     def _check(self):
-        if self.law == "linear" and self.stiffness is None:
-            raise ValueError("contact.law 'linear' needs contact.stiffness (N/m², force per unit length per metre)")
-        if self.law == "hertz_crossed" and self.angle is None:
-            raise ValueError("contact.law 'hertz_crossed' needs contact.angle (e.g. '6 deg')")
-        if self.law == "scaled_stiffness" and self.preset is None and None in (self.k_def, self.s0, self.s, self.d):
-            raise ValueError("contact.law 'scaled_stiffness' needs contact.preset or all of k_def, s0, s, d")
+        from fiberpipe.solver.laws import LAWS
+
+        law = LAWS.get(self.law)
+        if law is None:
+            close = difflib.get_close_matches(self.law, list(LAWS), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ValueError(f"contact.law {self.law!r} is not a contact law{hint}; choose from {sorted(LAWS)}")
+        law.check_config(self)
         if self.stiffness is not None:
             _positive("contact.stiffness", self.stiffness)
         if self.angle is not None and not (0 <= self.angle <= math.pi / 2 + 1e-12):
             raise ValueError("contact.angle must be between 0 and 90 deg")
         _positive("contact.overlap_release", self.overlap_release)
-        if self.blend_length is not None:
-            _positive("contact.blend_length", self.blend_length)
-            if self.law != "hertz_oriented":
-                raise ValueError(f"contact.blend_length applies to law 'hertz_oriented' only (the law is {self.law!r})")
+        _positive("contact.blend_length", self.blend_length)
+        if "blend_length" in self.model_fields_set and self.law != "hertz_oriented":
+            raise ValueError(f"contact.blend_length applies to law 'hertz_oriented' only (the law is {self.law!r})")
         return self
 
 
 class FrictionConfig(Section):
     mu: float = 0.2
-    stiffness: Optional[float] = None
+    stiffness: Optional[Stiffness] = Field(None, description="tangential penalty k_t, N/m (default 0.02 m_min (2/Δt)²)")
 
     @field_validator("mu")
     @classmethod
@@ -439,6 +439,11 @@ class SceneConfig(Section):
         for name, cls in defaults.items():
             if name in self.effects and getattr(self, name) is None:
                 object.__setattr__(self, name, cls())
+        # contact and friction run in one hook, which reads both blocks
+        if "contact" in self.effects or "friction" in self.effects:
+            for name in ("contact", "friction"):
+                if getattr(self, name) is None:
+                    object.__setattr__(self, name, defaults[name]())
         if "plates" in self.effects:
             self._check_plates()
         if "walls" in self.effects and all(getattr(self.walls, ax) is None for ax in "xyz"):

@@ -16,7 +16,7 @@ import pytest
 from fiberpipe.errors import FiberpipeError, InputError, SimulationDiverged
 from fiberpipe.solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Material, Plates,
                               SimulationSettings, State, Walls, build_model, simulate, stable_time_step)
-from fiberpipe.solver.contact_effect import make_contact_hook
+from fiberpipe.verification.case_config import contact_hook
 from fiberpipe.solver.integrator import choose_time_step
 from fiberpipe.solver.laws import make_law
 
@@ -40,7 +40,7 @@ def fibers_model(polys):
 
 
 def hook(m, friction=False, mu=0.2):
-    return make_contact_hook(m, law=make_law(LAW, E_pa=15e9, nu=0.3), friction=friction, mu=mu)
+    return contact_hook(m, law=make_law(LAW, E_pa=15e9, nu=0.3), friction=friction, mu=mu)
 
 
 def _seg_dist(p0, p1, q0, q1):
@@ -186,7 +186,7 @@ def test_crossing_fiber_dragged_across_joints_does_not_snag(pressed):
                       ((0.6e-3, -L / 2, z1), (0.6e-3, L / 2, z1), n)])
     if pressed:
         clamps = Clamps([Clamp(0, "start"), Clamp(0, "end")])
-        contact = make_contact_hook(m, law=make_law(LAW, E_pa=15e9, nu=0.3), overlap_release_s=0.0)
+        contact = contact_hook(m, law=make_law(LAW, E_pa=15e9, nu=0.3), overlap_release_s=0.0)
     else:
         clamps = Clamps([Clamp(0, k) for k in range(n + 1)])
         contact = hook(m)

@@ -26,12 +26,10 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
     (K,) N, ``max_penetration`` (K,) m.
     """
     from fiberpipe.solver.contact import compute_contact
-    from fiberpipe.solver.contact_effect import law_from_config
-    from fiberpipe.solver.model import Material
+    from fiberpipe.solver.laws import law_from_config
     from fiberpipe.solver.neighbours import VerletList, segment_arclength
 
-    material = Material(material_cfg.youngs_modulus, material_cfg.density, material_cfg.poisson_ratio_value)
-    law = law_from_config(scene_cfg.contact, material)
+    law = law_from_config(scene_cfg.contact, material_cfg)
     seg = mesh.elements()
     seg_fiber = mesh.element_fiber()
     seg_radius = mesh.element_radius_m()

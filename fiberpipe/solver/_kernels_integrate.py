@@ -33,43 +33,13 @@ import types
 import numpy as np
 from numba import njit
 
-from ._kernels_beam import EB_SIZE, beam_resultants, beam_resultants_fibers, node_resultant
+from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
+                     H_CONTACTS, H_FD, H_KE, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WF, H_WK,
+                     STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
-# accumulator slots (float64 array ``acc``)
-ACC_WK = 0   # prescribed-motion work (plates, drives, clamps), J
-ACC_VD = 1   # damping dissipation, J
-ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook), J
-ACC_FD = 3   # friction dissipation (contact hook), J
-ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW), J
-ACC_SIZE = 8
-
-# history columns
-H_TIME = 0
-H_PLATE_DISP = 1   # 2 columns: lower, upper
-H_PLATE_FORCE = 3  # 2 columns: lower, upper
-H_KE = 5
-H_SE = 6
-H_VD = 7
-H_WK = 8
-H_PW = 9
-H_FD = 10
-H_CONTACTS = 11
-H_WF = 12          # work of the friction forces on the fibers (ACC_WF), J
-H_WALL = 13        # W columns
-
-# node fixity bits
-FIX_X = 1
-FIX_Y = 2
-FIX_Z = 4
-FIX_ROT = 8
-DRIVEN = 16
-
-STATUS_OK = 0
-STATUS_NAN = 1
-STATUS_SPEED = 2
-STATUS_RUNAWAY = 3
-STATUS_ENERGY = 4
+_FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
 
 
 @njit(cache=True, error_model="numpy")
@@ -78,350 +48,406 @@ def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
     return 0
 
 
-def _advance_template(
-    # model (static)
-    el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-    mass, inv_mass, J, inv_J, radius_node, x0,
-    # state (in/out)
-    x, q, v, w, acc, t_start, step_start,
-    # work arrays: f, mom (N, 3) for the forces and moments of everything but the beams, eb (E, 9) for
-    # the beams' element resultants (gathered per node in the update)
-    f, mom, eb,
-    # step
-    dt, n_steps,
-    # damping
-    alpha, beta, strain_prev,
-    # constant external forces (gravity + loads), (N,3) or (0,3)
-    f_ext,
-    # fixity and drives
-    fix_mask, node_drive, drive_vec, drive_T, drive_ta, drive_mode, drive_v,
-    # planes
-    pl_axis, pl_sign, pl_pos0, pl_move, pl_T, pl_ta, pl_mode, pl_hist_col, k_pen,
-    pl_pos, pl_force, pen_idx, pen_f,
-    # contact hook (the hook kernel itself is the module global ``_contact_hook`` of the
-    # specialisation, see ``step_loop_for``)
-    contact_on, contact_data,
-    # history
-    hist, h_row, history_every,
-    # checks
-    v_limit, x_limit, e_ref,
-    # threads: > 1 runs the beam pass per fiber in a prange (``node_offsets``: CSR fiber offsets)
-    threads, node_offsets,
-):
-    """Advance the state by up to ``n_steps`` steps of ``dt`` (s).
+@njit(cache=True)
+def no_contact_forces(data):
+    """The force array of a hook that adds its forces to ``f`` itself: an empty (0, 3) array."""
+    return np.zeros((0, 3))
 
-    Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is STATUS_OK or the reason the
-    run stopped (then the state is the one at the check that failed).
+
+# ---- the passes of one step, in the manner of warp.sim's one eval_* per force term ------------------
+
+
+@njit(inline="always", **_FLAGS)
+def eval_external(f, mom, f_ext):
+    """Reset the step's force and moment arrays to the constant loads (gravity, point and line loads)."""
+    N = f.shape[0]
+    if f_ext.shape[0] == N:
+        for i in range(N):
+            f[i, 0] = f_ext[i, 0]
+            f[i, 1] = f_ext[i, 1]
+            f[i, 2] = f_ext[i, 2]
+    else:
+        f[:, :] = 0.0
+    mom[:, :] = 0.0
+
+
+@njit(inline="always", **_FLAGS)
+def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
+    """Plane penalties at t_n into ``f``; the moving plates' prescribed work to ALLWK and the first
+    half of the penalty work ``½Δt f_n·v_{n−½}`` to ALLPW. Returns the number of touching nodes."""
+    P = planes.axis.shape[0]
+    for p in range(P):
+        planes.pos[p] = planes.pos0[p] + planes.sign[p] * planes.move[p] * ramp_fraction(
+            t, planes.T[p], planes.ta[p], planes.mode[p])
+    n_pen = plane_contacts(x, radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos, f, planes.force,
+                           planes.pen_idx, planes.pen_f)
+    wk = 0.0
+    for p in range(P):
+        if planes.move[p] != 0.0:
+            du = planes.move[p] * 0.5 * (ramp_fraction(t + dt, planes.T[p], planes.ta[p], planes.mode[p])
+                                         - ramp_fraction(t - dt, planes.T[p], planes.ta[p], planes.mode[p]))
+            wk += planes.force[p] * du
+    acc[ACC_WK] += wk
+    acc[ACC_PW] += 0.5 * dt * penalty_power(v, planes.pen_idx, planes.pen_f, n_pen) - wk
+    return n_pen
+
+
+@njit(inline="always", **_FLAGS)
+def eval_drives(drives, t, dt):
+    """The drives' prescribed velocities over [t_n, t_{n+1}] (into ``drives.v``)."""
+    for d in range(drives.vec.shape[0]):
+        s1 = ramp_fraction(t + dt, drives.T[d], drives.ta[d], drives.mode[d])
+        s0 = ramp_fraction(t, drives.T[d], drives.ta[d], drives.mode[d])
+        for k in range(3):
+            drives.v[d, k] = drives.vec[d, k] * (s1 - s0) / dt
+
+
+@njit(inline="always", **_FLAGS)
+def body_moment(qw, qx, qy, qz, mx, my, mz):
+    """Body moment Rᵀ M = conj(q) M q, as M + w t + u' × t with u' = −u, t = 2 u' × M (fewer
+    operations than building R)."""
+    tx_ = 2.0 * (qz * my - qy * mz)
+    ty_ = 2.0 * (qx * mz - qz * mx)
+    tz_ = 2.0 * (qy * mx - qx * my)
+    return (mx + qw * tx_ - (qy * tz_ - qz * ty_), my + qw * ty_ - (qz * tx_ - qx * tz_),
+            mz + qw * tz_ - (qx * ty_ - qy * tx_))
+
+
+@njit(inline="always", **_FLAGS)
+def rotate_node(q, i, dt, w1x, w1y, w1z):
+    """q_{n+1} = q_n ⊗ exp(Ω_{n+½} Δt / 2), renormalised, in place."""
+    qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+    hx = 0.5 * dt * w1x
+    hy = 0.5 * dt * w1y
+    hz = 0.5 * dt * w1z
+    h2 = hx * hx + hy * hy + hz * hz
+    if h2 < 1e-8:
+        cw = 1.0 - 0.5 * h2
+        sf = 1.0 - h2 / 6.0
+    else:
+        hn = math.sqrt(h2)
+        cw = math.cos(hn)
+        sf = math.sin(hn) / hn
+    dx_ = sf * hx
+    dy_ = sf * hy
+    dz_ = sf * hz
+    nw = qw * cw - qx * dx_ - qy * dy_ - qz * dz_
+    nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
+    ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
+    nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
+    # renormalise: |q|² = 1 + ε with ε ~ 1e-16 (a product of unit quaternions), so one Newton step
+    # for 1/√(1 + ε), (3 − |q|²)/2, is exact to O(ε²): no square root, no division
+    inv = 0.5 * (3.0 - (nw * nw + nx * nx + ny * ny + nz * nz))
+    q[i, 0] = nw * inv
+    q[i, 1] = nx * inv
+    q[i, 2] = ny * inv
+    q[i, 3] = nz * inv
+
+
+@njit(inline="always", **_FLAGS)
+def prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, fx_i, fy_i, fz_i):
+    """Impose a fixed or driven node's translations; returns the new velocity and the reaction's
+    work over the step.
+
+    The reaction is the force that imposes the motion: m (v1 − v0)/Δt − f_n + α m v̄ (the damping
+    force −α m v̄ acts on prescribed nodes too and is booked in ALLVD, so the reaction overcoming it
+    must be in ALLWK); its work over the step is R · v̄ Δt.
     """
+    wk = 0.0
+    if mask & DRIVEN:
+        d = scene.node_drive[i]
+        px = scene.drives.v[d, 0]
+        py = scene.drives.v[d, 1]
+        pz = scene.drives.v[d, 2]
+        fx = 1
+        fy = 1
+        fz = 1
+    else:
+        px = 0.0
+        py = 0.0
+        pz = 0.0
+        fx = mask & FIX_X
+        fy = mask & FIX_Y
+        fz = mask & FIX_Z
+    if fx:
+        v1x = px
+        vb = 0.5 * (v1x + v0x)
+        wk += (m * (v1x - v0x) / dt - fx_i + alpha * m * vb) * vb * dt
+    if fy:
+        v1y = py
+        vb = 0.5 * (v1y + v0y)
+        wk += (m * (v1y - v0y) / dt - fy_i + alpha * m * vb) * vb * dt
+    if fz:
+        v1z = pz
+        vb = 0.5 * (v1z + v0z)
+        wk += (m * (v1z - v0z) / dt - fz_i + alpha * m * vb) * vb * dt
+    return v1x, v1y, v1z, wk
+
+
+@njit(**_FLAGS)
+def update_nodes(model, scene, state, work, fc, dt, record, gyro):
+    """The central-difference update of every node (module docstring), gathering the beam
+    resultants per node and adding the contact hook's force array ``fc`` (cleared here).
+
+    Returns ``(ke, vd, wk_fix, pw_c, vmax2, bad)``: the kinetic energy at t_n (if ``record``),
+    Σ m|v̄|² + J|Ω̄|² for the damping dissipation, the prescribed nodes' reaction work, Σ fc·v̄
+    (the hook's power), the largest |v_{n+½}|² and its node.
+    """
+    x, q, v, w = state.x, state.q, state.v, state.w
+    f, mom, eb = work.f, work.mom, work.eb
+    mass, inv_mass, J, inv_J = model.mass, model.inv_mass, model.J, model.inv_J
+    node_offsets = model.node_offsets
     N = x.shape[0]
-    P = pl_axis.shape[0]
-    ND = drive_vec.shape[0]
-    has_ext = f_ext.shape[0] == N
-    has_fix = fix_mask.shape[0] == N
+    alpha = scene.alpha_per_s
     use_damp = alpha > 0.0
+    has_fix = scene.fix_mask.shape[0] == N
+    has_fc = fc.shape[0] == N
     a_half = 0.5 * alpha * dt
-    c_old = 1.0 - a_half
     c_inv = 1.0 / (1.0 + a_half)
-    # v_{n+½} = c_keep v_{n−½} + (Δt c_inv / m) f: the constant factors folded once per call
-    c_keep = c_old * c_inv
+    # v_{n+½} = c_keep v_{n−½} + (Δt c_inv / m) f: the constant factors folded once per step
+    c_keep = (1.0 - a_half) * c_inv
     dt_c = dt * c_inv if use_damp else dt
-    vd_scale = alpha * dt
-    beta_over_dt = beta / dt if beta > 0.0 else 0.0
     NF = node_offsets.shape[0] - 1
+    ke = 0.0
+    vd = 0.0
+    wk_fix = 0.0
+    pw_c = 0.0
+    vmax2 = 0.0
+    bad = -1
+    # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
+    fib = 0
+    node_lo = 0
+    node_end = node_offsets[1] if NF > 0 else N
+    for i in range(N):
+        if i == node_end:
+            fib += 1
+            node_lo = node_end
+            node_end = node_offsets[fib + 1]
+        bfx, bfy, bfz, bmx, bmy, bmz = node_resultant(eb, node_lo, node_end, fib, i)
+        fx_i = f[i, 0] + bfx
+        fy_i = f[i, 1] + bfy
+        fz_i = f[i, 2] + bfz
+        cfx = 0.0
+        cfy = 0.0
+        cfz = 0.0
+        if has_fc:
+            cfx = fc[i, 0]
+            cfy = fc[i, 1]
+            cfz = fc[i, 2]
+            fc[i, 0] = 0.0
+            fc[i, 1] = 0.0
+            fc[i, 2] = 0.0
+            fx_i += cfx
+            fy_i += cfy
+            fz_i += cfz
+        m = mass[i]
+        mask = scene.fix_mask[i] if has_fix else 0
+        v0x = v[i, 0]
+        v0y = v[i, 1]
+        v0z = v[i, 2]
+        b = dt_c * inv_mass[i]
+        if use_damp:
+            v1x = c_keep * v0x + b * fx_i
+            v1y = c_keep * v0y + b * fy_i
+            v1z = c_keep * v0z + b * fz_i
+        else:
+            v1x = v0x + b * fx_i
+            v1y = v0y + b * fy_i
+            v1z = v0z + b * fz_i
+        w0x = w[i, 0]
+        w0y = w[i, 1]
+        w0z = w[i, 2]
+        mbx, mby, mbz = body_moment(q[i, 0], q[i, 1], q[i, 2], q[i, 3],
+                                    mom[i, 0] + bmx, mom[i, 1] + bmy, mom[i, 2] + bmz)
+        jx = J[i, 0]
+        jy = J[i, 1]
+        jz = J[i, 2]
+        # gyroscopic Ω × JΩ (zero for isotropic J)
+        gx = 0.0
+        gy = 0.0
+        gz = 0.0
+        if gyro:
+            gx = w0y * jz * w0z - w0z * jy * w0y
+            gy = w0z * jx * w0x - w0x * jz * w0z
+            gz = w0x * jy * w0y - w0y * jx * w0x
+        if use_damp:
+            w1x = c_keep * w0x + dt_c * (mbx - gx) * inv_J[i, 0]
+            w1y = c_keep * w0y + dt_c * (mby - gy) * inv_J[i, 1]
+            w1z = c_keep * w0z + dt_c * (mbz - gz) * inv_J[i, 2]
+        else:
+            w1x = w0x + dt * (mbx - gx) * inv_J[i, 0]
+            w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
+            w1z = w0z + dt * (mbz - gz) * inv_J[i, 2]
+        if mask != 0:
+            v1x, v1y, v1z, wk = prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z,
+                                               fx_i, fy_i, fz_i)
+            wk_fix += wk
+            if mask & (FIX_ROT | DRIVEN):
+                w1x = 0.0
+                w1y = 0.0
+                w1z = 0.0
+        # averages at t_n
+        vax = 0.5 * (v0x + v1x)
+        vay = 0.5 * (v0y + v1y)
+        vaz = 0.5 * (v0z + v1z)
+        wax = 0.5 * (w0x + w1x)
+        way = 0.5 * (w0y + w1y)
+        waz = 0.5 * (w0z + w1z)
+        # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
+        pw_c += cfx * vax + cfy * vay + cfz * vaz
+        if use_damp:
+            vd += (m * (vax * vax + vay * vay + vaz * vaz)
+                   + jx * wax * wax + jy * way * way + jz * waz * waz)
+        if record:
+            v2 = v1x * v1x + v1y * v1y + v1z * v1z
+            # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
+            # K_{n+½} − K_{n−½} = Δt F_n·v̄_n exactly, so with every work booked as Δt f_n·v̄_n
+            # (plates, walls, contact, drives) the balance has no O((ωΔt)²) swing in stiff bounces
+            ke += 0.25 * (m * (v0x * v0x + v0y * v0y + v0z * v0z + v1x * v1x + v1y * v1y + v1z * v1z)
+                          + jx * (w0x * w0x + w1x * w1x) + jy * (w0y * w0y + w1y * w1y)
+                          + jz * (w0z * w0z + w1z * w1z))
+            if not (v2 <= vmax2):
+                if not (v2 == v2) or v2 > vmax2:
+                    vmax2 = v2 if v2 == v2 else np.inf
+                    bad = i
+        v[i, 0] = v1x
+        v[i, 1] = v1y
+        v[i, 2] = v1z
+        w[i, 0] = w1x
+        w[i, 1] = w1y
+        w[i, 2] = w1z
+        x[i, 0] += dt * v1x
+        x[i, 1] += dt * v1y
+        x[i, 2] += dt * v1z
+        rotate_node(q, i, dt, w1x, w1y, w1z)
+    return ke, vd, wk_fix, pw_c, vmax2, bad
+
+
+@njit(**_FLAGS)
+def write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n_contacts):
+    """One history row at t_n; the works are the mean of the accumulators before and after the step."""
+    x, v, acc, hist = state.x, state.v, state.acc, work.hist
+    f_ext, x0 = scene.f_ext, model.x0
+    planes = scene.planes
+    N = x.shape[0]
+    wext = 0.0
+    if f_ext.shape[0] == N:
+        for i in range(N):
+            xi0 = x[i, 0] - dt * v[i, 0]
+            xi1 = x[i, 1] - dt * v[i, 1]
+            xi2 = x[i, 2] - dt * v[i, 2]
+            wext += (f_ext[i, 0] * (xi0 - x0[i, 0]) + f_ext[i, 1] * (xi1 - x0[i, 1])
+                     + f_ext[i, 2] * (xi2 - x0[i, 2]))
+    hist[h_row, H_TIME] = t
+    for p in range(planes.axis.shape[0]):
+        c = planes.hist_col[p]
+        if c >= 0:
+            hist[h_row, c] = planes.force[p]
+            if H_PLATE_FORCE <= c < H_PLATE_FORCE + 2:  # a plate: its travel too
+                hist[h_row, H_PLATE_DISP + c - H_PLATE_FORCE] = planes.move[p] * ramp_fraction(
+                    t, planes.T[p], planes.ta[p], planes.mode[p])
+    hist[h_row, H_KE] = ke
+    hist[h_row, H_SE] = se
+    hist[h_row, H_VD] = 0.5 * (acc_before[ACC_VD] + acc[ACC_VD])
+    hist[h_row, H_WK] = 0.5 * (acc_before[ACC_WK] + acc[ACC_WK]) + wext
+    hist[h_row, H_PW] = 0.5 * (acc_before[ACC_PW] + acc[ACC_PW])
+    hist[h_row, H_FD] = 0.5 * (acc_before[ACC_FD] + acc[ACC_FD])
+    hist[h_row, H_WF] = 0.5 * (acc_before[ACC_WF] + acc[ACC_WF])
+    hist[h_row, H_CONTACTS] = n_contacts
+
+
+@njit(**_FLAGS)
+def check_row(model, state, row, ke, se, vmax2, ctl):
+    """The blow-up checks at a history row: ``(status, bad node or -1)``."""
+    if not (ke == ke) or not (se == se) or vmax2 == np.inf:
+        return STATUS_NAN, -1
+    if vmax2 > ctl.v_limit_m_s * ctl.v_limit_m_s:
+        return STATUS_SPEED, -1
+    emax = ctl.e_ref_J
+    if abs(row[H_WK]) > emax:
+        emax = abs(row[H_WK])
+    if abs(row[H_PW]) > emax:
+        emax = abs(row[H_PW])
+    if ke > 1e3 * emax:
+        return STATUS_ENERGY, -1
+    x, x0 = state.x, model.x0
+    lim2 = ctl.x_limit_m * ctl.x_limit_m
+    for i in range(x.shape[0]):
+        ddx = x[i, 0] - x0[i, 0]
+        ddy = x[i, 1] - x0[i, 1]
+        ddz = x[i, 2] - x0[i, 2]
+        if ddx * ddx + ddy * ddy + ddz * ddz > lim2:
+            return STATUS_RUNAWAY, i
+    return STATUS_OK, -1
+
+
+def _advance_template(model, scene, state, work, ctl, contact_data):
+    """Advance ``state`` by up to ``ctl.n_steps`` steps of ``ctl.dt_s`` (s).
+
+    Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is a ``layout.STATUS_*`` code
+    (not OK: the state is the one at the check that failed).
+    """
+    x, q, v, w, acc = state
+    dt = ctl.dt_s
+    h_row = ctl.h_row
+    hist = work.hist
+    P = scene.planes.axis.shape[0]
+    beta = scene.beta_s
+    beta_over_dt = beta / dt if beta > 0.0 else 0.0
+    vd_scale = scene.alpha_per_s * dt
+    J = model.J
     # isotropic rotary inertia (build_model's): Ω × JΩ = 0, the gyroscopic term is skipped
     gyro = False
-    for i in range(N):
+    for i in range(x.shape[0]):
         if J[i, 0] != J[i, 1] or J[i, 0] != J[i, 2]:
             gyro = True
             break
     acc_before = np.zeros(ACC_SIZE)
-    # the contact hook's force array (contact_effect: it leaves each step's fiber–fiber contact and
-    # friction forces there instead of adding them to f; the update adds them, books their work
-    # Δt f_n·v̄_n and clears the array, in its own pass over the nodes); (0, 3) for other hooks
-    fc = _contact_forces_of(contact_data)
-    has_fc = fc.shape[0] == N
+    # the hook's own force array (a hook that declares one leaves its forces there; the update adds
+    # them, books their work Δt f_n·v̄_n and clears the array); (0, 3) for hooks that add into f
+    fc = _hook_forces(contact_data)
+    has_fc = fc.shape[0] == x.shape[0]
     status = STATUS_OK
     bad = -1
     done = 0
-    for it in range(n_steps):
-        step = step_start + it
-        t = t_start + it * dt
-        record = ((step + 1) % history_every == 0) and h_row < hist.shape[0]
+    for it in range(ctl.n_steps):
+        step = ctl.step_start + it
+        t = ctl.t_start_s + it * dt
+        record = ((step + 1) % ctl.history_every == 0) and h_row < hist.shape[0]
         if record:
             for k in range(ACC_SIZE):
                 acc_before[k] = acc[k]
-        # ---- forces at t_n -------------------------------------------------------------
-        if has_ext:
-            for i in range(N):
-                f[i, 0] = f_ext[i, 0]
-                f[i, 1] = f_ext[i, 1]
-                f[i, 2] = f_ext[i, 2]
-        else:
-            f[:, :] = 0.0
-        mom[:, :] = 0.0
+        # ---- forces at t_n ----
+        eval_external(work.f, work.mom, scene.f_ext)
         # _beam_pass: beam_resultants (serial) or beam_resultants_fibers (prange per fiber), bound per
-        # loop variant by _specialise; it fills eb, the update below gathers it
-        se, vd_beta = _beam_pass(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest,
-                                 eb, record, beta_over_dt, strain_prev, node_offsets)
+        # loop variant by _specialise; it fills eb, the update gathers it
+        se, vd_beta = _beam_pass(x, q, model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest,
+                                 model.theta_rest, work.eb, record, beta_over_dt, work.strain_prev,
+                                 model.node_offsets)
         acc[ACC_VD] += vd_beta
         n_pen = 0
         if P > 0:
-            for p in range(P):
-                pl_pos[p] = pl_pos0[p] + pl_sign[p] * pl_move[p] * ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
-            n_pen = plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f)
-            wk = 0.0
-            for p in range(P):
-                if pl_move[p] != 0.0:
-                    du = pl_move[p] * 0.5 * (ramp_fraction(t + dt, pl_T[p], pl_ta[p], pl_mode[p])
-                                             - ramp_fraction(t - dt, pl_T[p], pl_ta[p], pl_mode[p]))
-                    wk += pl_force[p] * du
-            acc[ACC_WK] += wk
-            acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen) - wk
-        n_contacts = 0
-        if contact_on:
-            # >>> CONTACT/FRICTION HOOK: adds fiber–fiber contact and friction forces (N) into f
-            # and moments (N·m) into mom at time t_n, from x_n, q_n and the half-step velocities
-            # v_{n−½}, w_{n−½}; adds its penalty work to acc[ACC_PW] and its friction dissipation
-            # to acc[ACC_FD]; returns the number of active contacts.
-            n_contacts = _contact_hook(x, q, v, w, f, mom, acc, t, dt, contact_data)
-        for d in range(ND):
-            s1 = ramp_fraction(t + dt, drive_T[d], drive_ta[d], drive_mode[d])
-            s0 = ramp_fraction(t, drive_T[d], drive_ta[d], drive_mode[d])
-            for k in range(3):
-                drive_v[d, k] = drive_vec[d, k] * (s1 - s0) / dt
-        # ---- update ------------------------------------------------------------------
-        ke = 0.0
-        vd = 0.0
-        wk_fix = 0.0
-        pw_c = 0.0
-        vmax2 = 0.0
-        # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
-        fib = 0
-        node_lo = 0
-        node_end = node_offsets[1] if NF > 0 else N
-        for i in range(N):
-            if i == node_end:
-                fib += 1
-                node_lo = node_end
-                node_end = node_offsets[fib + 1]
-            bfx, bfy, bfz, bmx, bmy, bmz = node_resultant(eb, node_lo, node_end, fib, i)
-            fx_i = f[i, 0] + bfx
-            fy_i = f[i, 1] + bfy
-            fz_i = f[i, 2] + bfz
-            cfx = 0.0
-            cfy = 0.0
-            cfz = 0.0
-            if has_fc:
-                cfx = fc[i, 0]
-                cfy = fc[i, 1]
-                cfz = fc[i, 2]
-                fc[i, 0] = 0.0
-                fc[i, 1] = 0.0
-                fc[i, 2] = 0.0
-                fx_i += cfx
-                fy_i += cfy
-                fz_i += cfz
-            mx_i = mom[i, 0] + bmx
-            my_i = mom[i, 1] + bmy
-            mz_i = mom[i, 2] + bmz
-            m = mass[i]
-            im = inv_mass[i]
-            mask = fix_mask[i] if has_fix else 0
-            v0x = v[i, 0]
-            v0y = v[i, 1]
-            v0z = v[i, 2]
-            b = dt_c * im
-            if use_damp:
-                v1x = c_keep * v0x + b * fx_i
-                v1y = c_keep * v0y + b * fy_i
-                v1z = c_keep * v0z + b * fz_i
-            else:
-                v1x = v0x + b * fx_i
-                v1y = v0y + b * fy_i
-                v1z = v0z + b * fz_i
-            # rotations: body moment
-            w0x = w[i, 0]
-            w0y = w[i, 1]
-            w0z = w[i, 2]
-            qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-            # body moment Rᵀ M = conj(q) M q, as M + w t + u' × t with u' = −u, t = 2 u' × M
-            # (fewer operations than building R)
-            tx_ = 2.0 * (qz * my_i - qy * mz_i)
-            ty_ = 2.0 * (qx * mz_i - qz * mx_i)
-            tz_ = 2.0 * (qy * mx_i - qx * my_i)
-            mbx = mx_i + qw * tx_ - (qy * tz_ - qz * ty_)
-            mby = my_i + qw * ty_ - (qz * tx_ - qx * tz_)
-            mbz = mz_i + qw * tz_ - (qx * ty_ - qy * tx_)
-            jx = J[i, 0]
-            jy = J[i, 1]
-            jz = J[i, 2]
-            # gyroscopic Ω × JΩ (zero for isotropic J)
-            gx = 0.0
-            gy = 0.0
-            gz = 0.0
-            if gyro:
-                gx = w0y * jz * w0z - w0z * jy * w0y
-                gy = w0z * jx * w0x - w0x * jz * w0z
-                gz = w0x * jy * w0y - w0y * jx * w0x
-            if use_damp:
-                w1x = c_keep * w0x + dt_c * (mbx - gx) * inv_J[i, 0]
-                w1y = c_keep * w0y + dt_c * (mby - gy) * inv_J[i, 1]
-                w1z = c_keep * w0z + dt_c * (mbz - gz) * inv_J[i, 2]
-            else:
-                w1x = w0x + dt * (mbx - gx) * inv_J[i, 0]
-                w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
-                w1z = w0z + dt * (mbz - gz) * inv_J[i, 2]
-            if mask != 0:
-                # prescribed translations: velocity imposed, reaction work to ALLWK
-                if mask & DRIVEN:
-                    d = node_drive[i]
-                    px = drive_v[d, 0]
-                    py = drive_v[d, 1]
-                    pz = drive_v[d, 2]
-                    fx = 1
-                    fy = 1
-                    fz = 1
-                else:
-                    px = 0.0
-                    py = 0.0
-                    pz = 0.0
-                    fx = mask & FIX_X
-                    fy = mask & FIX_Y
-                    fz = mask & FIX_Z
-                # reaction = the force that imposes the motion: m (v1 − v0)/Δt − f_n + α m v̄ (the
-                # damping force −α m v̄ acts on prescribed nodes too and is booked in ALLVD, so the
-                # reaction overcoming it must be in ALLWK); its work over the step is R · v̄ Δt
-                if fx:
-                    v1x = px
-                    vb = 0.5 * (v1x + v0x)
-                    wk_fix += (m * (v1x - v0x) / dt - fx_i + alpha * m * vb) * vb * dt
-                if fy:
-                    v1y = py
-                    vb = 0.5 * (v1y + v0y)
-                    wk_fix += (m * (v1y - v0y) / dt - fy_i + alpha * m * vb) * vb * dt
-                if fz:
-                    v1z = pz
-                    vb = 0.5 * (v1z + v0z)
-                    wk_fix += (m * (v1z - v0z) / dt - fz_i + alpha * m * vb) * vb * dt
-                if mask & (FIX_ROT | DRIVEN):
-                    w1x = 0.0
-                    w1y = 0.0
-                    w1z = 0.0
-            # averages at t_n
-            vax = 0.5 * (v0x + v1x)
-            vay = 0.5 * (v0y + v1y)
-            vaz = 0.5 * (v0z + v1z)
-            wax = 0.5 * (w0x + w1x)
-            way = 0.5 * (w0y + w1y)
-            waz = 0.5 * (w0z + w1z)
-            # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
-            pw_c += cfx * vax + cfy * vay + cfz * vaz
-            if use_damp:
-                vd += (m * (vax * vax + vay * vay + vaz * vaz)
-                       + jx * wax * wax + jy * way * way + jz * waz * waz)
-            if record:
-                v2 = v1x * v1x + v1y * v1y + v1z * v1z
-                # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
-                # K_{n+½} − K_{n−½} = Δt F_n·v̄_n exactly, so with every work booked as Δt f_n·v̄_n
-                # (plates, walls, contact, drives) the balance has no O((ωΔt)²) swing in stiff bounces
-                ke += 0.25 * (m * (v0x * v0x + v0y * v0y + v0z * v0z + v1x * v1x + v1y * v1y + v1z * v1z)
-                              + jx * (w0x * w0x + w1x * w1x) + jy * (w0y * w0y + w1y * w1y)
-                              + jz * (w0z * w0z + w1z * w1z))
-                if not (v2 <= vmax2):
-                    if not (v2 == v2) or v2 > vmax2:
-                        vmax2 = v2 if v2 == v2 else np.inf
-                        bad = i
-            v[i, 0] = v1x
-            v[i, 1] = v1y
-            v[i, 2] = v1z
-            w[i, 0] = w1x
-            w[i, 1] = w1y
-            w[i, 2] = w1z
-            x[i, 0] += dt * v1x
-            x[i, 1] += dt * v1y
-            x[i, 2] += dt * v1z
-            # q ⊗ exp(Ω dt / 2)
-            hx = 0.5 * dt * w1x
-            hy = 0.5 * dt * w1y
-            hz = 0.5 * dt * w1z
-            h2 = hx * hx + hy * hy + hz * hz
-            if h2 < 1e-8:
-                cw = 1.0 - 0.5 * h2
-                sf = 1.0 - h2 / 6.0
-            else:
-                hn = math.sqrt(h2)
-                cw = math.cos(hn)
-                sf = math.sin(hn) / hn
-            dx_ = sf * hx
-            dy_ = sf * hy
-            dz_ = sf * hz
-            nw = qw * cw - qx * dx_ - qy * dy_ - qz * dz_
-            nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
-            ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
-            nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
-            # renormalise: |q|² = 1 + ε with ε ~ 1e-16 (a product of unit quaternions), so one
-            # Newton step for 1/√(1 + ε), (3 − |q|²)/2, is exact to O(ε²): no square root, no division
-            inv = 0.5 * (3.0 - (nw * nw + nx * nx + ny * ny + nz * nz))
-            q[i, 0] = nw * inv
-            q[i, 1] = nx * inv
-            q[i, 2] = ny * inv
-            q[i, 3] = nz * inv
+            n_pen = eval_planes(scene.planes, x, v, model.radius_node, work.f, acc, t, dt)
+        # the hook adds its forces (or leaves them in its own array) and moments at t_n from x_n, q_n
+        # and the half-step velocities v_{n−½}, w_{n−½}; books its work and friction dissipation
+        n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
+        eval_drives(scene.drives, t, dt)
+        # ---- update ----
+        ke, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, record, gyro)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
-            acc[ACC_PW] += 0.5 * dt * penalty_power(v, pen_idx, pen_f, n_pen)
+            acc[ACC_PW] += 0.5 * dt * penalty_power(v, scene.planes.pen_idx, scene.planes.pen_f, n_pen)
         if has_fc:
             acc[ACC_PW] += dt * pw_c
         done = it + 1
-        # ---- history and checks ---------------------------------------------------------
+        # ---- history and checks ----
         if record:
-            # works at t_n: mean of the accumulators before and after this step
-            wext = 0.0
-            if has_ext:
-                for i in range(N):
-                    xi0 = x[i, 0] - dt * v[i, 0]
-                    xi1 = x[i, 1] - dt * v[i, 1]
-                    xi2 = x[i, 2] - dt * v[i, 2]
-                    wext += (f_ext[i, 0] * (xi0 - x0[i, 0]) + f_ext[i, 1] * (xi1 - x0[i, 1])
-                             + f_ext[i, 2] * (xi2 - x0[i, 2]))
-            hist[h_row, H_TIME] = t
-            for p in range(P):
-                c = pl_hist_col[p]
-                if c >= 0:
-                    hist[h_row, c] = pl_force[p]
-                    if c < H_PLATE_FORCE + 2:
-                        hist[h_row, c - 2] = pl_move[p] * ramp_fraction(t, pl_T[p], pl_ta[p], pl_mode[p])
-            hist[h_row, H_KE] = ke
-            hist[h_row, H_SE] = se
-            hist[h_row, H_VD] = 0.5 * (acc_before[ACC_VD] + acc[ACC_VD])
-            hist[h_row, H_WK] = 0.5 * (acc_before[ACC_WK] + acc[ACC_WK]) + wext
-            hist[h_row, H_PW] = 0.5 * (acc_before[ACC_PW] + acc[ACC_PW])
-            hist[h_row, H_FD] = 0.5 * (acc_before[ACC_FD] + acc[ACC_FD])
-            hist[h_row, H_WF] = 0.5 * (acc_before[ACC_WF] + acc[ACC_WF])
-            hist[h_row, H_CONTACTS] = n_contacts
+            write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n_contacts)
             h_row += 1
-            if not (ke == ke) or not (se == se) or vmax2 == np.inf:
-                status = STATUS_NAN
-                break
-            if vmax2 > v_limit * v_limit:
-                status = STATUS_SPEED
-                break
-            emax = e_ref
-            if abs(hist[h_row - 1, H_WK]) > emax:
-                emax = abs(hist[h_row - 1, H_WK])
-            if abs(hist[h_row - 1, H_PW]) > emax:
-                emax = abs(hist[h_row - 1, H_PW])
-            if ke > 1e3 * emax:
-                status = STATUS_ENERGY
-                break
-            for i in range(N):
-                ddx = x[i, 0] - x0[i, 0]
-                ddy = x[i, 1] - x0[i, 1]
-                ddz = x[i, 2] - x0[i, 2]
-                if ddx * ddx + ddy * ddy + ddz * ddz > x_limit * x_limit:
-                    status = STATUS_RUNAWAY
-                    bad = i
-                    break
+            status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, ctl)
+            if bad_x >= 0:
+                bad = bad_x
             if status != STATUS_OK:
                 break
     return status, done, h_row, bad
@@ -430,63 +456,56 @@ def _advance_template(
 # ---- specialisations of the step loop, one per contact hook -----------------------------------------
 #
 # The hook is NOT a first-class function argument: each specialisation is a copy of
-# ``_advance_template`` whose global ``_contact_hook`` is bound to one hook kernel, so numba compiles
-# the call directly (inlined, no indirect call) and never pickles a dispatcher type into its cache.
-# The built-in hooks (none, and ``contact_effect.contact_step``) are cached on disk under their own
-# names; their freshness covers every module of the package (``_jitcache``), so an edit of a contact
-# module recompiles them. A user hook (tests, scripts) gets an uncached specialisation, compiled
-# once per process and hook.
+# ``_advance_template`` whose globals ``_hook`` and ``_hook_forces`` are bound to one hook kernel and
+# its force-array accessor, so numba compiles the call directly (inlined, no indirect call) and never
+# pickles a dispatcher type into its cache. The built-in hooks are cached on disk under their own
+# names (``step_loop_for(cache_name=...)``); their freshness covers every module of the package
+# (``_jitcache``), so an edit of a contact module recompiles them. Any other hook gets an uncached
+# specialisation, compiled once per process and hook.
 
-_contact_hook = no_contact
-
-
-@njit(cache=True)
-def no_contact_forces(data):
-    """A hook that adds its forces to ``f`` itself has no force array for the update (the
-    ``_contact_forces_of`` default): an empty (0, 3) array."""
-    return np.zeros((0, 3))
+_hook = no_contact
+_hook_forces = no_contact_forces
 
 
-_contact_forces_of = no_contact_forces
-
-
-def _specialise(name: str, hook, cache: bool, parallel: bool = False):
-    g = dict(globals())
-    g["_contact_hook"] = hook
-    g["_contact_forces_of"] = no_contact_forces
-    if hook is not no_contact:
-        from .contact_effect import contact_forces_of, contact_step
-        if hook is contact_step:
-            g["_contact_forces_of"] = contact_forces_of
-    g["_beam_pass"] = beam_resultants_fibers if parallel else beam_resultants
-    tmpl = _advance_template
-    fn = types.FunctionType(tmpl.__code__, g, name, tmpl.__defaults__, tmpl.__closure__)
+def specialise(template, name: str, bindings: dict, *, cache: bool, **flags):
+    """A jitted copy of the plain function ``template`` whose module globals named in ``bindings``
+    are replaced (the way a kernel is specialised on the kernels it calls)."""
+    g = dict(template.__globals__)
+    g.update(bindings)
+    fn = types.FunctionType(template.__code__, g, name, template.__defaults__, template.__closure__)
     fn.__qualname__ = name
-    fn.__module__ = __name__
-    fn.__doc__ = tmpl.__doc__
-    return njit(cache=cache, fastmath=True, error_model="numpy")(fn)
+    fn.__module__ = template.__module__
+    fn.__doc__ = template.__doc__
+    return njit(cache=cache, **flags)(fn)
 
 
-advance_plain = _specialise("advance_plain", no_contact, True)
+def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False):
+    return specialise(_advance_template, name, {
+        "_hook": hook, "_hook_forces": forces_of,
+        "_beam_pass": beam_resultants_fibers if parallel else beam_resultants,
+    }, cache=cache, fastmath=True, error_model="numpy")
+
+
+advance_plain = _specialise("advance_plain", no_contact, no_contact_forces, True)
 _LOOPS: dict = {}
 
 
-def step_loop_for(hook, threads: int = 1):
+def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1, cache_name: str | None = None):
     """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none).
 
-    ``threads > 1``: the variant whose beam pass runs one prange task per fiber; it is compiled in
-    every process (not cached, see :func:`fiberpipe.solver._kernels_beam.beam_resultants_fibers`).
+    forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
+        adds into ``f``). cache_name : a built-in hook's name for the on-disk cache (None: compiled
+        in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
+        fiber; compiled in every process (see ``_kernels_beam.beam_resultants_fibers``).
     """
     parallel = threads > 1
     if hook is no_contact and not parallel:
         return advance_plain
-    loop = _LOOPS.get((hook, parallel))
+    key = (hook, forces_of, parallel)
+    loop = _LOOPS.get(key)
     if loop is None:
-        from .contact_effect import contact_step
-        if hook is contact_step and not parallel:
-            loop = _specialise("advance_contact", hook, True)
-        else:
-            name = "advance_plain" if hook is no_contact else "advance_contact" if hook is contact_step else "advance_hook"
-            loop = _specialise(name + ("_threads" if parallel else ""), hook, False, parallel)
-        _LOOPS[(hook, parallel)] = loop
+        cache = cache_name is not None and not parallel
+        name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
+        loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel)
+        _LOOPS[key] = loop
     return loop

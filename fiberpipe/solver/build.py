@@ -1,6 +1,6 @@
 """Map a validated config (``fiberpipe.config.Config``, SI floats) and a mesh to (model, effects, settings).
 
-Config sections used (SPEC 3, 3.1): ``material`` (youngs_modulus, poisson_ratio | shear_modulus,
+Config sections used (docs/config.md): ``material`` (youngs_modulus, poisson_ratio | shear_modulus,
 density), ``fiber.radius`` (overrides the mesh's per-fiber radius), ``scene`` (effects + blocks),
 ``solver`` (dt_safety, dt, end_time, output_frames, history_every, rotational_inertia_scaling,
 mass_scaling). Only the effects listed in ``scene.effects`` are built.
@@ -14,8 +14,8 @@ import numpy as np
 
 from ..errors import FiberpipeError
 from ..model.mesh import plane_penetration
-from .effects import (SceneArrays, AxialLock, Clamp, Clamps, Damping, Drive, Drives, Effect, Gravity, LineLoad, Loads, Plates,
-                      PointLoad, Walls)
+from . import contact_effect  # noqa: F401  (registers the contact and friction effect)
+from .effects import EFFECTS, Clamps, ContactHook, Drives, Effect, Loads, SceneArrays
 from .integrator import SimulationSettings
 from .model import Material, Model, build_model
 
@@ -95,20 +95,7 @@ def material_from_config(cfg) -> Material:
     m = cfg.material
     if m.shear_modulus is not None:
         return Material(float(m.youngs_modulus), float(m.density), None, float(m.shear_modulus))
-    nu = 0.3 if m.poisson_ratio is None else float(m.poisson_ratio)
-    return Material(float(m.youngs_modulus), float(m.density), nu)
-
-
-def _contact_effects(model: Model, cfg) -> list[Effect]:
-    """Fiber–fiber contact (and friction) from the contact module, if it provides a factory
-    ``contact_effect(model, scene_cfg, material) -> ContactHook``."""
-    try:
-        from . import contact as _contact  # written in parallel by the contact engineer
-        factory = getattr(_contact, "contact_effect")
-    except (ImportError, AttributeError):
-        raise FiberpipeError("scene.effects lists contact, but fiber–fiber contact is not available in "
-                             "this version of the solver", where="scene.effects") from None
-    return [factory(model, cfg.scene, material_from_config(cfg))]
+    return Material(float(m.youngs_modulus), float(m.density), float(m.poisson_ratio_value))
 
 
 def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings]:
@@ -132,38 +119,17 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
                         mass_scale=float(getattr(s, "mass_scaling", 1.0) or 1.0))
     sc = cfg.scene
     effects: list[Effect] = []
-    names = list(sc.effects)
-    for name in names:
-        if name == "gravity":
-            effects.append(Gravity(list(sc.gravity.acceleration)))
-        elif name == "damping":
-            effects.append(Damping(float(sc.damping.alpha), float(sc.damping.beta)))
-        elif name == "clamps":
-            effects.append(Clamps([Clamp(c.fiber, c.at) for c in sc.clamps]))
-        elif name == "loads":
-            lds = []
-            for ld in sc.loads:
-                if ld.line_force is not None:
-                    lds.append(LineLoad(ld.fiber, list(ld.line_force)))
-                else:
-                    lds.append(PointLoad(ld.fiber, list(ld.force), ld.at))
-            effects.append(Loads(lds))
-        elif name == "plates":
-            p, ld = sc.plates, sc.loading
-            effects.append(Plates(axis=p.axis, lower=p.lower, upper=p.upper,
-                                  displacement_m=float(ld.displacement), velocity_m_s=float(ld.velocity),
-                                  ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
-                                  lower_position_m=p.lower_position,
-                                  upper_position_m=p.upper_position))
-        elif name == "walls":
-            w = sc.walls
-            effects.append(Walls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None}))
-        elif name == "drives":
-            effects.append(Drives([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in sc.drives]))
-        elif name == "constraints":
-            effects.append(AxialLock(axis=sc.constraints.axis, nodes=sc.constraints.lock_axial))
-    if "contact" in names or "friction" in names:
-        effects.extend(_contact_effects(model, cfg))
+    hooks: list[Effect] = []
+    built = set()
+    for name in sc.effects:
+        cls = EFFECTS[name]
+        if cls in built:  # contact and friction share one hook
+            continue
+        built.add(cls)
+        e = cls.from_config(sc, model, cfg)
+        # the contact hook sets up last: it reads the planes the other effects define
+        (hooks if isinstance(e, ContactHook) else effects).append(e)
+    effects += hooks
     for e in effects:
         if isinstance(e, (Clamps, Loads, Drives)):
             e.setup(model, SceneArrays(model, 1.0))  # checks fiber/node indices now, with a clear error

@@ -104,7 +104,7 @@ def _flatten(obj, prefix: str, out: dict, spec: list):
     elif _is_typed_list(obj):
         sub = []
         for i, item in enumerate(obj):
-            _flatten(np.asarray(item), f"{prefix}/{i}", out, sub)
+            _flatten(item if isinstance(item, tuple) else np.asarray(item), f"{prefix}/{i}", out, sub)
         spec.append(["list", sub])
     elif isinstance(obj, np.ndarray):
         out[prefix] = obj
@@ -147,13 +147,17 @@ def _unflatten(spec, arrays: dict):
 
 def restore_into(current, saved):
     """Copy ``saved`` into the arrays of ``current`` in place where shapes and dtypes agree (the jitted
-    kernel may hold references to them); return the tuple to use from now on."""
+    kernel may hold references to them); return the structure to use from now on (NamedTuples keep
+    their type: the saved file holds plain tuples)."""
     if isinstance(current, tuple) and isinstance(saved, tuple) and len(current) == len(saved):
-        return tuple(restore_into(c, s) for c, s in zip(current, saved))
+        items = [restore_into(c, s) for c, s in zip(current, saved)]
+        return type(current)(*items) if hasattr(current, "_fields") else tuple(items)
     if _is_typed_list(current) and _is_typed_list(saved) and len(current) == len(saved):
         for i in range(len(saved)):  # in place: the buffers may have grown, the list object stays
             cur = current[i]
-            if cur.shape == saved[i].shape and cur.dtype == saved[i].dtype:
+            if isinstance(cur, tuple):
+                current[i] = restore_into(cur, saved[i])
+            elif cur.shape == saved[i].shape and cur.dtype == saved[i].dtype:
                 np.copyto(cur, saved[i])
             else:
                 current[i] = saved[i]

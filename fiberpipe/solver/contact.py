@@ -38,7 +38,9 @@ import math
 import numpy as np
 from numba import njit
 
-from fiberpipe.solver.laws import law_line, law_point, law_weight_point
+from .geometry import crossing_angle, segment_distance2_s
+from .contact_state import PairRecords
+from .laws import law_line, law_point, law_weight_point
 
 # Gauss–Legendre nodes on [0, 1] and weights (sum 1), orders 1…6
 _GL = {
@@ -57,39 +59,6 @@ def gauss_points(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
 
 JOINT_EPS = 1e-6
 
-# sin²(15°): below it the crossing angle comes from sin²Φ = |t_A × t_B|²/(|t_A|²|t_B|²) and the
-# series of asin(y)/y (8 terms: relative error < 1e-11), above it from acos(|cos Φ|)
-_S2_SERIES = math.sin(math.radians(15.0)) ** 2
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _crossing_angle(ta0, ta1, ta2, tb0, tb1, tb2, aa, bb, ab):
-    """Angle Φ ∈ [0, π/2] [rad] between the lines of two segments (tangents ``ta``, ``tb``; ``aa``,
-    ``bb``, ``ab`` their dot products).
-
-    Contacts of quasi-parallel fibres cross at a few degrees: there Φ = y·asin(y)/y with
-    y = sin Φ from the cross product (one square root and a polynomial: Σ cₙ y²ⁿ, cₙ = (2n)!/(4ⁿ(n!)²(2n+1)))
-    instead of ``acos`` — cheaper, and more accurate at small angles, where acos(|cos Φ|) loses
-    half of the digits of Φ (cos Φ = 1 − Φ²/2).
-    """
-    c0 = ta1 * tb2 - ta2 * tb1
-    c1 = ta2 * tb0 - ta0 * tb2
-    c2 = ta0 * tb1 - ta1 * tb0
-    s2 = (c0 * c0 + c1 * c1 + c2 * c2) / (aa * bb)
-    if s2 < _S2_SERIES:
-        r = 143.0 / 10240.0
-        r = r * s2 + 231.0 / 13312.0
-        r = r * s2 + 63.0 / 2816.0
-        r = r * s2 + 35.0 / 1152.0
-        r = r * s2 + 5.0 / 112.0
-        r = r * s2 + 3.0 / 40.0
-        r = r * s2 + 1.0 / 6.0
-        r = r * s2 + 1.0
-        return math.sqrt(s2) * r
-    cphi = abs(ab) / math.sqrt(aa * bb)
-    if cphi > 1.0:
-        cphi = 1.0
-    return math.acos(cphi)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -135,86 +104,11 @@ def _joint_share(x, seg_nodes, e, s, d_own, o0, to, rr):
     c0x = x[n0, 0]
     c0y = x[n0, 1]
     c0z = x[n0, 2]
-    d2, sn, tn = _segment_distance2_s(c0x - o0[0], c0y - o0[1], c0z - o0[2],
+    d2, sn, tn = segment_distance2_s(c0x - o0[0], c0y - o0[1], c0z - o0[2],
                                       x[n1, 0] - c0x, x[n1, 1] - c0y, x[n1, 2] - c0z, to[0], to[1], to[2])
     tol = 1e-9 * rr
     wgt = 0.5 + (math.sqrt(d2) - d_own) / (2.0 * tol)
     return min(max(wgt, 0.0), 1.0)
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def segment_distance2(a0, a1, b0, b1, ta, tb):
-    """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
-    r0 = a0[0] - b0[0]
-    r1 = a0[1] - b0[1]
-    r2 = a0[2] - b0[2]
-    aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
-    bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
-    ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
-    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-    den = aa * bb - ab * ab
-    if den > 1e-12 * aa * bb:
-        s = (ab * br - ar * bb) / den
-        s = min(max(s, 0.0), 1.0)
-    else:
-        s = 0.0
-    t = (ab * s + br) / bb
-    if t < 0.0:
-        t = 0.0
-        s = min(max(-ar / aa, 0.0), 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((ab - ar) / aa, 0.0), 1.0)
-    d0 = r0 + s * ta[0] - t * tb[0]
-    d1 = r1 + s * ta[1] - t * tb[1]
-    d2 = r2 + s * ta[2] - t * tb[2]
-    return d0 * d0 + d1 * d1 + d2 * d2, s, t
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
-    """:func:`segment_distance2` on scalars: r = a0 − b0, ta = a1 − a0, tb = b1 − b0."""
-    aa = ta0 * ta0 + ta1 * ta1 + ta2 * ta2
-    bb = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
-    ab = ta0 * tb0 + ta1 * tb1 + ta2 * tb2
-    ar = ta0 * r0 + ta1 * r1 + ta2 * r2
-    br = tb0 * r0 + tb1 * r1 + tb2 * r2
-    den = aa * bb - ab * ab
-    if den > 1e-12 * aa * bb:
-        s = (ab * br - ar * bb) / den
-        s = min(max(s, 0.0), 1.0)
-    else:
-        s = 0.0
-    t = (ab * s + br) / bb
-    if t < 0.0:
-        t = 0.0
-        s = min(max(-ar / aa, 0.0), 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((ab - ar) / aa, 0.0), 1.0)
-    d0 = r0 + s * ta0 - t * tb0
-    d1 = r1 + s * ta1 - t * tb1
-    d2 = r2 + s * ta2 - t * tb2
-    return d0 * d0 + d1 * d1 + d2 * d2, s, t
-
-
-@njit(cache=True, inline="always")
-def pair_nodes(pairs, seg_nodes, k):
-    """Segments ``(i, j)`` of candidate pair ``k`` and their node indices ``(a0, a1, b0, b1)``."""
-    i = pairs[k, 0]
-    j = pairs[k, 1]
-    return i, j, seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1]
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def pair_gap(x, seg_nodes, seg_radius, pairs, k):
-    """Gap [m] of candidate pair ``k``: clamped segment–segment centre-line distance − r_i − r_j."""
-    i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
-    d2, s, t = _segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
-                                    x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
-                                    x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
-    return math.sqrt(d2) - seg_radius[i] - seg_radius[j]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -333,97 +227,169 @@ def _line_half(
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_forces(
-    x,
-    seg_nodes,
-    seg_radius,
-    pairs,
-    n_pairs,
-    law_id,
-    law_params,
-    gxi,
-    gw,
-    f_out,
-    c_fn,
-    c_n,
-    c_s,
-    c_t,
-    c_phi,
-    c_delta,
-):
-    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``:
-    :func:`contact_forces_ex` without initial-overlap offsets and contact shares (same
-    parameters, same returns ``(energy, n_active)``)."""
-    empty = np.zeros(0)
+def contact_forces(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
+                   c_fn, c_n, c_s, c_t, c_phi, c_delta):
+    """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``: the plain
+    array form of :func:`contact_forces_ex`, without initial-overlap offsets, contact shares, skip
+    thresholds or an active list (same returns ``(energy, n_active)``)."""
+    rec = PairRecords(c_fn, c_n, c_s, c_t, c_phi, c_delta, np.zeros(0), np.zeros(0), np.zeros(0),
+                      np.zeros(0, np.int64))
     return contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out,
-                             c_fn, c_n, c_s, c_t, c_phi, c_delta, empty, empty, empty, empty, 0.0,
-                             np.zeros(0, np.int64))
+                             rec, np.zeros(0), 0.0)
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
+    """+f on segment A at parameter s, −f on segment B at t, linearly shared by each segment's nodes."""
+    na0, na1, nb0, nb1 = nodes4
+    f_out[na0, 0] += (1.0 - s) * f0
+    f_out[na0, 1] += (1.0 - s) * f1
+    f_out[na0, 2] += (1.0 - s) * f2
+    f_out[na1, 0] += s * f0
+    f_out[na1, 1] += s * f1
+    f_out[na1, 2] += s * f2
+    f_out[nb0, 0] -= (1.0 - t) * f0
+    f_out[nb0, 1] -= (1.0 - t) * f1
+    f_out[nb0, 2] -= (1.0 - t) * f2
+    f_out[nb1, 0] -= t * f0
+    f_out[nb1, 1] -= t * f1
+    f_out[nb1, 2] -= t * f2
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _point_part(x, seg_nodes, pair, nodes4, radii, geo, closest, point, law_id, law_params, off, f_out, rec):
+    """The point part of a pair (module docstring, item 3): its force into ``f_out`` and ``rec``;
+    returns the stored energy [J].
+
+    pair = (i, j) segments; nodes4 = their nodes (a0, a1, b0, b1); radii = (r_i, r_j);
+    geo = (a0, b0, ta, tb, aa, bb, ab) node positions, tangents and their dot products;
+    closest = (dist2, sc, tc) the clamped closest points; point = (w, F(δ_c), E(δ_c), Φ).
+    """
+    i, j = pair
+    ra, rb = radii
+    a0, b0, ta, tb, aa, bb, ab = geo
+    dist2, sc, tc = closest
+    w, fp_c, ep_c, phi = point
+    rr = ra + rb
+    den = aa * bb - ab * ab
+    # closest points of the infinite lines
+    r0 = a0[0] - b0[0]
+    r1 = a0[1] - b0[1]
+    r2 = a0[2] - b0[2]
+    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+    s = (ab * br - ar * bb) / den
+    t = (aa * br - ab * ar) / den
+    # ownership across element joints (partition of unity): compare with the neighbouring
+    # segment at the nearer end, on each fibre (see _joint_share)
+    d_own = math.sqrt(dist2)
+    ws_ = _joint_share(x, seg_nodes, i, s, d_own, b0, tb, rr)
+    wt_ = _joint_share(x, seg_nodes, j, t, d_own, a0, ta, rr)
+    wst = ws_ * wt_
+    if not wst > 0.0:
+        return 0.0
+    s = sc
+    t = tc
+    d0 = r0 + s * ta[0] - t * tb[0]
+    d1 = r1 + s * ta[1] - t * tb[1]
+    d2 = r2 + s * ta[2] - t * tb[2]
+    d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    delta = rr - d - off
+    if not delta > 0.0:
+        return 0.0
+    rec[7] += w * wst
+    if d > 1e-14 * rr:
+        inv = 1.0 / d
+        n0 = d0 * inv
+        n1 = d1 * inv
+        n2 = d2 * inv
+    else:  # axes intersect: normal to both tangents, oriented arbitrarily but consistently
+        n0 = ta[1] * tb[2] - ta[2] * tb[1]
+        n1 = ta[2] * tb[0] - ta[0] * tb[2]
+        n2 = ta[0] * tb[1] - ta[1] * tb[0]
+        inv = 1.0 / math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0 *= inv
+        n1 *= inv
+        n2 *= inv
+    if off != 0.0:
+        fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
+    else:  # δ = δ_c: the same closest points (sc, tc) as dist2
+        fp, ep = fp_c, ep_c
+    fm = w * wst * fp
+    f0 = fm * n0
+    f1 = fm * n1
+    f2 = fm * n2
+    _apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
+    rec[0] += fm
+    rec[1] += f0
+    rec[2] += f1
+    rec[3] += f2
+    rec[4] += fm * s
+    rec[5] += fm * t
+    rec[6] = max(rec[6], delta)
+    return w * wst * ep
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _store_record(out, k, rec, phi):
+    """Pair ``k``'s results from its accumulated ``rec`` (see :class:`PairRecords`)."""
+    fsum = rec[0]
+    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+    out.fn[k] = fv
+    if fv > 0.0:
+        out.normal[k, 0] = rec[1] / fv
+        out.normal[k, 1] = rec[2] / fv
+        out.normal[k, 2] = rec[3] / fv
+    out.s[k] = rec[4] / fsum
+    out.t[k] = rec[5] / fsum
+    out.phi[k] = phi
+    out.delta[k] = rec[6]
+    if out.share.shape[0] > 0:
+        out.share[k] = rec[7]
+        out.fsum[k] = fsum
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_forces_ex(
-    x,
-    seg_nodes,
-    seg_radius,
-    pairs,
-    n_pairs,
-    law_id,
-    law_params,
-    gxi,
-    gw,
-    f_out,
-    c_fn,
-    c_n,
-    c_s,
-    c_t,
-    c_phi,
-    c_delta,
-    c_off,
-    c_share,
-    c_fsum,
-    c_gap,
-    reach,
-    c_active,
-):
+def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out, out, c_off,
+                      reach):
     """Normal contact forces of all candidate segment pairs, accumulated into ``f_out``.
 
     Parameters
     ----------
     x : (N, 3) float64, m — node positions.
-    seg_nodes : (E, 2) int64 — node indices of each segment.
-    seg_radius : (E,) float64, m.
+    seg_nodes : (E, 2) int64 — node indices of each segment. seg_radius : (E,) float64, m.
     pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
     law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
     gxi, gw : Gauss nodes on (0, 1) and weights summing to 1 (:func:`gauss_points`).
     f_out : (N, 3) float64, N — accumulated into (not zeroed).
-    c_fn, c_s, c_t, c_phi, c_delta : (P,) float64 — out, per pair; c_n : (P, 3) float64 — out.
+    out : :class:`fiberpipe.solver.contact_state.PairRecords` — per pair, out: ``fn``, ``normal``,
+        ``s``, ``t``, ``phi``, ``delta``; if size > 0, ``share`` (the pair's contact share: point part
+        its blend weight × joint share, line part the fraction of the segment length in contact,
+        halves averaged; a full-length parallel contact or a crossing counts 1), ``fsum`` (Σ|f| of
+        its contact points [N]) and ``active`` (the indices of the pairs in contact, in order, so
+        that friction and statistics visit only those). ``gap`` (size > 0): in/out, each pair's skip
+        threshold, with ``reach``.
+    c_off : (P,) float64, m — per-pair initial-overlap offset subtracted from every penetration of
+        the pair (``δ_eff = δ − c_off[k]``; size 0: none).
+    reach : float, m — twice a bound on the path any node has travelled since the last
+        neighbour-list build (``2 Σ Δt max_i |v_i|``, non-decreasing). A pair with ``gap > reach``
+        is skipped: when it was last evaluated, at reach ``R_c``, its clamped centre-line distance
+        minus ``r_i + r_j`` was ``g_c`` and ``gap = R_c + g_c``; every point of a segment is a convex
+        combination of its nodes, so since then the gap closed by at most ``reach − R_c``
+        (Verlet-list reasoning with a per-pair refresh: one comparison per pair instead of a
+        segment–segment distance, and a pair far from touching stays skipped for many steps). The
+        build sets ``gap = g_b`` at reach 0; every evaluated pair found apart sets it anew.
 
     Returns
     -------
     (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
     constant blend weight), number of pairs in contact.
-
-    c_off : (P,) float64, m — per-pair initial-overlap offset subtracted from every penetration of
-        the pair (``δ_eff = δ − c_off[k]``; size 0: none). c_share, c_fsum : (P,) float64 — out if
-        size > 0: the pair's contact share (point part: its blend weight × joint share; line part:
-        the fraction of the segment length in contact, halves averaged; a full-length parallel
-        contact or a crossing counts 1) and Σ|f| of its contact points [N].
-    c_gap : (P,) float64, m — in/out, each pair's skip threshold (size 0: not used); reach : float,
-        m — twice a bound on the path any node has travelled since the last neighbour-list build
-        (``2 Σ Δt max_i |v_i|``, non-decreasing). A pair with ``c_gap > reach`` is skipped: when it
-        was last evaluated, at reach ``R_c``, its clamped centre-line distance minus ``r_i + r_j``
-        was ``g_c`` and ``c_gap = R_c + g_c``; every point of a segment is a convex combination of
-        its nodes, so since then the gap closed by at most ``reach − R_c`` (Verlet-list reasoning
-        with a per-pair refresh: one comparison per pair instead of a segment–segment distance,
-        and a pair far from touching stays skipped for many steps). The build sets
-        ``c_gap = g_b`` at reach 0; every evaluated pair found apart sets it anew.
-    c_active : (P,) int64 — out if size > 0: the indices of the pairs in contact, in order (the
-        first ``n_active``), so that friction and statistics visit only those.
     """
+    c_gap = out.gap
+    c_active = out.active
     use_gap = c_gap.shape[0] > 0
     use_list = c_active.shape[0] > 0
     use_off = c_off.shape[0] > 0
-    use_share = c_share.shape[0] > 0
     energy = 0.0
     n_active = 0
     rec = np.zeros(8)
@@ -434,7 +400,7 @@ def contact_forces_ex(
     ta = np.empty(3)
     tb = np.empty(3)
     for k in range(n_pairs):
-        c_fn[k] = 0.0
+        out.fn[k] = 0.0
         if use_gap and c_gap[k] > reach:
             continue  # before any gather: most pairs stop here
         i = pairs[k, 0]
@@ -454,9 +420,9 @@ def contact_forces_ex(
         xb0 = x[nb0, 0]
         yb0 = x[nb0, 1]
         zb0 = x[nb0, 2]
-        dist2, sc, tc = _segment_distance2_s(xa0 - xb0, ya0 - yb0, za0 - zb0,
-                                             x[na1, 0] - xa0, x[na1, 1] - ya0, x[na1, 2] - za0,
-                                             x[nb1, 0] - xb0, x[nb1, 1] - yb0, x[nb1, 2] - zb0)
+        dist2, sc, tc = segment_distance2_s(xa0 - xb0, ya0 - yb0, za0 - zb0,
+                                            x[na1, 0] - xa0, x[na1, 1] - ya0, x[na1, 2] - za0,
+                                            x[nb1, 0] - xb0, x[nb1, 1] - yb0, x[nb1, 2] - zb0)
         if dist2 >= rr * rr:
             if use_gap:
                 c_gap[k] = reach + math.sqrt(dist2) - rr
@@ -473,77 +439,15 @@ def contact_forces_ex(
         aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
         bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
         ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
-        phi = _crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
+        phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
         delta_c = rr - math.sqrt(dist2)
         # the point force at δ_c comes with the weight (one Hertz evaluation for both)
         w, fp_c, ep_c = law_weight_point(law_id, law_params, delta_c, ra, rb, phi)
         den = aa * bb - ab * ab
+        nodes4 = (na0, na1, nb0, nb1)
         if w > 0.0 and den > 1e-10 * aa * bb:
-            # closest points of the infinite lines
-            r0 = a0[0] - b0[0]
-            r1 = a0[1] - b0[1]
-            r2 = a0[2] - b0[2]
-            ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-            br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-            s = (ab * br - ar * bb) / den
-            t = (aa * br - ab * ar) / den
-            # ownership across element joints (partition of unity): compare with the neighbouring
-            # segment at the nearer end, on each fibre (see _joint_share)
-            d_own = math.sqrt(dist2)
-            ws_ = _joint_share(x, seg_nodes, i, s, d_own, b0, tb, rr)
-            wt_ = _joint_share(x, seg_nodes, j, t, d_own, a0, ta, rr)
-            wst = ws_ * wt_
-            if wst > 0.0:
-                s = sc
-                t = tc
-                d0 = r0 + s * ta[0] - t * tb[0]
-                d1 = r1 + s * ta[1] - t * tb[1]
-                d2 = r2 + s * ta[2] - t * tb[2]
-                d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                delta = rr - d - off
-                if delta > 0.0:
-                    rec[7] += w * wst
-                    if d > 1e-14 * rr:
-                        inv = 1.0 / d
-                        n0 = d0 * inv
-                        n1 = d1 * inv
-                        n2 = d2 * inv
-                    else:  # axes intersect: normal to both tangents, oriented arbitrarily but consistently
-                        n0 = ta[1] * tb[2] - ta[2] * tb[1]
-                        n1 = ta[2] * tb[0] - ta[0] * tb[2]
-                        n2 = ta[0] * tb[1] - ta[1] * tb[0]
-                        inv = 1.0 / math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-                        n0 *= inv
-                        n1 *= inv
-                        n2 *= inv
-                    if use_off and off != 0.0:
-                        fp, ep = law_point(law_id, law_params, delta, ra, rb, phi)
-                    else:  # δ = δ_c: the same closest points (sc, tc) as dist2
-                        fp, ep = fp_c, ep_c
-                    fm = w * wst * fp
-                    energy += w * wst * ep
-                    f0 = fm * n0
-                    f1 = fm * n1
-                    f2 = fm * n2
-                    f_out[na0, 0] += (1.0 - s) * f0
-                    f_out[na0, 1] += (1.0 - s) * f1
-                    f_out[na0, 2] += (1.0 - s) * f2
-                    f_out[na1, 0] += s * f0
-                    f_out[na1, 1] += s * f1
-                    f_out[na1, 2] += s * f2
-                    f_out[nb0, 0] -= (1.0 - t) * f0
-                    f_out[nb0, 1] -= (1.0 - t) * f1
-                    f_out[nb0, 2] -= (1.0 - t) * f2
-                    f_out[nb1, 0] -= t * f0
-                    f_out[nb1, 1] -= t * f1
-                    f_out[nb1, 2] -= t * f2
-                    rec[0] += fm
-                    rec[1] += f0
-                    rec[2] += f1
-                    rec[3] += f2
-                    rec[4] += fm * s
-                    rec[5] += fm * t
-                    rec[6] = max(rec[6], delta)
+            energy += _point_part(x, seg_nodes, (i, j), nodes4, (ra, rb), (a0, b0, ta, tb, aa, bb, ab),
+                                  (dist2, sc, tc), (w, fp_c, ep_c, phi), law_id, law_params, off, f_out, rec)
         elif w > 0.0:
             w = 0.0
         if w < 1.0:
@@ -552,24 +456,11 @@ def contact_forces_ex(
                                  off)
             energy += _line_half(x, nb0, nb1, na0, na1, rb, ra, law_id, law_params, gxi, gw, half, f_out, rec, -1.0,
                                  off)
-        fsum = rec[0]
-        if fsum > 0.0:
+        if rec[0] > 0.0:
             if use_list:
                 c_active[n_active] = k
             n_active += 1
-            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-            c_fn[k] = fv
-            if fv > 0.0:
-                c_n[k, 0] = rec[1] / fv
-                c_n[k, 1] = rec[2] / fv
-                c_n[k, 2] = rec[3] / fv
-            c_s[k] = rec[4] / fsum
-            c_t[k] = rec[5] / fsum
-            c_phi[k] = phi
-            c_delta[k] = rec[6]
-            if use_share:
-                c_share[k] = rec[7]
-                c_fsum[k] = fsum
+            _store_record(out, k, rec, phi)
     return energy, n_active
 
 
@@ -622,11 +513,3 @@ def compute_contact(x, seg_nodes, seg_radius, pairs, n_pairs, law, f_out, buffer
         buffers.delta,
     )
     return e, na, buffers
-
-
-def contact_effect(model, scene_cfg, material=None):
-    """The scene's contact/friction hook (``build_simulation`` calls this); see
-    :func:`fiberpipe.solver.contact_effect.contact_effect`."""
-    from fiberpipe.solver.contact_effect import contact_effect as _factory
-
-    return _factory(model, scene_cfg, material)

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..errors import FiberpipeError
 from ._kernels_boundary import RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
-from ._kernels_integrate import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_PLATE_FORCE, H_WALL, no_contact
+from ._kernels_integrate import no_contact, no_contact_forces
+from .layout import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_PLATE_FORCE, H_WALL
 from .model import Model
 
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -105,6 +106,9 @@ class SceneArrays:
         self.plate_axis = None
         self.contact_on = False
         self.contact_fn = no_contact
+        self.contact_forces_of = no_contact_forces
+        self.contact_cache_name = None
+        self.contact_hook_name = ""
         self.contact_data = (np.zeros(0),)
         self.end_time_hint = 0.0
         self._n = n
@@ -139,10 +143,31 @@ class SceneArrays:
         return self.penalty_factor * self.model.mass * (2.0 / self.dt) ** 2
 
 
+#: the effects a scene may list (``scene.effects``), by config name: one class each, added by
+#: :func:`register_effect`; ``build.build_simulation`` calls ``EFFECTS[name].from_config``
+EFFECTS: dict = {}
+
+
+def register_effect(*names):
+    """Class decorator: ``scene.effects`` entries ``names`` (default: the class's ``name``) build
+    this effect with its ``from_config(scene_cfg, model, cfg)``; entries sharing one class (contact
+    and friction) give one effect."""
+    def deco(cls):
+        for n in names or (cls.name,):
+            EFFECTS[n] = cls
+        return cls
+    return deco
+
+
 class Effect:
-    """Base class: ``name`` and ``setup(model, scene)`` filling the kernel arrays."""
+    """Base class: ``name``, ``setup(model, scene)`` filling the kernel arrays, and
+    ``from_config(scene_cfg, model, cfg)`` building it from the config (SI values)."""
 
     name = "effect"
+
+    @classmethod
+    def from_config(cls, scene_cfg, model, cfg) -> "Effect":  # pragma: no cover - interface
+        raise NotImplementedError
 
     def setup(self, model: Model, scene: SceneArrays) -> None:  # pragma: no cover - interface
         raise NotImplementedError
@@ -151,6 +176,7 @@ class Effect:
         return repr(self)
 
 
+@register_effect()
 @dataclass
 class Gravity(Effect):
     """Uniform gravity on the physical lumped mass: f_i = m_i g.
@@ -166,10 +192,15 @@ class Gravity(Effect):
     def __post_init__(self):
         self.acceleration_m_s2 = _vec3(self.acceleration_m_s2, "gravity.acceleration")
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls(list(sc.gravity.acceleration))
+
     def setup(self, model, scene):
         scene.ext()[:] += (model.mass / model.mass_scale)[:, None] * self.acceleration_m_s2[None, :]
 
 
+@register_effect()
 @dataclass
 class Damping(Effect):
     """Rayleigh material damping as Abaqus/Explicit applies it.
@@ -196,6 +227,10 @@ class Damping(Effect):
                 raise FiberpipeError(f"damping.{k.split('_')[0]} must be ≥ 0, got {val}")
             setattr(self, k, val)
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls(float(sc.damping.alpha), float(sc.damping.beta))
+
     def setup(self, model, scene):
         scene.alpha = self.alpha_per_s
         scene.beta = self.beta_s
@@ -212,6 +247,7 @@ class Clamp:
     dofs: str = "all"
 
 
+@register_effect()
 @dataclass
 class Clamps(Effect):
     """Nodes with all (or chosen translational) DOF fixed at their initial values."""
@@ -229,6 +265,10 @@ class Clamps(Effect):
             out.append(c)
         self.clamps = out
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls([Clamp(c.fiber, c.at) for c in sc.clamps])
+
     def setup(self, model, scene):
         m = scene.mask()
         for k, c in enumerate(self.clamps):
@@ -240,6 +280,7 @@ class Clamps(Effect):
                     m[i] |= {"x": FIX_X, "y": FIX_Y, "z": FIX_Z}[ch]
 
 
+@register_effect('constraints')
 @dataclass
 class AxialLock(Effect):
     """The study's boundary condition, "the movement is locked in the fiber orientation": the
@@ -255,6 +296,10 @@ class AxialLock(Effect):
             raise FiberpipeError(f"constraints axis must be x, y or z, got {self.axis!r}")
         if self.nodes not in ("all", "ends"):
             raise FiberpipeError(f"constraints lock_axial must be all or ends, got {self.nodes!r}")
+
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls(axis=sc.constraints.axis, nodes=sc.constraints.lock_axial)
 
     def setup(self, model, scene):
         m = scene.mask()
@@ -288,6 +333,7 @@ class LineLoad:
     force_n_per_m: Sequence[float]
 
 
+@register_effect()
 @dataclass
 class Loads(Effect):
     """Constant point and line forces (applied from t = 0; quasi-static cases add damping)."""
@@ -313,6 +359,11 @@ class Loads(Effect):
             out.append(ld)
         self.loads = out
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls([LineLoad(ld.fiber, list(ld.line_force)) if ld.line_force is not None
+                    else PointLoad(ld.fiber, list(ld.force), ld.at) for ld in sc.loads])
+
     def setup(self, model, scene):
         f = scene.ext()
         for k, ld in enumerate(self.loads):
@@ -327,6 +378,7 @@ class Loads(Effect):
                     np.add.at(f, n1 + k, half[:, None] * ld.force_n_per_m[None, :])
 
 
+@register_effect()
 @dataclass
 class Plates(Effect):
     """Two rigid planes normal to ``axis`` (lower at the low side, upper at the high side).
@@ -386,6 +438,13 @@ class Plates(Effect):
             T = T / (1.0 - self.ramp_fraction)  # so that the plateau speed is the given one
         return T
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        p, ld = sc.plates, sc.loading
+        return cls(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=float(ld.displacement),
+                   velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
+                   lower_position_m=p.lower_position, upper_position_m=p.upper_position)
+
     def setup(self, model, scene):
         ax = _AXES[self.axis]
         c = model.nodes_m[:, ax]
@@ -404,6 +463,7 @@ class Plates(Effect):
         scene.end_time_hint = max(scene.end_time_hint, self.loading_time_s)
 
 
+@register_effect()
 @dataclass
 class Walls(Effect):
     """Fixed rigid confining planes: ``planes`` maps an axis to the (low, high) plane positions (m);
@@ -425,6 +485,11 @@ class Walls(Effect):
             out[ax] = (lo, hi)
         self.planes = out
 
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        w = sc.walls
+        return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None})
+
     def setup(self, model, scene):
         for ax, (lo, hi) in self.planes.items():
             for sign, pos, tag in ((1.0, lo, "lo"), (-1.0, hi, "hi")):
@@ -445,6 +510,7 @@ class Drive:
     ramp_fraction: float = 0.1
 
 
+@register_effect()
 @dataclass
 class Drives(Effect):
     """Prescribed rigid motions of whole fibers (the study's rearrangement case); the reactions'
@@ -470,6 +536,10 @@ class Drives(Effect):
     def duration_s(self, d: Drive) -> float:
         T = float(np.linalg.norm(d.displacement_m)) / d.velocity_m_s
         return T / (1.0 - d.ramp_fraction) if d.ramp == "smooth" else T
+
+    @classmethod
+    def from_config(cls, sc, model, cfg):
+        return cls([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in sc.drives])
 
     def setup(self, model, scene):
         m = scene.mask()
@@ -498,25 +568,39 @@ class ContactHook(Effect):
     ----------
     kernel : a numba ``@njit`` function
         ``kernel(x, q, v, w, f, mom, acc, t, dt, data) -> int`` called once per step at t_n after
-        the beam forces: ``x`` (N,3) m, ``q`` (N,4), ``v`` (N,3) m/s and ``w`` (N,3) rad/s (body
-        frame) at t_n − Δt/2; it must ADD its forces (N) into ``f`` (N,3) and moments (N·m,
-        spatial) into ``mom`` (N,3), add its penalty work on the fibers (J) to
-        ``acc[ACC_PW]`` and its friction dissipation (J) to ``acc[ACC_FD]``, and return the
-        number of active contacts. ``data`` is any numba-compatible tuple of arrays (neighbour
-        lists, friction history...). (The built-in ``contact_effect.contact_step`` is the one
-        exception: it leaves its forces in ``contact_forces_of(data)``, which the step loop's
-        update applies, books and clears in its pass over the nodes.)
+        the beam and plane forces: ``x`` (N,3) m, ``q`` (N,4), ``v`` (N,3) m/s and ``w`` (N,3)
+        rad/s (body frame) at t_n − Δt/2. It writes its forces (N) and moments (N·m, spatial) into
+        the arrays it declares (below), adds its penalty work on the fibers (J) to
+        ``acc[layout.ACC_PW]`` and its friction dissipation (J) to ``acc[layout.ACC_FD]``, and returns
+        the number of active contacts. ``data`` is any numba-compatible tuple (NamedTuples of
+        arrays, typed lists of them: neighbour lists, friction history...).
     data : tuple — passed through unchanged.
     prepare : optional callable ``prepare(model, scene) -> data`` run at setup (e.g. to build the
         neighbour list against ``model`` and size buffers with ``scene.dt``).
+    forces_of : the force arrays the kernel writes. ``None`` (default): it ADDS its forces into ``f``
+        and its moments into ``mom``. Otherwise a jitted ``forces_of(data) -> (N, 3) array``: the
+        kernel leaves its forces there and the step loop's update adds them to the nodes, books their
+        work ``Δt f_n·v̄_n`` to ALLPW and clears the array (one pass over the nodes instead of three).
+    cache_name : a built-in hook's name for the on-disk compilation cache (None: the step loop
+        specialised for this kernel is compiled once per process).
+
+    A scene runs one hook: a second one is refused (combine the passes in one kernel).
     """
 
     kernel: Callable = no_contact
     data: tuple = (np.zeros(0),)
     prepare: Callable | None = None
+    forces_of: Callable | None = None
+    cache_name: str | None = None
     name = "contact"
 
     def setup(self, model, scene):
+        if scene.contact_on:
+            raise FiberpipeError(f"the scene has two contact hooks ({scene.contact_hook_name} and {self.name}); "
+                                 "the step loop runs one: combine their passes in one kernel")
         scene.contact_on = True
+        scene.contact_hook_name = self.name
         scene.contact_fn = self.kernel
+        scene.contact_forces_of = self.forces_of if self.forces_of is not None else no_contact_forces
+        scene.contact_cache_name = self.cache_name
         scene.contact_data = self.prepare(model, scene) if self.prepare is not None else self.data

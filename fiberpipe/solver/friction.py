@@ -25,7 +25,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .contact import pair_nodes
+from .contact_state import PairRecords, PlaneFriction
+from .geometry import pair_nodes
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -72,40 +73,41 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
 def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out):
     """Fiber–fiber friction with the full ``k_t`` on every pair in contact (see :func:`friction_forces_ex`);
     returns the dissipated energy [J]."""
-    d, e = friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out,
-                              np.zeros(0), np.zeros(0, np.int64), 0, -1)
+    e = np.zeros(0)
+    rec = PairRecords(c_fn, c_n, c_s, c_t, e, e, e, e, e, np.zeros(0, np.int64))
+    d, es = friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, 0, -1)
     return d
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def friction_forces_ex(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, dt, hist, f_out, c_share,
-                       c_active, n_active, step):
+def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step):
     """Fiber–fiber friction forces, accumulated into ``f_out``; returns the dissipated energy [J].
 
     Parameters
     ----------
     v : (N, 3) float64, m/s — node velocities (half step). seg_nodes : (E, 2) int64.
     pairs, n_pairs : the Verlet list (as passed to the contact kernel in the same step).
-    c_fn, c_n, c_s, c_t : per-pair records of :func:`fiberpipe.solver.contact.contact_forces` from
-        this step (normal force N, unit normal from the second segment to the first, contact
-        parameters on the two segments).
+    rec : :class:`fiberpipe.solver.contact_state.PairRecords` of the contact kernel from this step:
+        ``fn`` (normal force N), ``normal`` (unit normal from the second segment to the first), ``s``,
+        ``t`` (contact parameters on the two segments), ``share`` and ``active`` (below).
     mu : Coulomb coefficient. k_t : N/m, tangential penalty stiffness. dt : s.
     hist : (C, 3) or (C, 4) float64 — elastic tangential force per pair [N] (in/out), aligned with
         ``pairs``; a 4th column holds the pair's k_t at its last update (N/m; with ``c_share``).
     f_out : (N, 3) float64 — accumulated into; +f_t on the first segment, −f_t on the second.
-    c_share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact.contact_forces_ex`);
+    rec.share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact.contact_forces_ex`);
         the pair's tangential stiffness is ``k_t × share`` (size 0: ``k_t``). Without it a contact
         split over several segment pairs (parallel fibres: each segment touches 2–3 of the other
         fibre) gets ``k_t`` per pair, so a node's tangential stiffness grew with the number of pairs
         and the tangential springs went unstable at ``dt_safety`` 0.9 (energy gain, tens of m/s).
 
-    c_active, n_active : (n_active,) int64 — the pairs in contact (``c_active`` of the contact kernel);
+    rec.active, n_active : (n_active,) int64 — the pairs in contact (``active`` of the contact kernel);
         size 0: visit all ``n_pairs`` and clear the history of the open ones. step : int — this
         step's number (< 0: no time stamps); with ``c_active``, ``step ≥ 0`` and a 5th ``hist``
         column (the step of the pair's last update) only the pairs in contact are visited, and a pair's history counts only if it was
         updated at ``step − 1`` (a contact that opened in between starts afresh, as if cleared).
     Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J]).
     """
+    c_fn, c_n, c_s, c_t, c_share, c_active = rec.fn, rec.normal, rec.s, rec.t, rec.share, rec.active
     diss = 0.0
     espring = 0.0
     use_share = c_share.shape[0] > 0
@@ -216,10 +218,11 @@ def plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, margin, cand_idx,
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, mu, k_t, dt, hist, f_out, pl_tforce,
-                   step=-1, cand_idx=None, cand_off=None):
+def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=False):
     """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
 
+    ``planes`` : :class:`fiberpipe.solver.contact_state.PlaneFriction` (its ``pos``, ``vel``,
+    ``hist``, ``tforce`` and the candidates ``cand_idx``, ``cand_off`` are read at this step).
     Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
     ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·δ`` (added by the plate kernel
     ``_kernels_boundary.plane_contacts``, not here). Here only the tangential force, from the
@@ -228,10 +231,12 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
     step's number (the default −1: no time stamps, open entries are cleared): then a node off the
     plane is not visited again, and its history counts only if it
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
-    ``cand_idx``, ``cand_off`` (with time stamps): visit only these nodes per plane
+    ``use_candidates`` (with time stamps): visit only the nodes ``cand_idx``, ``cand_off`` per plane
     (:func:`plane_candidates`; the caller keeps them valid), not all N.
     Returns the dissipated energy [J].
     """
+    radius_node, k_pen, pl_axis, pl_sign, pl_pos = planes.radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos
+    pl_vel, hist, pl_tforce, cand_idx, cand_off = planes.vel, planes.hist, planes.tforce, planes.cand_idx, planes.cand_off
     diss = 0.0
     npl = pl_axis.shape[0]
     for p in range(npl):
@@ -254,14 +259,15 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
             n1 = sg
         else:
             n2 = sg
-        if cand_off is None or not lazy:
+        all_nodes = not (use_candidates and lazy)
+        if all_nodes:
             c_lo = 0
             c_hi = x.shape[0]
         else:
             c_lo = cand_off[p]
             c_hi = cand_off[p + 1]
         for c in range(c_lo, c_hi):
-            if cand_off is None or not lazy:
+            if all_nodes:
                 i = c
             else:
                 i = cand_idx[c]
@@ -293,6 +299,14 @@ def plane_friction(x, v, radius_node, k_pen, pl_axis, pl_sign, pl_pos, pl_vel, m
     return diss
 
 
-def tangential_stiffness(k_normal_per_contact: float, ratio: float = 1.0) -> float:
-    """A default k_t [N/m]: ``ratio`` × the normal contact stiffness of one contact (Abaqus-like)."""
-    return float(ratio * k_normal_per_contact)
+def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None):
+    """A :class:`PlaneFriction` for calling :func:`plane_friction` directly (tests, scripts); the
+    ramp fields are those of fixed planes at ``pos``."""
+    P = len(axis)
+    z = np.zeros(P)
+    return PlaneFriction(np.asarray(radius_node, float), np.asarray(k_pen, float), np.asarray(axis, np.int64),
+                         np.asarray(sign, float), np.asarray(pos, float).copy(), z, np.ones(P), z.copy(),
+                         np.zeros(P, np.int64), np.asarray(pos, float), np.asarray(vel, float), hist, tforce,
+                         np.zeros(0, np.int64) if cand_idx is None else np.asarray(cand_idx, np.int64),
+                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64),
+                         np.asarray(pos, float).copy())

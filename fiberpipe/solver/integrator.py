@@ -21,16 +21,22 @@ import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
 from . import _kernels_integrate as K
-from ._kernels_beam import beam_forces
+from ._kernels_beam import EB_SIZE, beam_forces
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
+from .layout import (H_FD, H_KE, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+                     H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
+from .step_data import DriveArrays, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
 from .timestep import TimeStepReport, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "total", "residual")
-ABAQUS_NAMES = {"kinetic": "ALLKE", "strain": "ALLSE", "damping": "ALLVD", "external": "ALLWK",
-                "contact": "ALLPW", "friction": "ALLFD", "total": "ETOTAL"}
+
+
+def m_(a, dtype=np.float64) -> np.ndarray:
+    """A model array as the kernels take it: contiguous, of the given dtype (no copy if it is)."""
+    return np.ascontiguousarray(a, dtype=dtype)
 
 
 @dataclass
@@ -174,7 +180,7 @@ class Integrator:
         self.pen_f = np.zeros(n * P)
         self.drive_v = np.zeros_like(sc.drive_vec)
         self.history_every = int(history_every)
-        self.hist = np.zeros((history_rows, K.H_WALL + sc.n_walls))
+        self.hist = np.zeros((history_rows, H_WALL + sc.n_walls))
         self.h_row = 0
         c = model.material.wave_speed_m_s
         self.v_limit = 0.2 * c if speed_limit_m_s is None else float(speed_limit_m_s)
@@ -194,14 +200,28 @@ class Integrator:
                 or not np.array_equal(model.el_n1, np.arange(k.size) + k)):
             raise FiberpipeError("the model's elements are not in the CSR order of build_model "
                                  "(fiber k: nodes node_offsets[k]…, elements node − k)")
-        self.eb = np.zeros((model.n_elements, K.EB_SIZE))
+        self.eb = np.zeros((model.n_elements, EB_SIZE))
         # solver.threads > 1: the beam pass runs one prange task per fiber
         self.threads = max(1, int(threads))
-        self._loop = K.step_loop_for(sc.contact_fn if sc.contact_on else K.no_contact, self.threads)
+        self._loop = K.step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
+        self.model_arrays = ModelArrays(
+            m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
+            m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),
+            m_(model.radius_node), m_(model.nodes_m), self.node_offsets)
+
+    def _kernel_args(self):
+        """The scene and work structures of the step loop (views of this integrator's arrays)."""
+        sc = self.scene
+        planes = PlaneArrays(sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode,
+                             sc.pl_hist_col, self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f)
+        drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
+        scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes)
+        work = WorkArrays(self.f, self.mom, self.eb, self.strain_prev, self.hist)
+        return scene, work
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
-        m, sc = self.model, self.scene
+        sc = self.scene
         # the step loop keeps |q| = 1 by one Newton step per step (exact for |q|² = 1 + O(1e-16)) and
         # the beam pass assumes unit quaternions: a state handed in with other norms is normalised here
         qn2 = np.einsum("ij,ij->i", state.q, state.q)
@@ -212,27 +232,19 @@ class Integrator:
         if self.threads > 1:
             import numba
             numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
+        scene, work = self._kernel_args()
+        ctl = StepControl(self.dt, int(n_steps), float(state.t), int(state.step), int(self.h_row),
+                          self.history_every, float(self.v_limit), self.x_limit, float(self.e_ref))
         status, done, self.h_row, bad = self._loop(
-            m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest,
-            m.mass, m.inv_mass, m.J, m.inv_J, m.radius_node, m.nodes_m,
-            state.x, state.q, state.v, state.w, state.acc, state.t, state.step,
-            self.f, self.mom, self.eb, self.dt, int(n_steps),
-            sc.alpha, sc.beta, self.strain_prev, sc.f_ext,
-            sc.fix_mask, sc.node_drive, sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v,
-            sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode, sc.pl_hist_col,
-            self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f,
-            sc.contact_on, sc.contact_data,
-            self.hist, self.h_row, self.history_every,
-            self.v_limit, self.x_limit, self.e_ref,
-            self.threads, self.node_offsets,
-        )
+            self.model_arrays, scene, StepState(state.x, state.q, state.v, state.w, state.acc), work, ctl,
+            sc.contact_data)
         state.step += int(done)
         state.t = state.step * self.dt
-        if status == K.STATUS_OK and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
+        if status == STATUS_OK and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
             # The kernels are compiled with fastmath, which lets LLVM assume no NaN and drop the
             # in-loop NaN test: check the state once per chunk here (a few µs for 2000 nodes).
             bad_nodes = np.flatnonzero(~(np.isfinite(state.x).all(axis=1) & np.isfinite(state.v).all(axis=1)))
-            return int(K.STATUS_NAN), int(done), int(bad_nodes[0])
+            return int(STATUS_NAN), int(done), int(bad_nodes[0])
         return int(status), int(done), int(bad)
 
     def snapshot_arrays(self) -> dict:
@@ -259,7 +271,7 @@ def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] 
         dt, _ = choose_time_step(model, effects, SimulationSettings())
     integ = Integrator(model, effects, dt, history_every=max(1, n_steps))
     status, done, bad = integ.advance(state, n_steps)
-    if status != K.STATUS_OK:
+    if status != STATUS_OK:
         raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None))
     return state
 
@@ -268,10 +280,10 @@ STATUS_PENETRATION = 5  # checked in Python between chunks
 STATUS_LEFT_BOX = 6
 
 _STATUS_TEXT = {
-    K.STATUS_NAN: "NaN or inf in the state",
-    K.STATUS_SPEED: "a node moved faster than the speed limit",
-    K.STATUS_RUNAWAY: "a node ran away from its rest position",
-    K.STATUS_ENERGY: "kinetic energy blew up (> 1000 × the energy put in)",
+    STATUS_NAN: "NaN or inf in the state",
+    STATUS_SPEED: "a node moved faster than the speed limit",
+    STATUS_RUNAWAY: "a node ran away from its rest position",
+    STATUS_ENERGY: "kinetic energy blew up (> 1000 × the energy put in)",
     STATUS_PENETRATION: "runaway penetration into a plate or wall",
     STATUS_LEFT_BOX: "a fiber left the box (through a plate or wall)",
 }
@@ -279,9 +291,9 @@ _STATUS_TEXT = {
 
 def _plane_name(sc: SceneArrays, p: int) -> str:
     c = int(sc.pl_hist_col[p])
-    if c in (K.H_PLATE_FORCE, K.H_PLATE_FORCE + 1):
-        return ("lower", "upper")[c - K.H_PLATE_FORCE] + " plate"
-    k = c - K.H_WALL
+    if c in (H_PLATE_FORCE, H_PLATE_FORCE + 1):
+        return ("lower", "upper")[c - H_PLATE_FORCE] + " plate"
+    k = c - H_WALL
     return f"wall {sc.wall_names[k]}" if 0 <= k < len(sc.wall_names) else f"plane {p}"
 
 
@@ -290,7 +302,7 @@ def _plane_check(model: Model, integ: "Integrator", state: State, limit: float) 
     radius) a plate or wall; returns ``(status, node, detail)``."""
     sc = integ.scene
     if sc.pl_axis.size == 0:
-        return K.STATUS_OK, -1, ""
+        return STATUS_OK, -1, ""
     r = model.radius_node
     worst, node, plane = -np.inf, -1, -1
     with np.errstate(invalid="ignore"):
@@ -300,7 +312,7 @@ def _plane_check(model: Model, integ: "Integrator", state: State, limit: float) 
             if i >= 0 and depth[i] > worst:
                 worst, node, plane = float(depth[i]), i, p
     if node < 0 or worst <= limit:
-        return K.STATUS_OK, -1, ""
+        return STATUS_OK, -1, ""
     name = _plane_name(sc, plane)
     ax = "xyz"[int(sc.pl_axis[plane])]
     where = f"{name} ({ax} = {integ.pl_pos[plane] * 1e3:.4g} mm)"
@@ -326,10 +338,10 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
     speed = float(np.linalg.norm(state.v[bad])) if finite[bad] else float("nan")
     quantity = _STATUS_TEXT.get(status, f"status {status}")
     energy = ""
-    if last_row is not None and last_row.size > K.H_FD:
-        ke, se = last_row[K.H_KE], last_row[K.H_SE]
-        wk, pw = last_row[K.H_WK], last_row[K.H_PW]
-        if status == K.STATUS_NAN:
+    if last_row is not None and last_row.size > H_FD:
+        ke, se = last_row[H_KE], last_row[H_SE]
+        wk, pw = last_row[H_WK], last_row[H_PW]
+        if status == STATUS_NAN:
             bad_e = [n for n, v in (("kinetic", ke), ("strain", se)) if not np.isfinite(v)]
             energy = f"; {' and '.join(bad_e) or 'no'} energy non-finite"
         else:
@@ -356,20 +368,20 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
 
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
     h = hist[:n_rows]
-    KE, SE, VD, WK, PW, FD = (h[:, c] for c in (K.H_KE, K.H_SE, K.H_VD, K.H_WK, K.H_PW, K.H_FD))
+    KE, SE, VD, WK, PW, FD = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD))
     total = KE + SE + VD + FD - WK - PW
     scale = np.maximum.accumulate(np.maximum(np.abs(WK), SE + KE)) if n_rows else np.zeros(0)
     scale = np.maximum(scale, 1e-300)
     out = {
-        "time": h[:, K.H_TIME].copy(),
-        "plate_displacement": h[:, K.H_PLATE_DISP:K.H_PLATE_DISP + 2].copy(),
-        "plate_force": h[:, K.H_PLATE_FORCE:K.H_PLATE_FORCE + 2].copy(),
-        "wall_force": h[:, K.H_WALL:K.H_WALL + n_walls].copy(),
-        "contacts": h[:, K.H_CONTACTS].copy(),
+        "time": h[:, H_TIME].copy(),
+        "plate_displacement": h[:, H_PLATE_DISP:H_PLATE_DISP + 2].copy(),
+        "plate_force": h[:, H_PLATE_FORCE:H_PLATE_FORCE + 2].copy(),
+        "wall_force": h[:, H_WALL:H_WALL + n_walls].copy(),
+        "contacts": h[:, H_CONTACTS].copy(),
         "energy/kinetic": KE.copy(), "energy/strain": SE.copy(), "energy/damping": VD.copy(),
         "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
         # the friction forces' work on the fibers (part of ALLPW): ALLPW − ALLFD − this is the normal forces'
-        "energy/friction_work": h[:, K.H_WF].copy(),
+        "energy/friction_work": h[:, H_WF].copy(),
         "energy/total": total, "energy/residual": (total - e0) / scale,
     }
     return out
@@ -377,11 +389,12 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
 
 def _copy_tree(obj):
     if isinstance(obj, tuple):
-        return tuple(_copy_tree(o) for o in obj)
+        items = [_copy_tree(o) for o in obj]
+        return type(obj)(*items) if hasattr(obj, "_fields") else tuple(items)
     if type(obj).__name__ == "List" and type(obj).__module__.startswith("numba"):
         from numba.typed import List
 
-        return List([np.array(a) for a in obj])
+        return List([_copy_tree(a) for a in obj])
     return obj.copy() if isinstance(obj, np.ndarray) else obj
 
 
@@ -542,9 +555,9 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
         last_good = state.copy()
         status, done, bad = integ.advance(state, nxt - rel)
         detail = ""
-        if status == K.STATUS_OK:
+        if status == STATUS_OK:
             status, bad, detail = _plane_check(model, integ, state, settings.penetration_limit)
-        if status != K.STATUS_OK:
+        if status != STATUS_OK:
             row = integ.hist[integ.h_row - 1] if integ.h_row > 0 else None
             msg = _diagnose(model, state, status, bad, dt, rep, detail, row)
             # keep the last good state as the partial result's final state (and last frame)

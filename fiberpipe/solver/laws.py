@@ -59,14 +59,6 @@ LAW_HERTZ_PARALLEL = 2
 LAW_HERTZ_CROSSED = 3
 LAW_HERTZ_ORIENTED = 4
 
-LAW_NAMES = {
-    "linear": LAW_LINEAR,
-    "scaled_stiffness": LAW_SCALED,
-    "hertz_parallel": LAW_HERTZ_PARALLEL,
-    "hertz_crossed": LAW_HERTZ_CROSSED,
-    "hertz_oriented": LAW_HERTZ_ORIENTED,
-}
-
 P_ESTAR = 0  # Pa, contact modulus E*
 P_LREF = 1  # m, length one point contact stands for
 P_PHI_LO = 2  # rad, generic blend: below, distributed only
@@ -534,11 +526,50 @@ def _e_star(E_pa: float, nu: float) -> float:
     return E_pa / (2.0 * (1.0 - nu * nu))
 
 
+#: the contact laws by config name (``scene.contact.law``): one class each, added by :func:`register_law`
+LAWS: dict = {}
+
+
+def register_law(cls):
+    """Class decorator: make ``cls`` selectable as ``scene.contact.law: <cls.name>``.
+
+    A law class has a ``name``, a ``law_id`` the contact kernels dispatch on, validates its
+    parameters in ``__init__``, encodes them in ``params()`` and builds itself from the config's
+    ``contact`` block in ``from_config(contact_cfg, E_pa=..., nu=...)``. A law with its own
+    formula also gives ``kernels``, the jitted ``(line, point, weight_point)`` functions the
+    contact kernels are specialised on (see docs/solver.md, "Adding a contact law").
+    """
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} has no name")
+    LAWS[cls.name] = cls
+    return cls
+
+
+def law_from_config(contact_cfg, material_cfg):
+    """The :class:`ContactLaw` of the scene's ``contact`` block (SI values) for a material section
+    (``youngs_modulus``, ``poisson_ratio_value``: given, or derived from the shear modulus)."""
+    cls = LAWS.get(contact_cfg.law)
+    if cls is None:
+        raise ConfigError(f"unknown contact law {contact_cfg.law!r}; choose from {sorted(LAWS)}", where="scene.contact.law")
+    return cls.from_config(contact_cfg, E_pa=float(material_cfg.youngs_modulus), nu=float(material_cfg.poisson_ratio_value))
+
+
 class ContactLaw:
     """Base class: a normal contact law with SI parameters and its numba encoding."""
 
     law_id: int = -1
     name: str = ""
+    #: None: the built-in kernels (dispatch on law_id); else the jitted (line, point, weight_point)
+    kernels = None
+
+    @classmethod
+    def from_config(cls, cfg, *, E_pa: float, nu: float) -> "ContactLaw":
+        """The law from the ``scene.contact`` block (the base: no parameters of its own)."""
+        return cls(E_pa=E_pa, nu=nu)
+
+    @classmethod
+    def check_config(cls, cfg) -> None:
+        """Refuse a ``scene.contact`` block this law cannot run with (raise ValueError naming the key)."""
 
     def __init__(
         self,
@@ -606,6 +637,7 @@ class ContactLaw:
         return f"{type(self).__name__}(" + ", ".join(f"{k}={getattr(self, k)!r}" for k in keys) + ")"
 
 
+@register_law
 class LinearLaw(ContactLaw):
     """Linear penalty: ``p = k δ`` with k in N/m² (``per='length'``) or ``F = k δ`` with k in N/m (``per='contact'``)."""
 
@@ -624,6 +656,15 @@ class LinearLaw(ContactLaw):
         else:
             self.stiffness_n_per_m = float(stiffness)
         self.stiffness = float(stiffness)
+
+    @classmethod
+    def check_config(cls, cfg):
+        if cfg.stiffness is None:
+            raise ValueError("contact.law 'linear' needs contact.stiffness (N/m², force per unit length per metre)")
+
+    @classmethod
+    def from_config(cls, cfg, *, E_pa, nu):
+        return cls(stiffness=float(cfg.stiffness), E_pa=E_pa, nu=nu)
 
     def params(self):
         p = self._header()
@@ -646,6 +687,7 @@ SCALED_PRESETS = {
 }
 
 
+@register_law
 class ScaledStiffnessLaw(ContactLaw):
     """The study's Eq. 1: ``K_i = S0·K_def·S^(i−1)`` for ``δ ∈ [(i−1)d, id]``, piecewise-linear force.
 
@@ -686,6 +728,17 @@ class ScaledStiffnessLaw(ContactLaw):
         law.preset_name = name
         return law
 
+    @classmethod
+    def check_config(cls, cfg):
+        if cfg.preset is None and None in (cfg.k_def, cfg.s0, cfg.s, cfg.d):
+            raise ValueError("contact.law 'scaled_stiffness' needs contact.preset or all of k_def, s0, s, d")
+
+    @classmethod
+    def from_config(cls, cfg, *, E_pa, nu):
+        if cfg.preset is not None:
+            return cls.preset(cfg.preset, E_pa=E_pa, nu=nu)
+        return cls(d_m=float(cfg.d), S=float(cfg.s), S0=float(cfg.s0), K_def=float(cfg.k_def), E_pa=E_pa, nu=nu)
+
     def params(self):
         p = self._header()
         p[P_D], p[P_S], p[P_S0], p[P_KDEF], p[P_NSEG] = self.d_m, self.S, self.S0, self.K_def, self.n
@@ -699,6 +752,7 @@ class ScaledStiffnessLaw(ContactLaw):
         ).reshape(np.shape(delta_m))
 
 
+@register_law
 class HertzParallelLaw(ContactLaw):
     """Johnson line contact of parallel cylinders (Lambert-W inversion); always distributed."""
 
@@ -706,6 +760,7 @@ class HertzParallelLaw(ContactLaw):
     name = "hertz_parallel"
 
 
+@register_law
 class HertzCrossedLaw(ContactLaw):
     """Elliptical Hertz contact of cylinders crossed at one fixed angle Φ for the whole model: F = K(Φ)δ^{3/2}.
 
@@ -717,16 +772,28 @@ class HertzCrossedLaw(ContactLaw):
     law_id = LAW_HERTZ_CROSSED
     name = "hertz_crossed"
 
-    def __init__(self, phi_deg: float, **kw):
+    def __init__(self, phi_deg: float | None = None, *, phi_rad: float | None = None, **kw):
         super().__init__(**kw)
-        if not 0.0 < phi_deg <= 90.0:
-            raise ConfigError(f"phi_deg must be in (0, 90], got {phi_deg}")
-        self.phi_deg = float(phi_deg)
+        if (phi_deg is None) == (phi_rad is None):
+            raise ConfigError("hertz_crossed: give the crossing angle once, phi_deg or phi_rad")
+        self.phi_rad = float(phi_rad) if phi_rad is not None else float(phi_deg) * DEG
+        if not 0.0 < self.phi_rad <= 0.5 * math.pi * (1 + 1e-12):
+            raise ConfigError(f"the crossing angle must be in (0, 90] deg, got {math.degrees(self.phi_rad):g} deg")
+        self.phi_deg = math.degrees(self.phi_rad)
         self.per_length = False
+
+    @classmethod
+    def check_config(cls, cfg):
+        if cfg.angle is None:
+            raise ValueError("contact.law 'hertz_crossed' needs contact.angle (e.g. '6 deg')")
+
+    @classmethod
+    def from_config(cls, cfg, *, E_pa, nu):
+        return cls(phi_rad=float(cfg.angle), E_pa=E_pa, nu=nu)
 
     def params(self):
         p = self._header()
-        p[P_PHI_FIXED] = self.phi_deg * DEG
+        p[P_PHI_FIXED] = self.phi_rad
         return p
 
     def stiffness(self, r1_m=0.25e-3, r2_m=0.25e-3) -> float:
@@ -734,6 +801,7 @@ class HertzCrossedLaw(ContactLaw):
         return float(law_point(self.law_id, self.params(), 1.0, r1_m, r2_m, 0.0)[0])
 
 
+@register_law
 class HertzOrientedLaw(ContactLaw):
     """Each contact's own Φ: crossed Hertz F = K(Φ)δ^{3/2} while the contact ellipse fits, line law beyond.
 
@@ -755,6 +823,10 @@ class HertzOrientedLaw(ContactLaw):
         self.blend_length_m = float(blend_length_m)
         self.xi_lo, self.xi_hi = float(xi_lo), float(xi_hi)
 
+    @classmethod
+    def from_config(cls, cfg, *, E_pa, nu):
+        return cls(blend_length_m=float(cfg.blend_length), E_pa=E_pa, nu=nu)
+
     def params(self):
         p = self._header()
         p[P_LBLEND], p[P_XI_LO], p[P_XI_HI] = self.blend_length_m, self.xi_lo, self.xi_hi
@@ -762,17 +834,11 @@ class HertzOrientedLaw(ContactLaw):
 
 
 def make_law(name: str, **kw) -> ContactLaw:
-    """Build a law by name (``linear``, ``scaled_stiffness`` (``preset=`` or parameters), ``hertz_*``)."""
-    if name == "linear":
-        return LinearLaw(**kw)
-    if name == "scaled_stiffness":
-        if "preset" in kw:
-            return ScaledStiffnessLaw.preset(kw.pop("preset"), **kw)
-        return ScaledStiffnessLaw(**kw)
-    if name == "hertz_parallel":
-        return HertzParallelLaw(**kw)
-    if name == "hertz_crossed":
-        return HertzCrossedLaw(**kw)
-    if name == "hertz_oriented":
-        return HertzOrientedLaw(**kw)
-    raise ConfigError(f"unknown contact law {name!r}; choose from {sorted(LAW_NAMES)}")
+    """Build a registered law by name with its constructor's keywords (``scaled_stiffness``:
+    ``preset=`` or its parameters)."""
+    cls = LAWS.get(name)
+    if cls is None:
+        raise ConfigError(f"unknown contact law {name!r}; choose from {sorted(LAWS)}")
+    if cls is ScaledStiffnessLaw and "preset" in kw:
+        return ScaledStiffnessLaw.preset(kw.pop("preset"), **kw)
+    return cls(**kw)

@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fiberpipe.solver.contact import segment_distance2
+from .geometry import segment_distance2
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")

@@ -195,12 +195,12 @@ class CaseSetup:
 
     def law(self):
         """The contact law of ``scene.contact`` (Hertz laws: from the config's material)."""
-        from fiberpipe.solver.contact_effect import law_from_config
+        from fiberpipe.solver.laws import law_from_config
 
         contact = self._scene("contact")
         if not contact.law.startswith("hertz"):
             raise ValueError(f"{self.path}: the verification cases run Hertz laws, not {contact.law!r}")
-        return law_from_config(contact, self.material)  # what a run of the config uses
+        return law_from_config(contact, self.cfg.material)  # what a run of the config uses
 
     @property
     def plates(self):
@@ -230,3 +230,21 @@ def case_setup(name: str) -> CaseSetup:
         raise FileNotFoundError(f"verification case {name!r}: its config {path} does not exist "
                                 "(the verification cases run from a source checkout with configs/verify/)")
     return CaseSetup(name, path, load_config(path))
+
+
+def contact_hook(model, **overrides):
+    """:func:`fiberpipe.solver.contact_effect.make_contact_hook` with the config schema's defaults
+    (``scene.contact`` and ``scene.friction`` as a config that lists them without a block would
+    have them) for what ``overrides`` does not set; the default law is for the model's material."""
+    from types import SimpleNamespace
+
+    from ..config import ContactConfig, FrictionConfig
+    from ..solver.contact_effect import make_contact_hook
+    from ..solver.laws import law_from_config
+
+    if "law" not in overrides:
+        mat = SimpleNamespace(youngs_modulus=model.material.youngs_modulus_pa, poisson_ratio_value=model.material.nu)
+        overrides["law"] = law_from_config(ContactConfig(), mat)
+    overrides.setdefault("mu", FrictionConfig().mu)
+    overrides.setdefault("overlap_release_s", ContactConfig().overlap_release)
+    return make_contact_hook(model, **overrides)

@@ -29,10 +29,9 @@ import numpy as np
 from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates,
                       SimulationSettings, State, Walls, build_model, choose_time_step, simulate)
 from ..solver.contact import contact_forces, gauss_points
-from ..solver.contact_effect import make_contact_hook
 from ..solver.laws import make_law
 from ..solver.neighbours import build_pairs
-from .case_config import CaseSetup, case_setup
+from .case_config import CaseSetup, case_setup, contact_hook
 from .cases import E_PA, MATERIAL, NU, R_M, Row
 
 E_STAR = E_PA / (2 * (1 - NU**2))
@@ -152,7 +151,7 @@ def contact_pair_parallel(quick: bool = False) -> list[Row]:
     rows = []
     for p in loads:
         m = s.model()
-        eff = [s.clamps(), s.loads(p / p0), Damping(s.damping_alpha), make_contact_hook(m, law=law)]
+        eff = [s.clamps(), s.loads(p / p0), Damping(s.damping_alpha), contact_hook(m, law=law)]
         res = simulate(m, eff, s.settings())
         x = res.frames_positions[-1]
         d = 2 * s.r - (x[m.node_fiber == 1, 2] - x[m.node_fiber == 0, 2])
@@ -186,7 +185,7 @@ def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
     m = s.model()
     law = s.law()
     K = K_CROSSED_SPEC[phi_deg]
-    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha), make_contact_hook(m, law=law)]
+    eff = [s.clamps(), s.loads(), Damping(s.damping_alpha), contact_hook(m, law=law)]
     T = s.end_time / 2 if quick else s.end_time
     res = simulate(m, eff, s.settings(end_time_s=T))
     x = res.frames_positions[-1]
@@ -255,7 +254,7 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
             eff = [Gravity(g), s.loads(q / q0),
                    Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
                           upper_position_m=p.upper_position),
-                   Walls(s.walls), make_contact_hook(m, law=law)]
+                   Walls(s.walls), contact_hook(m, law=law)]
             if alpha > 0:
                 eff.append(Damping(alpha))
             xs = []
@@ -327,7 +326,7 @@ def rearrangement_run(velocity_m_s=None, alpha=None, *, length_m=None, setup: Ca
     eff = [Gravity(s.gravity), Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
                                       upper_position_m=p.upper_position),
            Drives([Drive(d.fiber, [float(c) for c in d.displacement], v)]),
-           make_contact_hook(m, law=s.law(), friction=True, mu=s.mu)]
+           contact_hook(m, law=s.law(), friction=True, mu=s.mu)]
     if alpha > 0:
         eff.append(Damping(alpha))
     t0 = time.perf_counter()
@@ -459,7 +458,7 @@ def inclined_plate(case: str = "friction_inclined_slide", quick: bool = False) -
     # start at the static penetration of the plate penalty (k = 0.1 m (2/Δt)², same δ on every node)
     d_s = g * math.cos(th) / (0.1 * (2.0 / dt) ** 2)
     m = s.model(nodes_m=probe.nodes_m - np.array([0.0, 0.0, d_s]))
-    eff = [Gravity(gvec), Plates(**plates), make_contact_hook(m, contact=False, friction=True, mu=mu)]
+    eff = [Gravity(gvec), Plates(**plates), contact_hook(m, contact=False, friction=True, mu=mu)]
     T = s.end_time / 3 if quick else s.end_time
     res = simulate(m, eff, s.settings(end_time_s=T))
     t = res.frames_time
@@ -489,7 +488,7 @@ def sliding_parallel(quick: bool = False, p: float = 66.0, speed_m_s: float = 5.
     zb = 2 * R_M - d0
     m = _model([((0, 0, 0), (LA, 0, 0), 20), ((1e-3, 0, zb), (1e-3 + LB, 0, zb), 12)])
     law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
-    eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]), make_contact_hook(m, law=law)]
+    eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]), contact_hook(m, law=law)]
     dist = 0.6e-3 if quick else 1.8e-3
     T = dist / speed_m_s
     st = State.at_rest(m)

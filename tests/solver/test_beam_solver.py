@@ -11,7 +11,7 @@ from fiberpipe.solver import (Clamp, Clamps, ContactHook, Damping, Drive, Drives
                               Material, Plates, PointLoad, SimulationSettings, State, Walls, build_model,
                               simulate, stable_time_step)
 from fiberpipe.solver._kernels_beam import beam_forces
-from fiberpipe.solver._kernels_integrate import ACC_PW
+from fiberpipe.solver.layout import ACC_PW
 from fiberpipe.solver.integrator import Integrator
 
 MAT = Material(15e9, 1380.0, 0.3)

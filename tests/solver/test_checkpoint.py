@@ -11,7 +11,8 @@ from numba import njit
 from fiberpipe.errors import ArtifactError, FiberpipeError
 from fiberpipe.solver import (ContactHook, Damping, Gravity, Material, Plates, SimulationSettings, Walls,
                               build_model, simulate)
-from fiberpipe.solver._kernels_integrate import ACC_PW
+from fiberpipe.solver.layout import ACC_PW
+from fiberpipe.verification.case_config import contact_hook
 from fiberpipe.solver.checkpoint import SimulationInterrupted, read_checkpoint, write_checkpoint
 
 MAT = Material(15e9, 1380.0, 0.3)
@@ -135,7 +136,7 @@ def test_resume_with_the_real_contact_hook_is_bit_for_bit(tmp_path):
     def effects():
         return [Damping(1e4), Gravity([0, 0, -9.81]),
                 Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.02e-3, velocity_m_s=0.1),
-                ce.make_contact_hook(model, friction=True, mu=0.3)]
+                contact_hook(model, friction=True, mu=0.3)]
 
     # default dt_safety (0.9): this scene once gained tens of m/s from the fibre–fibre friction (k_t per
     # segment pair, not per contact share: unstable tangential springs); see tests/solver/test_friction.py

@@ -9,7 +9,7 @@ from fiberpipe.solver import laws as L
 from fiberpipe.solver.contact import compute_contact
 from fiberpipe.solver.neighbours import VerletList, segment_arclength
 
-from fiberpipe.solver._contact_geometry import LE, R, all_pairs_between, assemble, fiber
+from _contact_geometry import LE, R, all_pairs_between, assemble, fiber
 
 ESTAR = 15e9 / (2 * (1 - 0.09))
 

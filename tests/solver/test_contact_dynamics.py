@@ -10,7 +10,9 @@ import pytest
 from fiberpipe.solver import (Clamp, Clamps, Gravity, Plates, SimulationSettings, State, build_model, simulate,
                               Material)
 from fiberpipe.solver import contact_effect as ce
-from fiberpipe.solver.contact import contact_effect
+from fiberpipe.verification.case_config import contact_hook
+from fiberpipe.config import MaterialConfig, SceneConfig
+from fiberpipe.solver.contact_effect import ContactEffect
 from fiberpipe.solver.laws import LAW_HERTZ_CROSSED, LAW_LINEAR, LAW_SCALED, LAW_HERTZ_ORIENTED
 
 R = 0.25e-3
@@ -40,24 +42,18 @@ def _hex_bundle(n_el=10, L=3e-3, gap=0.0):
 ])
 def test_config_maps_to_law(cfg, law_id):
     m = _model([((0, 0, 0), (3e-3, 0, 0), 10)])
-    full = dict(law="hertz_oriented", stiffness=None, preset=None, k_def=None, s0=None, s=None, d=None, angle=None,
-                skin=None)
-    full.update(cfg)
-    scene = SimpleNamespace(effects=["contact", "friction"], contact=SimpleNamespace(**full),
-                            friction=SimpleNamespace(mu=0.3, stiffness=None))
-    hook = contact_effect(m, scene, MAT)
+    scene = SceneConfig(effects=["contact", "friction"], contact=cfg, friction={"mu": 0.3})
+    hook = ContactEffect.from_config(scene, m, SimpleNamespace(material=MaterialConfig(poisson_ratio=0.3)))
     assert hook.setup_info.law.law_id == law_id
     assert hook.setup_info.friction_on and hook.setup_info.mu == 0.3
 
 
 def test_build_simulation_finds_the_hook():
-    from fiberpipe.solver.build import _contact_effects
+    from fiberpipe.solver.effects import EFFECTS
     m = _model([((0, 0, 0), (3e-3, 0, 0), 10)])
-    cfg = SimpleNamespace(material=SimpleNamespace(shear_modulus=None, poisson_ratio=0.3, youngs_modulus=15e9,
-                                                   density=1380.0),
-                          scene=SimpleNamespace(effects=["contact"], contact=None, friction=None))
-    (hook,) = _contact_effects(m, cfg)
-    assert hook.name == "contact"
+    scene = SceneConfig(effects=["contact"])
+    hook = EFFECTS["contact"].from_config(scene, m, SimpleNamespace(material=MaterialConfig()))
+    assert hook.name == "contact" and not hook.setup_info.friction_on
 
 
 def test_energy_balance_undamped_collision():
@@ -66,7 +62,7 @@ def test_energy_balance_undamped_collision():
     L = 3e-3
     m = _model([((0, 0, 0), (L, 0, 0), 10),
                 ((L / 2, -L / 2, 2 * R + 2e-6), (L / 2, L / 2, 2 * R + 2e-6), 10)])
-    hook = ce.make_contact_hook(m)
+    hook = contact_hook(m)
     st = State.at_rest(m)
     st.v[m.node_fiber == 1, 2] = -0.5
     res = simulate(m, [Clamps([Clamp(0, k) for k in range(11)]), hook],
@@ -86,12 +82,12 @@ def test_buffers_grow_inside_the_kernel(monkeypatch):
     results = []
     for per_seg in (16, 0):
         monkeypatch.setattr(ce, "DEFAULT_PAIRS_PER_SEGMENT", per_seg)
-        hook = ce.make_contact_hook(m, friction=True)
+        hook = contact_hook(m, friction=True)
         st = State.at_rest(m)
         st.v[m.node_fiber == 0, 2] = 0.5  # the centre fiber pushes into its upper neighbours
         simulate(m, [hook], SimulationSettings(end_time_s=4e-6, output_frames=2), state=st)
         info = hook.setup_info
-        results.append((st.x.copy(), info.n_pairs, info.n_active, int(info.data[0][ce.IS_NGROW])))
+        results.append((st.x.copy(), info.n_pairs, info.n_active, info.n_grow))
     (x1, n1, a1, g1), (x2, n2, a2, g2) = results
     assert g1 == 0 and g2 >= 1
     assert n1 == n2 > 64 and a1 == a2
@@ -100,7 +96,7 @@ def test_buffers_grow_inside_the_kernel(monkeypatch):
 
 def test_verlet_rebuilds_only_when_needed():
     m = _model([((0, 0, 0), (3e-3, 0, 0), 10), ((0, 0, 2 * R + 50e-6), (3e-3, 0, 2 * R + 50e-6), 10)])
-    hook = ce.make_contact_hook(m, skin_m=20e-6)
+    hook = contact_hook(m, skin_m=20e-6)
     st = State.at_rest(m)
     st.v[m.node_fiber == 1, 0] = 1.0  # slides along x: moves 10 µm per 10 µs
     simulate(m, [hook], SimulationSettings(end_time_s=100e-6, output_frames=2), state=st)
@@ -111,7 +107,7 @@ def test_verlet_rebuilds_only_when_needed():
 def test_friction_dissipation_and_plane_friction():
     """A fiber sliding on a plate under gravity stops; the kinetic energy ends in ALLFD."""
     m = _model([((0, 0, R), (3e-3, 0, R), 10)])
-    hook = ce.make_contact_hook(m, contact=False, friction=True, mu=0.5)
+    hook = contact_hook(m, contact=False, friction=True, mu=0.5)
     st = State.at_rest(m)
     v0 = 0.01
     st.v[:, 0] = v0

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from fiberpipe.solver import SimulationSettings, State, simulate
-from fiberpipe.solver.contact_effect import make_contact_hook
+from fiberpipe.verification.case_config import contact_hook
 from fiberpipe.solver.laws import make_law
 
 from test_contact_dynamics import R, _model  # noqa: E402  (same folder, on sys.path under pytest)
@@ -37,7 +37,7 @@ def test_end_cap_passing_over_a_fibre_gives_back_its_energy():
     state = State.at_rest(m)
     state.v[m.node_fiber == 1, 1] = -1.0
     law = make_law("hertz_oriented", E_pa=15e9, nu=0.3)
-    res = simulate(m, [make_contact_hook(m, law=law)], SimulationSettings(end_time_s=1.6e-3, output_frames=3),
+    res = simulate(m, [contact_hook(m, law=law)], SimulationSettings(end_time_s=1.6e-3, output_frames=3),
                    state=state)
     assert res.completed
     contacts = np.asarray(res.history["contacts"])

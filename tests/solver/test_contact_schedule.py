@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from fiberpipe.solver import laws as L
-from fiberpipe.solver._contact_geometry import LE, R, assemble, fiber
-from fiberpipe.solver.contact import contact_forces_ex, gauss_points, pair_gap
-from fiberpipe.solver.friction import friction_forces_ex, plane_friction
+from _contact_geometry import LE, R, assemble, fiber
+from fiberpipe.solver.contact import contact_forces_ex, gauss_points
+from fiberpipe.solver.contact_state import PairRecords
+from fiberpipe.solver.geometry import pair_gap
+from fiberpipe.solver.friction import friction_forces_ex, plane_friction, plane_friction_arrays
 
 
 def _bundle(rng):
@@ -34,8 +36,8 @@ def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
     f = np.zeros_like(x)
     out = [np.zeros(n) for _ in range(7)]
     cn = np.zeros((n, 3))
-    e, na = contact_forces_ex(x, seg, rad, pairs, n, law.law_id, law.params(), gxi, gw, f, out[0], cn, out[1], out[2],
-                              out[3], out[4], np.zeros(0), out[5], out[6], c_gap, reach, c_active)
+    rec = PairRecords(out[0], cn, out[1], out[2], out[3], out[4], out[5], out[6], c_gap, c_active)
+    e, na = contact_forces_ex(x, seg, rad, pairs, n, law.law_id, law.params(), gxi, gw, f, rec, np.zeros(0), reach)
     return f, out[0], na
 
 
@@ -93,16 +95,16 @@ def test_stamped_friction_history_equals_clearing_it():
         gxi, gw = gauss_points(2)
         out = [np.zeros(1) for _ in range(7)]
         cn = np.zeros((1, 3))
-        contact_forces_ex(x, seg, rad, pairs, 1, law.law_id, law.params(), gxi, gw, np.zeros_like(x), out[0], cn,
-                          out[1], out[2], out[3], out[4], np.zeros(0), out[5], out[6], np.zeros(0), 0.0, c_active)
+        rec = PairRecords(out[0], cn, out[1], out[2], out[3], out[4], out[5], out[6], np.zeros(0), c_active)
+        contact_forces_ex(x, seg, rad, pairs, 1, law.law_id, law.params(), gxi, gw, np.zeros_like(x), rec, np.zeros(0),
+                          0.0)
         v = np.zeros_like(x)
         v[rng[0][0]:rng[0][1], 0] = 0.3 * (1 + 0.1 * np.sin(step))
         f1 = np.zeros_like(x)
         f2 = np.zeros_like(x)
-        d1, e1 = friction_forces_ex(v, seg, pairs, 1, out[0], cn, out[1], out[2], mu, kt, dt, hist_clear, f1, out[5],
-                                    np.zeros(0, np.int64), 0, 0)
-        d2, e2 = friction_forces_ex(v, seg, pairs, 1, out[0], cn, out[1], out[2], mu, kt, dt, hist_stamp, f2, out[5],
-                                    c_active, na, step)
+        d1, e1 = friction_forces_ex(v, seg, pairs, 1, rec._replace(active=np.zeros(0, np.int64)), mu, kt, dt,
+                                    hist_clear, f1, 0, 0)
+        d2, e2 = friction_forces_ex(v, seg, pairs, 1, rec, mu, kt, dt, hist_stamp, f2, na, step)
         assert np.array_equal(f1, f2) and d1 == d2 and e1 == e2
         if na:
             assert np.array_equal(hist_clear[0, :4], hist_stamp[0, :4])
@@ -120,8 +122,8 @@ def test_stamped_plane_friction_equals_clearing_it():
         vv = v * (1 + 0.2 * np.cos(step))
         f3 = np.zeros((1, 3))
         f4 = np.zeros((1, 3))
-        d3 = plane_friction(x, vv, *args, 0.2, 1e5, 1e-7, h3, f3, np.zeros((1, 3)))
-        d4 = plane_friction(x, vv, *args, 0.2, 1e5, 1e-7, h4, f4, np.zeros((1, 3)), step)
+        d3 = plane_friction(x, vv, plane_friction_arrays(*args, h3, np.zeros((1, 3))), 0.2, 1e5, 1e-7, f3)
+        d4 = plane_friction(x, vv, plane_friction_arrays(*args, h4, np.zeros((1, 3))), 0.2, 1e5, 1e-7, f4, step)
         assert np.array_equal(f3, f4) and d3 == d4
         if step < 10 or step >= 13:
             assert np.array_equal(h3[0, 0], h4[0, 0, :3])
@@ -161,9 +163,10 @@ def test_plane_friction_on_candidate_nodes_equals_scanning_all():
         f2 = np.zeros((N, 3))
         t1 = np.zeros((4, 3))
         t2 = np.zeros((4, 3))
-        d1 = plane_friction(x_now, v, rad, k_pen, axis, sign, p_now, vel, 0.2, 1e5, 1e-7, h_all, f1, t1, step)
-        d2 = plane_friction(x_now, v, rad, k_pen, axis, sign, p_now, vel, 0.2, 1e5, 1e-7, h_cand, f2, t2, step,
-                            cand_idx, cand_off)
+        d1 = plane_friction(x_now, v, plane_friction_arrays(rad, k_pen, axis, sign, p_now, vel, h_all, t1), 0.2, 1e5,
+                            1e-7, f1, step)
+        d2 = plane_friction(x_now, v, plane_friction_arrays(rad, k_pen, axis, sign, p_now, vel, h_cand, t2, cand_idx,
+                                                            cand_off), 0.2, 1e5, 1e-7, f2, step, True)
         assert np.array_equal(f1, f2) and d1 == d2 and np.array_equal(t1, t2)
         touched += int(np.count_nonzero(f1.any(axis=1)))
     assert np.array_equal(h_all[..., :3], h_cand[..., :3])
@@ -206,21 +209,21 @@ def test_positions_moved_from_outside_are_seen():
     farther from its build position than the path bound allows. Non-unit quaternions handed in are
     normalised."""
     from fiberpipe.solver import Material, build_model
-    from fiberpipe.solver.contact_effect import make_contact_hook
+    from fiberpipe.verification.case_config import contact_hook
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.solver.state import State
 
     xa = fiber([0, 0, 0], [1, 0, 0], 10)
     xb = fiber([0, 2 * R + 20e-6, 0], [1, 0, 0], 10)  # 20 µm apart: inside the skin, skipped
     m = build_model(np.vstack([xa, xb]), np.array([0, 11, 22]), R, Material(15e9, 1380.0, 0.3))
-    integ = Integrator(m, [make_contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
+    integ = Integrator(m, [contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
     st = State.at_rest(m)
     integ.advance(st, 20)
     st.x[11:, 1] -= 25e-6  # 5 µm overlap now
     st.q[3] *= 1.5  # a non-unit quaternion from outside
     fresh = st.copy()
     integ.advance(st, 1)
-    integ2 = Integrator(m, [make_contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
+    integ2 = Integrator(m, [contact_hook(m)], 1e-9, history_rows=2, history_every=10**9)
     integ2.advance(fresh, 1)
     assert np.all(st.v[11:, 1] > 0)  # pushed apart
     assert np.allclose(st.v, fresh.v, rtol=1e-9, atol=1e-15)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fiberpipe.solver import Damping, Drive, Drives, Material, SimulationSettings, build_model, simulate
-from fiberpipe.solver._kernels_integrate import DRIVEN
+from fiberpipe.solver.layout import DRIVEN
 
 R = 0.25e-3
 MAT = Material(15e9, 1380.0, 0.3)

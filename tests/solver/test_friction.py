@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from fiberpipe.solver import laws as L
-from fiberpipe.solver._contact_geometry import LE, R, all_pairs_between, assemble, fiber
+from _contact_geometry import LE, R, all_pairs_between, assemble, fiber
 from fiberpipe.solver.contact import compute_contact
-from fiberpipe.solver.friction import friction_forces, plane_friction, remap_history
+from fiberpipe.solver.friction import friction_forces, plane_friction, plane_friction_arrays, remap_history
 
 MU, KT, DT = 0.2, 1e5, 1e-7
 
@@ -102,10 +102,10 @@ def test_plane_friction_stick_and_slip():
     for _ in range(n):
         f = np.zeros((1, 3))
         tf = np.zeros((1, 3))
-        diss += plane_friction(x, v, *args, MU, KT, DT, hist, f, tf)
+        diss += plane_friction(x, v, plane_friction_arrays(*args, hist, tf), MU, KT, DT, f)
     assert f[0, 0] == pytest.approx(-MU * fn, rel=1e-12) and tf[0, 0] == pytest.approx(MU * fn)
     assert diss == pytest.approx(MU * fn * (1.0 * DT * n - MU * fn / KT), rel=1e-9)
     # off the plane: history reset
     f = np.zeros((1, 3))
-    plane_friction(x + [0, 0, 1e-5], v, *args, MU, KT, DT, hist, f, np.zeros((1, 3)))
+    plane_friction(x + [0, 0, 1e-5], v, plane_friction_arrays(*args, hist, np.zeros((1, 3))), MU, KT, DT, f)
     assert np.all(hist == 0) and np.all(f == 0)

@@ -41,11 +41,11 @@ print(simulate(m, [Damping(1e5)], SimulationSettings(end_time_s=1e-5, output_fra
 _CONTACT = """
 import numpy as np
 from fiberpipe.solver import Damping, Material, SimulationSettings, build_model, simulate
-from fiberpipe.solver.contact_effect import make_contact_hook
+from fiberpipe.verification.case_config import contact_hook
 s = np.linspace(0, 1, 11)[:, None]
 x = np.vstack([s * np.array([3e-3, 0, 0]), s * np.array([3e-3, 0, 0]) + np.array([0, 0, 0.5e-3 - 1e-7])])
 m = build_model(x, np.array([0, 11, 22]), 0.25e-3, Material(15e9, 1380.0, 0.3))
-print(simulate(m, [Damping(1e5), make_contact_hook(m)], SimulationSettings(end_time_s=1e-5, output_frames=2)).completed)
+print(simulate(m, [Damping(1e5), contact_hook(m)], SimulationSettings(end_time_s=1e-5, output_frames=2)).completed)
 """
 
 

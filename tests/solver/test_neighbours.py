@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from fiberpipe.solver._contact_geometry import LE, R
-from fiberpipe.solver.contact import segment_distance2
+from _contact_geometry import LE, R
+from fiberpipe.solver.geometry import segment_distance2
 from fiberpipe.solver.neighbours import VerletList, build_pairs, max_displacement_exceeds, segment_arclength
 
 

@@ -1,0 +1,152 @@
+"""The contact hook's data as named structures (NamedTuples of arrays; a leaf module).
+
+:func:`fiberpipe.solver.contact_effect.contact_step` receives one :class:`ContactData`:
+
+- ``params`` (:class:`ContactParams`): the law and the friction settings, constant over a run;
+- ``stats`` (:class:`ContactStats`): counters and last-step figures, each a 1-element array so the
+  kernel can update it in place;
+- ``segs`` (:class:`Segments`): the fibers' segments (one per beam element);
+- ``lists``: a numba typed list of two :class:`PairList` — the Verlet list in use and the spare that
+  the next build fills; each carries the per-pair histories that must follow the pairs across a
+  rebuild (friction springs, initial-overlap offsets);
+- ``records``: a typed list holding one :class:`PairRecords` — this step's per-pair results;
+- ``fc``: the hook's force array (the step loop adds it to the nodes and clears it);
+- ``planes`` (:class:`PlaneFriction`): the plates and walls, for their friction;
+- ``fwork`` (:class:`FrictionWork`): the nodes the friction forces act on, for booking their work.
+
+The kernel grows the buffers of ``lists`` and ``records`` itself when the neighbour list
+overflows (a new NamedTuple replaces the old one in its typed list).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class ContactParams(NamedTuple):
+    law_id: int             # the law's kernel id (fiberpipe.solver.laws)
+    law_params: np.ndarray  # float64, the law's parameter array
+    friction_on: bool       # fiber–fiber friction
+    plane_friction_on: bool  # fiber–plane friction (plates, walls)
+    skin_m: float           # Verlet skin
+    exclusion_m: float      # segments of one fiber closer than this along the fiber are not paired
+    mu: float               # Coulomb coefficient
+    kt_n_per_m: float       # tangential penalty stiffness
+    release_s: float        # initial overlaps released linearly over this time (0: at once)
+    gauss_xi: np.ndarray    # Gauss nodes on (0, 1) of the line part
+    gauss_w: np.ndarray     # their weights (sum 1)
+
+
+class ContactStats(NamedTuple):
+    """Counters and last-step figures, each an array of one element (updated in place)."""
+
+    n_pairs: np.ndarray       # int64, candidate pairs in the Verlet list
+    n_builds: np.ndarray      # int64, neighbour-list builds so far
+    n_grow: np.ndarray        # int64, times the buffers grew
+    n_active: np.ndarray      # int64, pairs in contact at the last step
+    overlaps_done: np.ndarray  # int64, 1: the initial overlaps have been recorded
+    calls: np.ndarray         # int64, calls so far (the friction histories' time stamps)
+    n_ff: np.ndarray          # int64, nodes in fwork.nodes
+    fn_sum_n: np.ndarray      # Σ normal force of the pairs in contact at the last step, N
+    delta_max_m: np.ndarray   # largest penetration at the last step, m
+    e_contact_J: np.ndarray   # stored normal contact energy at the last step, J
+    e_spring_J: np.ndarray    # elastic energy of the fiber–fiber tangential springs, J
+    offset_max_m: np.ndarray  # largest initial-overlap offset still applied, m
+    path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
+
+
+class Segments(NamedTuple):
+    nodes: np.ndarray   # (E, 2) int64, node indices
+    radius: np.ndarray  # (E,) m
+    fiber: np.ndarray   # (E,) int64
+    arc: np.ndarray     # (E, 2) m, arc length of the ends along the fiber
+
+
+class PairList(NamedTuple):
+    """A Verlet list and the histories that follow its pairs (capacity C)."""
+
+    pairs: np.ndarray     # (C, 2) int64, segment pairs (i < j)
+    keys: np.ndarray      # (C,) int64, sorted pair keys
+    friction: np.ndarray  # (C, 5) tangential spring force (3), its stiffness, step of last update
+    offset: np.ndarray    # (C, 1) m, initial-overlap offset
+
+
+class PairRecords(NamedTuple):
+    """This step's results per candidate pair (capacity C; pairs not in contact have ``fn = 0``)."""
+
+    fn: np.ndarray      # (C,) N, normal force
+    normal: np.ndarray  # (C, 3) unit normal from the second segment to the first
+    s: np.ndarray       # (C,) force-weighted contact parameter on the first segment
+    t: np.ndarray       # (C,) ... on the second segment
+    phi: np.ndarray     # (C,) rad, crossing angle
+    delta: np.ndarray   # (C,) m, largest penetration
+    share: np.ndarray   # (C,) contact share (size 0: not recorded)
+    fsum: np.ndarray    # (C,) N, Σ|f| of the pair's contact points (size 0: not recorded)
+    gap: np.ndarray     # (C,) m, skip threshold of the pair (size 0: every pair evaluated)
+    active: np.ndarray  # (C,) int64, indices of the pairs in contact (size 0: not listed)
+
+
+class PlaneFriction(NamedTuple):
+    """The plates and walls (as the step loop's planes) for their friction, P planes."""
+
+    radius_node: np.ndarray  # (N,) m
+    k_pen: np.ndarray        # (N,) N/m, the plane penalty per node
+    axis: np.ndarray         # (P,) int64
+    sign: np.ndarray         # (P,)
+    pos0: np.ndarray         # (P,) m
+    move: np.ndarray         # (P,) m
+    T: np.ndarray            # (P,) s
+    ta: np.ndarray           # (P,) s
+    mode: np.ndarray         # (P,) int64
+    pos: np.ndarray          # (P,) m, position at this step
+    vel: np.ndarray          # (P, 3) m/s, velocity at this step
+    hist: np.ndarray         # (N, max(P, 1), 4) tangential spring force (3) and step of last update
+    tforce: np.ndarray       # (max(P, 1), 3) N, tangential reaction on each plane
+    cand_idx: np.ndarray     # (N·P,) int64, the nodes near each plane
+    cand_off: np.ndarray     # (P + 1,) int64, CSR offsets into cand_idx
+    pos_cand: np.ndarray     # (P,) m, plane positions when the candidates were listed
+
+
+class FrictionWork(NamedTuple):
+    """The nodes the last step's friction forces act on, for booking their work."""
+
+    ff: np.ndarray     # (N, 3) N, the friction forces on the listed nodes
+    nodes: np.ndarray  # (N,) int64, the listed nodes (first stats.n_ff)
+    mark: np.ndarray   # (N,) int64, call number at which each node was listed
+
+
+class ContactData(NamedTuple):
+    params: ContactParams
+    stats: ContactStats
+    segs: Segments
+    x_ref: np.ndarray  # (N, 3) m, positions at the last neighbour-list build
+    lists: object      # numba typed List of 2 PairList: [in use, spare]
+    records: object    # numba typed List of 1 PairRecords
+    fc: np.ndarray     # (N, 3) N, this step's contact and friction forces
+    planes: PlaneFriction
+    fwork: FrictionWork
+
+
+def new_stats() -> ContactStats:
+    i = [np.zeros(1, np.int64) for _ in range(7)]
+    f = [np.zeros(1) for _ in range(6)]
+    return ContactStats(*i, *f)
+
+
+def new_pair_list(capacity: int) -> PairList:
+    return PairList(np.zeros((capacity, 2), np.int64), np.zeros(capacity, np.int64), np.zeros((capacity, 5)),
+                    np.zeros((capacity, 1)))
+
+
+def new_records(capacity: int) -> PairRecords:
+    z = [np.zeros(capacity) for _ in range(9)]
+    return PairRecords(z[0], np.zeros((capacity, 3)), z[1], z[2], z[3], z[4], z[5], z[6], z[7],
+                       np.zeros(capacity, np.int64))
+
+
+def bare_records(fn, normal, s, t, phi, delta) -> PairRecords:
+    """Records without shares, force sums, gaps or an active list (the plain array API)."""
+    e = np.zeros(0)
+    return PairRecords(fn, normal, s, t, phi, delta, e, e, e, np.zeros(0, np.int64))

@@ -1,0 +1,125 @@
+"""Segment geometry shared by the contact, friction and neighbour-list kernels (a leaf module).
+
+Straight two-node segments: the clamped closest distance of two segments (Ericson, *Real-Time
+Collision Detection*, 2005, §5.1.9), the crossing angle of their lines, and the nodes and gap of a
+candidate pair.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+# sin²(15°): below it the crossing angle comes from sin²Φ = |t_A × t_B|²/(|t_A|²|t_B|²) and the
+# series of asin(y)/y (8 terms: relative error < 1e-11), above it from acos(|cos Φ|)
+_S2_SERIES = math.sin(math.radians(15.0)) ** 2
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def crossing_angle(ta0, ta1, ta2, tb0, tb1, tb2, aa, bb, ab):
+    """Angle Φ ∈ [0, π/2] [rad] between the lines of two segments (tangents ``ta``, ``tb``; ``aa``,
+    ``bb``, ``ab`` their dot products).
+
+    Contacts of quasi-parallel fibres cross at a few degrees: there Φ = y·asin(y)/y with
+    y = sin Φ from the cross product (one square root and a polynomial: Σ cₙ y²ⁿ, cₙ = (2n)!/(4ⁿ(n!)²(2n+1)))
+    instead of ``acos`` — cheaper, and more accurate at small angles, where acos(|cos Φ|) loses
+    half of the digits of Φ (cos Φ = 1 − Φ²/2).
+    """
+    c0 = ta1 * tb2 - ta2 * tb1
+    c1 = ta2 * tb0 - ta0 * tb2
+    c2 = ta0 * tb1 - ta1 * tb0
+    s2 = (c0 * c0 + c1 * c1 + c2 * c2) / (aa * bb)
+    if s2 < _S2_SERIES:
+        r = 143.0 / 10240.0
+        r = r * s2 + 231.0 / 13312.0
+        r = r * s2 + 63.0 / 2816.0
+        r = r * s2 + 35.0 / 1152.0
+        r = r * s2 + 5.0 / 112.0
+        r = r * s2 + 3.0 / 40.0
+        r = r * s2 + 1.0 / 6.0
+        r = r * s2 + 1.0
+        return math.sqrt(s2) * r
+    cphi = abs(ab) / math.sqrt(aa * bb)
+    if cphi > 1.0:
+        cphi = 1.0
+    return math.acos(cphi)
+
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def segment_distance2(a0, a1, b0, b1, ta, tb):
+    """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
+    r0 = a0[0] - b0[0]
+    r1 = a0[1] - b0[1]
+    r2 = a0[2] - b0[2]
+    aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+    bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+    ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+    den = aa * bb - ab * ab
+    if den > 1e-12 * aa * bb:
+        s = (ab * br - ar * bb) / den
+        s = min(max(s, 0.0), 1.0)
+    else:
+        s = 0.0
+    t = (ab * s + br) / bb
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-ar / aa, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((ab - ar) / aa, 0.0), 1.0)
+    d0 = r0 + s * ta[0] - t * tb[0]
+    d1 = r1 + s * ta[1] - t * tb[1]
+    d2 = r2 + s * ta[2] - t * tb[2]
+    return d0 * d0 + d1 * d1 + d2 * d2, s, t
+
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def segment_distance2_s(r0, r1, r2, ta0, ta1, ta2, tb0, tb1, tb2):
+    """:func:`segment_distance2` on scalars: r = a0 − b0, ta = a1 − a0, tb = b1 − b0."""
+    aa = ta0 * ta0 + ta1 * ta1 + ta2 * ta2
+    bb = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
+    ab = ta0 * tb0 + ta1 * tb1 + ta2 * tb2
+    ar = ta0 * r0 + ta1 * r1 + ta2 * r2
+    br = tb0 * r0 + tb1 * r1 + tb2 * r2
+    den = aa * bb - ab * ab
+    if den > 1e-12 * aa * bb:
+        s = (ab * br - ar * bb) / den
+        s = min(max(s, 0.0), 1.0)
+    else:
+        s = 0.0
+    t = (ab * s + br) / bb
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-ar / aa, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((ab - ar) / aa, 0.0), 1.0)
+    d0 = r0 + s * ta0 - t * tb0
+    d1 = r1 + s * ta1 - t * tb1
+    d2 = r2 + s * ta2 - t * tb2
+    return d0 * d0 + d1 * d1 + d2 * d2, s, t
+
+
+
+@njit(cache=True, inline="always")
+def pair_nodes(pairs, seg_nodes, k):
+    """Segments ``(i, j)`` of candidate pair ``k`` and their node indices ``(a0, a1, b0, b1)``."""
+    i = pairs[k, 0]
+    j = pairs[k, 1]
+    return i, j, seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1]
+
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def pair_gap(x, seg_nodes, seg_radius, pairs, k):
+    """Gap [m] of candidate pair ``k``: clamped segment–segment centre-line distance − r_i − r_j."""
+    i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
+    d2, s, t = segment_distance2_s(x[a0, 0] - x[b0, 0], x[a0, 1] - x[b0, 1], x[a0, 2] - x[b0, 2],
+                                    x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
+                                    x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
+    return math.sqrt(d2) - seg_radius[i] - seg_radius[j]

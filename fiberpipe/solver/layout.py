@@ -1,0 +1,44 @@
+"""Named slots shared by the step loop, the effects and the post-processing (a leaf module).
+
+The step loop keeps its energy accumulators in one float64 array (``State.acc``) and writes one
+history row per ``history_every`` steps; these constants name the slots and columns once, so every
+module that reads or writes them agrees. Node fixity is a bit mask per node, and the kernels report
+why a run stopped with a status code.
+"""
+
+# energy accumulators (State.acc, float64), J
+ACC_WK = 0   # prescribed-motion work (plates, drives, clamps)
+ACC_VD = 1   # damping dissipation
+ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook)
+ACC_FD = 3   # friction dissipation (contact hook)
+ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW)
+ACC_SIZE = 8
+
+# history columns (one row per recorded step)
+H_TIME = 0
+H_PLATE_DISP = 1   # 2 columns: lower, upper plate travel, m
+H_PLATE_FORCE = 3  # 2 columns: lower, upper plate reaction, N
+H_KE = 5
+H_SE = 6
+H_VD = 7
+H_WK = 8
+H_PW = 9
+H_FD = 10
+H_CONTACTS = 11
+H_WF = 12          # work of the friction forces on the fibers (ACC_WF), J
+H_WALL = 13        # one column per wall plane from here on, N
+
+# node fixity bits (SceneArrays.fix_mask)
+FIX_X = 1
+FIX_Y = 2
+FIX_Z = 4
+FIX_ROT = 8
+DRIVEN = 16
+
+# why the step loop stopped
+STATUS_OK = 0
+STATUS_NAN = 1
+STATUS_SPEED = 2
+STATUS_RUNAWAY = 3
+STATUS_ENERGY = 4
+

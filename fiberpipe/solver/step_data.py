@@ -1,0 +1,113 @@
+"""The step loop's arguments as named structures (NamedTuples of arrays, which numba compiles).
+
+Static model data, the scene's effect arrays, the per-step state and the work buffers stay apart,
+in the manner of warp.sim's Model / State / Integrator: the step loop
+:func:`fiberpipe.solver._kernels_integrate.advance_plain` reads ``ModelArrays`` and ``SceneKernel``
+(never written), advances ``StepState`` in place and uses ``WorkArrays`` as scratch and output.
+Fibers are flat arrays with CSR offsets (fiber k owns nodes ``node_offsets[k] … node_offsets[k+1]−1``
+and elements ``node − k``). SI units throughout.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class ModelArrays(NamedTuple):
+    """Static arrays of a :class:`fiberpipe.solver.model.Model` (per element E, per node N)."""
+
+    el_n1: np.ndarray         # (E,) int64, first node of each element
+    el_invL0: np.ndarray      # (E,) 1/m, inverse rest length
+    el_C: np.ndarray          # (E, 3) N, axial and shear stiffness EA, GA_s, GA_s
+    el_Dk: np.ndarray         # (E, 3) N·m², torsion and bending stiffness GJ, EI, EI
+    gamma_rest: np.ndarray    # (E, 3) rest translational strain
+    theta_rest: np.ndarray    # (E, 3) rest curvature × length
+    mass: np.ndarray          # (N,) kg, lumped (scaled) mass
+    inv_mass: np.ndarray      # (N,) 1/kg
+    J: np.ndarray             # (N, 3) kg·m², body-frame rotary inertia
+    inv_J: np.ndarray         # (N, 3) 1/(kg·m²)
+    radius_node: np.ndarray   # (N,) m, fiber radius at each node
+    x0: np.ndarray            # (N, 3) m, rest positions (the constant loads' work reference)
+    node_offsets: np.ndarray  # (F+1,) int64, CSR offsets of the fibers' nodes
+
+
+class PlaneArrays(NamedTuple):
+    """Rigid planes (plates and walls), one entry per plane P; the last four are per-step outputs."""
+
+    axis: np.ndarray       # (P,) int64, axis normal to the plane
+    sign: np.ndarray       # (P,) +1 pushes towards +axis (lower plate, low wall), −1 otherwise
+    pos0: np.ndarray       # (P,) m, initial position
+    move: np.ndarray       # (P,) m, travel towards the bundle (0: fixed)
+    T: np.ndarray          # (P,) s, loading time of the ramp
+    ta: np.ndarray         # (P,) s, acceleration time of the ramp
+    mode: np.ndarray       # (P,) int64, ramp code (_kernels_boundary.RAMP_*)
+    hist_col: np.ndarray   # (P,) int64, history column of the reaction (-1: none)
+    k_pen: np.ndarray      # (N,) N/m, penalty stiffness per node (size 0 without planes)
+    pos: np.ndarray        # (P,) m, out: position at t_n
+    force: np.ndarray      # (P,) N, out: reaction, positive when pressed
+    pen_idx: np.ndarray    # (N·P,) int64, out: node·3 + axis of each touching node
+    pen_f: np.ndarray      # (N·P,) N, out: the penalty force component along the axis
+
+
+class DriveArrays(NamedTuple):
+    """Prescribed rigid motions of whole fibers, one entry per drive D."""
+
+    vec: np.ndarray    # (D, 3) m, total displacement
+    T: np.ndarray      # (D,) s, duration of the ramp
+    ta: np.ndarray     # (D,) s, acceleration time
+    mode: np.ndarray   # (D,) int64, ramp code
+    v: np.ndarray      # (D, 3) m/s, out: this step's prescribed velocity
+
+
+class SceneKernel(NamedTuple):
+    """The effects' arrays the step loop reads (size 0 where an effect is absent)."""
+
+    alpha_per_s: float        # mass-proportional damping α
+    beta_s: float             # stiffness-proportional damping β
+    f_ext: np.ndarray         # (N, 3) N, constant loads (gravity, point and line loads) or (0, 3)
+    fix_mask: np.ndarray      # (N,) uint8, layout.FIX_* and DRIVEN bits, or (0,)
+    node_drive: np.ndarray    # (N,) int64, drive of each driven node (-1: none)
+    drives: DriveArrays
+    planes: PlaneArrays
+
+
+class StepState(NamedTuple):
+    """The state the step loop advances in place (views of :class:`fiberpipe.solver.state.State`)."""
+
+    x: np.ndarray    # (N, 3) m, positions at t_n
+    q: np.ndarray    # (N, 4) unit quaternions (w, x, y, z), node frames
+    v: np.ndarray    # (N, 3) m/s, velocities at t_{n−½}
+    w: np.ndarray    # (N, 3) rad/s, body angular velocities at t_{n−½}
+    acc: np.ndarray  # (layout.ACC_SIZE,) J, energy accumulators
+
+
+class WorkArrays(NamedTuple):
+    """Scratch and output buffers of the step loop."""
+
+    f: np.ndarray            # (N, 3) N, forces of everything but the beams at t_n
+    mom: np.ndarray          # (N, 3) N·m, spatial moments of everything but the beams
+    eb: np.ndarray           # (E, EB_SIZE) the beams' element resultants, gathered per node
+    strain_prev: np.ndarray  # (E, 6) last step's strains (stiffness-proportional damping) or (0, 6)
+    hist: np.ndarray         # (rows, layout.H_WALL + walls) history rows
+
+
+class StepControl(NamedTuple):
+    """Scalars of one call of the step loop."""
+
+    dt_s: float
+    n_steps: int
+    t_start_s: float
+    step_start: int
+    h_row: int            # next history row to write
+    history_every: int    # steps between history rows
+    v_limit_m_s: float    # a node faster than this is a blow-up
+    x_limit_m: float      # a node farther than this from its rest position is a run-away
+    e_ref_J: float        # floor of the energy scale of the blow-up check
+
+
+def empty_planes(n_nodes: int) -> PlaneArrays:
+    """A :class:`PlaneArrays` with no plane."""
+    z, zi = np.zeros(0), np.zeros(0, np.int64)
+    return PlaneArrays(zi, z, z, z, z, z, zi, zi, np.zeros(0), z.copy(), z.copy(), zi.copy(), z.copy())
