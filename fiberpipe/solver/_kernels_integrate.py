@@ -28,11 +28,11 @@ the contact hook only. Works over a step use ``f_n · v̄ Δt`` (trapezoid, seco
 from __future__ import annotations
 
 import math
-import types
 
 import numpy as np
 from numba import njit
 
+from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
@@ -465,18 +465,6 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
 
 _hook = no_contact
 _hook_forces = no_contact_forces
-
-
-def specialise(template, name: str, bindings: dict, *, cache: bool, **flags):
-    """A jitted copy of the plain function ``template`` whose module globals named in ``bindings``
-    are replaced (the way a kernel is specialised on the kernels it calls)."""
-    g = dict(template.__globals__)
-    g.update(bindings)
-    fn = types.FunctionType(template.__code__, g, name, template.__defaults__, template.__closure__)
-    fn.__qualname__ = name
-    fn.__module__ = template.__module__
-    fn.__doc__ = template.__doc__
-    return njit(cache=cache, **flags)(fn)
 
 
 def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False):

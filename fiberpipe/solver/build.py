@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import FiberpipeError
 from ..model.mesh import plane_penetration
 from . import contact_effect  # noqa: F401  (registers the contact and friction effect)
-from .effects import EFFECTS, Clamps, ContactHook, Drives, Effect, Loads, SceneArrays
+from .effects import EFFECTS, Clamps, ContactHook, Drives, Effect, Loads, Plates, SceneArrays, Walls
 from .integrator import SimulationSettings
 from .model import Material, Model, build_model
 

@@ -39,6 +39,7 @@ from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
 from .contact import contact_forces_ex, gauss_points
 from .effects import ContactHook, register_effect
+from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PairList, PairRecords, PlaneFriction, Segments,
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
@@ -410,6 +411,35 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
         np.zeros(P + 1, np.int64), pos0.copy())
 
 
+_CUSTOM_KERNELS: dict = {}
+
+
+def contact_kernel_for(law):
+    """``(contact_step kernel, cache name)`` for ``law``: the built-in kernels (cached on disk) for a
+    law without ``kernels``; else copies of the contact kernels specialised on the law's own jitted
+    ``(line, point, weight_point)`` functions (compiled once per process and law class)."""
+    if law.kernels is None:
+        return contact_step, "advance_contact"
+    key = type(law)
+    if key not in _CUSTOM_KERNELS:
+        from . import contact as C
+
+        line, point, weight_point = law.kernels
+        tag = type(law).__name__
+        flags = dict(fastmath=True, error_model="numpy")
+        lh = specialise(C._line_half, f"_line_half_{tag}", {"law_line": line}, cache=False, **flags)
+        pp = specialise(C._point_part, f"_point_part_{tag}", {"law_point": point}, cache=False, inline="always",
+                        **flags)
+        cf = specialise(C.contact_forces_ex, f"contact_forces_{tag}",
+                        {"_line_half": lh, "_point_part": pp, "law_weight_point": weight_point}, cache=False, **flags)
+        ro = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"contact_forces_ex": cf},
+                        cache=False, **flags)
+        _CUSTOM_KERNELS[key] = specialise(contact_step, f"contact_step_{tag}",
+                                          {"contact_forces_ex": cf, "_record_initial_overlaps": ro}, cache=False,
+                                          **flags)
+    return _CUSTOM_KERNELS[key], None
+
+
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
                       plane_friction_on: bool = True):
@@ -454,7 +484,8 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         info.data = data
         return data
 
-    hook = ContactHook(kernel=contact_step, prepare=prepare, forces_of=contact_forces_of, cache_name="advance_contact")
+    kernel, cache_name = contact_kernel_for(law)
+    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name)
     hook.setup_info = info
     if not contact:
         hook.name = "friction"

@@ -155,7 +155,7 @@ def test_crossing_angle_series_and_acos_branches():
     atan2(|t_A × t_B|, |t_A·t_B|), from 1e-6 rad to 90°, across the 15° switch."""
     import math
 
-    from fiberpipe.solver.contact import _crossing_angle
+    from fiberpipe.solver.geometry import crossing_angle as _crossing_angle
 
     rng = np.random.default_rng(2)
     for phi in np.concatenate([np.geomspace(1e-6, math.pi / 2, 60), np.radians([14.999, 15.0, 15.001])]):

@@ -1,13 +1,12 @@
-"""scene.contact.blend_length: the hertz_oriented law's ℓ_blend from the config (issue 5 follow-up,
-docs/contact.md §11)."""
+"""scene.contact.blend_length: the hertz_oriented law's ℓ_blend from the config (docs/contact.md)."""
 
 import pytest
 
 from fiberpipe.config import validate_config
 from fiberpipe.errors import ConfigError
-from fiberpipe.solver.contact_effect import law_from_config
+from fiberpipe.config import MaterialConfig
+from fiberpipe.solver.laws import law_from_config
 from fiberpipe.solver.laws import P_LBLEND
-from fiberpipe.solver.model import Material
 
 
 def _scene(contact):
@@ -16,7 +15,7 @@ def _scene(contact):
 
 
 def test_blend_length_reaches_the_law():
-    mat = Material(youngs_modulus_pa=15e9, poisson_ratio=0.3, density_kg_m3=1380.0)
+    mat = MaterialConfig(youngs_modulus=15e9, poisson_ratio=0.3, density=1380.0)
     law = law_from_config(_scene({"law": "hertz_oriented", "blend_length": "0.15 mm"}).contact, mat)
     assert law.params()[P_LBLEND] == pytest.approx(0.15e-3)
     default = law_from_config(_scene({"law": "hertz_oriented"}).contact, mat)
