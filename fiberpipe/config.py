@@ -486,7 +486,9 @@ class SceneConfig(Section):
         if "friction" in self.effects and "contact" not in self.effects and "plates" not in self.effects and "walls" not in self.effects:
             out.append("scene.effects has friction but no contact, plates or walls: friction cannot act")
         for name in ("gravity", "damping", "contact", "friction", "plates", "walls", "constraints"):
-            if getattr(self, name) is not None and name not in self.effects:
+            # contact and friction share one hook: listing either fills both blocks with their defaults
+            given = name in self.model_fields_set
+            if getattr(self, name) is not None and name not in self.effects and given:
                 out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
         for name in ("clamps", "loads", "drives"):
             if getattr(self, name) and name not in self.effects:

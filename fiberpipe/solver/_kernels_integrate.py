@@ -184,7 +184,7 @@ def prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, f
     return v1x, v1y, v1z, wk
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def update_nodes(model, scene, state, work, fc, dt, record, gyro):
     """The central-difference update of every node (module docstring), gathering the beam
     resultants per node and adding the contact hook's force array ``fc`` (cleared here).

@@ -15,8 +15,9 @@ def test_solver_kernels_use_the_package_wide_cache_stamp():
 
 def test_step_loop_specialisations():
     assert K.step_loop_for(K.no_contact) is K.advance_plain
-    loop = K.step_loop_for(contact_effect.contact_step)
-    assert loop is K.step_loop_for(contact_effect.contact_step)
+    args = (contact_effect.contact_step, contact_effect.contact_forces_of)
+    loop = K.step_loop_for(*args, cache_name="advance_contact")
+    assert loop is K.step_loop_for(*args, cache_name="advance_contact")
     assert loop._cache._impl is not None  # the built-in contact loop is cached on disk
 
 

@@ -70,7 +70,7 @@ def test_runner_uses_its_config(name, tmp_path, monkeypatch):
         seen.update(model=model, effects=effects, settings=settings)
         raise _Stop
 
-    real_hook = contact_cases.make_contact_hook
+    real_hook = contact_cases.contact_hook
 
     def hook_spy(model, **kw):
         hooks.append(kw)
@@ -78,7 +78,7 @@ def test_runner_uses_its_config(name, tmp_path, monkeypatch):
 
     monkeypatch.setattr(cases, "simulate", spy)
     monkeypatch.setattr(contact_cases, "simulate", spy)
-    monkeypatch.setattr(contact_cases, "make_contact_hook", hook_spy)
+    monkeypatch.setattr(contact_cases, "contact_hook", hook_spy)
     with pytest.raises(_Stop):
         ALL_CASES[name](quick=True)
     m, eff = seen["model"], seen["effects"]
