@@ -15,12 +15,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
-from . import _kernels_integrate as K
+from ._kernels_integrate import step_loop_for
 from ._kernels_beam import EB_SIZE, beam_forces
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
@@ -203,7 +203,7 @@ class Integrator:
         self.eb = np.zeros((model.n_elements, EB_SIZE))
         # solver.threads > 1: the beam pass runs one prange task per fiber
         self.threads = max(1, int(threads))
-        self._loop = K.step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
+        self._loop = step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
         self.model_arrays = ModelArrays(
             m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
             m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),
@@ -409,6 +409,61 @@ def default_chunk_steps(model: Model, settings: SimulationSettings) -> int:
     return int(max(100, min(settings.max_chunk_steps, 5_000_000 // max(model.n_elements, 1))))
 
 
+class RunPlan(NamedTuple):
+    """What a run will do, decided before its first step."""
+
+    dt_s: float
+    timestep: TimeStepReport
+    state: State
+    end_time_s: float
+    total_steps: int
+    history_every: int
+    history_rows: int
+    chunk_steps: int
+    checkpoint_every: int  # 0: none
+
+
+def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSettings, state: State | None,
+              resume: Checkpoint | None) -> RunPlan:
+    """The run's time step, initial state, end time and step grid (checked against ``resume``)."""
+    dt, rep = choose_time_step(model, effects, settings)
+    if resume is not None:
+        if resume.x.shape != (model.n_nodes, 3):
+            raise FiberpipeError(f"checkpoint has {resume.x.shape[0]} nodes, the model {model.n_nodes}: it belongs "
+                                 "to another mesh")
+        if resume.dt_s != dt:
+            raise FiberpipeError(f"checkpoint was run with dt = {resume.dt_s:.6g} s, this run would use {dt:.6g} s: "
+                                 "it belongs to another config")
+        state = State(resume.x.copy(), resume.q.copy(), resume.v.copy(), resume.w.copy(), float(resume.t),
+                      int(resume.step), resume.acc.copy())
+    else:
+        state = State.at_rest(model) if state is None else state
+    # end time
+    probe = SceneArrays(model, dt)
+    for e in effects:
+        if e.name in ("plates", "drives"):
+            e.setup(model, probe)
+    end_time = settings.end_time_s if settings.end_time_s is not None else probe.end_time_hint
+    if not end_time or end_time <= 0:
+        raise FiberpipeError("no end time: set solver.end_time or a loading (moving plate) / drive")
+    n = end_time / dt
+    if not (math.isfinite(n) and n <= MAX_STEPS):
+        raise FiberpipeError(f"the run would take {n:.3g} steps (end time {end_time:.4g} s / dt {dt:.4g} s), more "
+                             f"than {MAX_STEPS:.0e}: check solver.end_time, solver.dt / dt_safety, damping.beta "
+                             "(which lowers the stable step) and the loading velocity")
+    total_steps = int(math.ceil(n - 1e-9))
+    every = settings.history_every or max(1, total_steps // 2000)
+    rows = total_steps // every + 1
+    chunk = default_chunk_steps(model, settings)
+    ce = int(settings.checkpoint_every or 0)
+    if resume is not None:
+        got = (resume.total_steps, resume.history_every, resume.chunk_steps, resume.checkpoint_every)
+        if got != (total_steps, every, chunk, ce):
+            raise FiberpipeError(f"checkpoint (total steps, history_every, chunk, checkpoint_every) = {got} does not "
+                                 f"match this run's {(total_steps, every, chunk, ce)}: it belongs to another config")
+    return RunPlan(dt, rep, state, end_time, total_steps, every, rows, chunk, ce)
+
+
 def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettings | None = None, *,
              state: State | None = None, progress: Callable | None = None,
              on_frame: Callable | None = None, resume: Checkpoint | None = None,
@@ -445,41 +500,8 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     """
     settings = settings or SimulationSettings()
     t_wall = time.perf_counter()
-    dt, rep = choose_time_step(model, effects, settings)
+    dt, rep, state, end_time, total_steps, every, rows, chunk, ce = _plan_run(model, effects, settings, state, resume)
     if resume is not None:
-        if resume.x.shape != (model.n_nodes, 3):
-            raise FiberpipeError(f"checkpoint has {resume.x.shape[0]} nodes, the model {model.n_nodes}: it belongs "
-                                 "to another mesh")
-        if resume.dt_s != dt:
-            raise FiberpipeError(f"checkpoint was run with dt = {resume.dt_s:.6g} s, this run would use {dt:.6g} s: "
-                                 "it belongs to another config")
-        state = State(resume.x.copy(), resume.q.copy(), resume.v.copy(), resume.w.copy(), float(resume.t),
-                      int(resume.step), resume.acc.copy())
-    else:
-        state = State.at_rest(model) if state is None else state
-    # end time
-    probe = SceneArrays(model, dt)
-    for e in effects:
-        if e.name in ("plates", "drives"):
-            e.setup(model, probe)
-    end_time = settings.end_time_s if settings.end_time_s is not None else probe.end_time_hint
-    if not end_time or end_time <= 0:
-        raise FiberpipeError("no end time: set solver.end_time or a loading (moving plate) / drive")
-    n = end_time / dt
-    if not (math.isfinite(n) and n <= MAX_STEPS):
-        raise FiberpipeError(f"the run would take {n:.3g} steps (end time {end_time:.4g} s / dt {dt:.4g} s), more "
-                             f"than {MAX_STEPS:.0e}: check solver.end_time, solver.dt / dt_safety, damping.beta "
-                             "(which lowers the stable step) and the loading velocity")
-    total_steps = int(math.ceil(n - 1e-9))
-    every = settings.history_every or max(1, total_steps // 2000)
-    rows = total_steps // every + 1
-    chunk = default_chunk_steps(model, settings)
-    ce = int(settings.checkpoint_every or 0)
-    if resume is not None:
-        got = (resume.total_steps, resume.history_every, resume.chunk_steps, resume.checkpoint_every)
-        if got != (total_steps, every, chunk, ce):
-            raise FiberpipeError(f"checkpoint (total steps, history_every, chunk, checkpoint_every) = {got} does not "
-                                 f"match this run's {(total_steps, every, chunk, ce)}: it belongs to another config")
         origin, ke0, se0 = resume.origin_step, resume.e0_ke, resume.e0_se
         wall_before = resume.wall_time_s
     else:

@@ -1,0 +1,83 @@
+"""The package's architecture as tests: no import cycle (lazy imports inside functions included),
+and the solver's functions short enough to read at once with a handful of named arguments."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import networkx as nx
+
+PKG = Path(__file__).resolve().parents[1] / "fiberpipe"
+MAX_LINES = 150
+MAX_PARAMS = 16
+
+
+def _modules(pkg: Path) -> dict[str, Path]:
+    out = {}
+    for p in pkg.rglob("*.py"):
+        parts = list(p.relative_to(pkg.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+def import_graph(pkg: Path = PKG) -> nx.DiGraph:
+    """Module → module edges of every ``import`` statement, at module level or inside functions.
+
+    ``from . import x`` imports the submodule ``x`` (the package itself is already initialised as
+    the parent of the importing module), so it is an edge to ``x``, not to the package.
+    """
+    mods = _modules(pkg)
+    g = nx.DiGraph()
+    g.add_nodes_from(mods)
+    for name, path in mods.items():
+        pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+                    mod = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                subs = [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in mods]
+                targets = subs if subs and len(subs) == len(node.names) else [mod] + subs
+            for t in targets:
+                if t in mods and t != name and not name.startswith(t + "."):  # parents are initialised first
+                    g.add_edge(name, t)
+    return g
+
+
+def test_no_import_cycle_in_the_package():
+    cycles = [c for c in nx.simple_cycles(import_graph()) if len(c) > 1]
+    assert not cycles, f"import cycles: {cycles[:5]}"
+
+
+def test_solver_functions_are_short_with_few_parameters():
+    long = []
+    for path in sorted((PKG / "solver").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = node.args
+                n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+                n -= bool(a.args) and a.args[0].arg in ("self", "cls")
+                lines = node.end_lineno - node.lineno + 1
+                if n > MAX_PARAMS or lines > MAX_LINES:
+                    long.append(f"{path.name}:{node.lineno} {node.name}: {n} parameters, {lines} lines")
+    assert not long, long
+
+
+def test_a_lazy_import_cycle_is_found(tmp_path):
+    """The graph builder sees an import inside a function (so the cycle test can fail)."""
+    pkg = tmp_path / "toy"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from . import b\n")
+    (pkg / "b.py").write_text("def f():\n    from .a import x\n    return x\n")
+    g = import_graph(pkg)
+    assert g.has_edge("toy.a", "toy.b") and g.has_edge("toy.b", "toy.a")
+    assert [c for c in nx.simple_cycles(g) if len(c) > 1]
