@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import crossing_angle, segment_distance2_s
+from .geometry import apply_pair_force, crossing_angle, segment_distance2_s
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
 
@@ -239,24 +239,6 @@ def contact_forces(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params,
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
-    """+f on segment A at parameter s, −f on segment B at t, linearly shared by each segment's nodes."""
-    na0, na1, nb0, nb1 = nodes4
-    f_out[na0, 0] += (1.0 - s) * f0
-    f_out[na0, 1] += (1.0 - s) * f1
-    f_out[na0, 2] += (1.0 - s) * f2
-    f_out[na1, 0] += s * f0
-    f_out[na1, 1] += s * f1
-    f_out[na1, 2] += s * f2
-    f_out[nb0, 0] -= (1.0 - t) * f0
-    f_out[nb0, 1] -= (1.0 - t) * f1
-    f_out[nb0, 2] -= (1.0 - t) * f2
-    f_out[nb1, 0] -= t * f0
-    f_out[nb1, 1] -= t * f1
-    f_out[nb1, 2] -= t * f2
-
-
-@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def _point_part(x, seg_nodes, pair, nodes4, radii, geo, closest, point, law_id, law_params, off, f_out, rec):
     """The point part of a pair (module docstring, item 3): its force into ``f_out`` and ``rec``;
     returns the stored energy [J].
@@ -319,7 +301,7 @@ def _point_part(x, seg_nodes, pair, nodes4, radii, geo, closest, point, law_id, 
     f0 = fm * n0
     f1 = fm * n1
     f2 = fm * n2
-    _apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
+    apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
     rec[0] += fm
     rec[1] += f0
     rec[2] += f1

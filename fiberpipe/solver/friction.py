@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from .contact_state import PairRecords, PlaneFriction
-from .geometry import pair_nodes
+from .geometry import apply_pair_force, pair_nodes
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -156,18 +156,7 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
         f0, f1, f2, d = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, ktp)
         diss += d
         espring += 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
-        f_out[a0, 0] += (1.0 - s) * f0
-        f_out[a0, 1] += (1.0 - s) * f1
-        f_out[a0, 2] += (1.0 - s) * f2
-        f_out[a1, 0] += s * f0
-        f_out[a1, 1] += s * f1
-        f_out[a1, 2] += s * f2
-        f_out[b0, 0] -= (1.0 - t) * f0
-        f_out[b0, 1] -= (1.0 - t) * f1
-        f_out[b0, 2] -= (1.0 - t) * f2
-        f_out[b1, 0] -= t * f0
-        f_out[b1, 1] -= t * f1
-        f_out[b1, 2] -= t * f2
+        apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
     return diss, espring
 
 

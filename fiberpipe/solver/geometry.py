@@ -50,32 +50,7 @@ def crossing_angle(ta0, ta1, ta2, tb0, tb1, tb2, aa, bb, ab):
 @njit(cache=True, fastmath=True, error_model="numpy")
 def segment_distance2(a0, a1, b0, b1, ta, tb):
     """Squared closest distance between segments [a0,a1] and [b0,b1] (clamped), and (s, t)."""
-    r0 = a0[0] - b0[0]
-    r1 = a0[1] - b0[1]
-    r2 = a0[2] - b0[2]
-    aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
-    bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
-    ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
-    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-    den = aa * bb - ab * ab
-    if den > 1e-12 * aa * bb:
-        s = (ab * br - ar * bb) / den
-        s = min(max(s, 0.0), 1.0)
-    else:
-        s = 0.0
-    t = (ab * s + br) / bb
-    if t < 0.0:
-        t = 0.0
-        s = min(max(-ar / aa, 0.0), 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((ab - ar) / aa, 0.0), 1.0)
-    d0 = r0 + s * ta[0] - t * tb[0]
-    d1 = r1 + s * ta[1] - t * tb[1]
-    d2 = r2 + s * ta[2] - t * tb[2]
-    return d0 * d0 + d1 * d1 + d2 * d2, s, t
-
+    return segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2], ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -123,3 +98,21 @@ def pair_gap(x, seg_nodes, seg_radius, pairs, k):
                                     x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2],
                                     x[b1, 0] - x[b0, 0], x[b1, 1] - x[b0, 1], x[b1, 2] - x[b0, 2])
     return math.sqrt(d2) - seg_radius[i] - seg_radius[j]
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
+    """+f on segment A at parameter s, −f on segment B at t, linearly shared by each segment's nodes."""
+    na0, na1, nb0, nb1 = nodes4
+    f_out[na0, 0] += (1.0 - s) * f0
+    f_out[na0, 1] += (1.0 - s) * f1
+    f_out[na0, 2] += (1.0 - s) * f2
+    f_out[na1, 0] += s * f0
+    f_out[na1, 1] += s * f1
+    f_out[na1, 2] += s * f2
+    f_out[nb0, 0] -= (1.0 - t) * f0
+    f_out[nb0, 1] -= (1.0 - t) * f1
+    f_out[nb0, 2] -= (1.0 - t) * f2
+    f_out[nb1, 0] -= t * f0
+    f_out[nb1, 1] -= t * f1
+    f_out[nb1, 2] -= t * f2
