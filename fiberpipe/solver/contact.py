@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import apply_pair_force, crossing_angle, segment_distance2_s
+from ._specialise import specialise
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
 
@@ -446,6 +447,29 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
     return energy, n_active
 
 
+_LAW_KERNELS: dict = {}
+
+
+def contact_kernels_for(law):
+    """``(contact_forces_ex, contact_forces)`` for ``law``: the built-in kernels for a law without
+    ``kernels``; else copies specialised on the law's own jitted ``(line, point, weight_point)``
+    (compiled once per process and law class; see ``_specialise``)."""
+    if law.kernels is None:
+        return contact_forces_ex, contact_forces
+    key = type(law)
+    if key not in _LAW_KERNELS:
+        line, point, weight_point = law.kernels
+        tag = type(law).__name__
+        flags = dict(fastmath=True, error_model="numpy")
+        lh = specialise(_line_half, f"_line_half_{tag}", {"law_line": line}, cache=False, **flags)
+        pp = specialise(_point_part, f"_point_part_{tag}", {"law_point": point}, cache=False, inline="always", **flags)
+        cf = specialise(contact_forces_ex, f"contact_forces_ex_{tag}",
+                        {"_line_half": lh, "_point_part": pp, "law_weight_point": weight_point}, cache=False, **flags)
+        plain = specialise(contact_forces, f"contact_forces_{tag}", {"contact_forces_ex": cf}, cache=False, **flags)
+        _LAW_KERNELS[key] = (cf, plain)
+    return _LAW_KERNELS[key]
+
+
 class ContactBuffers:
     """Per-pair output arrays for :func:`contact_forces`, grown with the neighbour list capacity."""
 
@@ -476,7 +500,7 @@ def compute_contact(x, seg_nodes, seg_radius, pairs, n_pairs, law, f_out, buffer
     if buffers is None:
         buffers = ContactBuffers(max(n_pairs, 1))
     buffers.ensure(n_pairs)
-    e, na = contact_forces(
+    e, na = contact_kernels_for(law)[1](
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(seg_nodes, dtype=np.int64),
         np.ascontiguousarray(seg_radius, dtype=np.float64),

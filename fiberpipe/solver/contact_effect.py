@@ -37,7 +37,7 @@ from numba.typed import List
 
 from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
-from .contact import contact_forces_ex, gauss_points
+from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PairList, PairRecords, PlaneFriction, Segments,
@@ -422,16 +422,9 @@ def contact_kernel_for(law):
         return contact_step, "advance_contact"
     key = type(law)
     if key not in _CUSTOM_KERNELS:
-        from . import contact as C
-
-        line, point, weight_point = law.kernels
         tag = type(law).__name__
         flags = dict(fastmath=True, error_model="numpy")
-        lh = specialise(C._line_half, f"_line_half_{tag}", {"law_line": line}, cache=False, **flags)
-        pp = specialise(C._point_part, f"_point_part_{tag}", {"law_point": point}, cache=False, inline="always",
-                        **flags)
-        cf = specialise(C.contact_forces_ex, f"contact_forces_{tag}",
-                        {"_line_half": lh, "_point_part": pp, "law_weight_point": weight_point}, cache=False, **flags)
+        cf, _ = contact_kernels_for(law)
         ro = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"contact_forces_ex": cf},
                         cache=False, **flags)
         _CUSTOM_KERNELS[key] = specialise(contact_step, f"contact_step_{tag}",

@@ -1,0 +1,56 @@
+"""Contact hooks declare the force arrays they write; a scene runs one hook."""
+
+import numpy as np
+import pytest
+from numba import njit
+
+from fiberpipe.errors import FiberpipeError
+from fiberpipe.solver import ContactHook, Damping, Material, SimulationSettings, build_model, simulate
+from fiberpipe.solver.layout import ACC_PW
+
+MAT = Material(15e9, 1380.0, 0.3)
+
+
+@njit(cache=True)
+def _lift(x, q, v, w, f, mom, acc, t, dt, data):
+    f[:, 2] += data[0][0]
+    acc[ACC_PW] += data[0][0] * np.sum(v[:, 2]) * dt  # a hook adding into f books its own work
+    return 1
+
+
+@njit(cache=True)
+def _own_array_lift(x, q, v, w, f, mom, acc, t, dt, data):
+    data[1][:, 2] += data[0][0]  # into the hook's own force array, which the step loop applies
+    return 1
+
+
+@njit(cache=True)
+def _own_forces(data):
+    return data[1]
+
+
+def _model():
+    s = np.linspace(0, 1, 6)[:, None]
+    return build_model(s * np.array([1e-3, 0, 0]), np.array([0, 6]), 0.25e-3, MAT)
+
+
+def test_a_hook_writing_its_own_array_moves_the_fiber_as_one_adding_into_f():
+    m = _model()
+    a = simulate(m, [ContactHook(_lift, (np.array([1e-4]),)), Damping(1e3)],
+                 SimulationSettings(end_time_s=1e-4, output_frames=2))
+    own = ContactHook(_own_array_lift, (np.array([1e-4]), np.zeros((m.n_nodes, 3))), forces_of=_own_forces)
+    b = simulate(m, [own, Damping(1e3)], SimulationSettings(end_time_s=1e-4, output_frames=2))
+    assert a.frames_positions[-1, 0, 2] > 0
+    np.testing.assert_allclose(b.frames_positions[-1], a.frames_positions[-1], rtol=0, atol=1e-15)
+    # the own array's work is booked by the step loop as contact work (ALLPW), as the first hook books it
+    wa, wb = a.history["energy/contact"][-1], b.history["energy/contact"][-1]
+    assert wb > 0 and wb == pytest.approx(wa, rel=0.01)
+
+
+def test_a_second_hook_is_refused():
+    m = _model()
+    one = ContactHook(_lift, (np.array([1e-4]),))
+    two = ContactHook(_lift, (np.array([1e-4]),))
+    two.name = "second"
+    with pytest.raises(FiberpipeError, match="two contact hooks"):
+        simulate(m, [one, two], SimulationSettings(end_time_s=1e-5, output_frames=2))
