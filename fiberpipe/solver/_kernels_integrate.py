@@ -185,13 +185,23 @@ def prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, f
 
 
 @njit(inline="always", **_FLAGS)
-def update_nodes(model, scene, state, work, fc, dt, record, gyro):
+def damping_factors(alpha, dt):
+    """``(c_keep, dt_c)`` of v_{n+½} = c_keep v_{n−½} + (dt_c / m) f with mass-proportional damping α:
+    c_keep = (1 − αΔt/2)/(1 + αΔt/2), dt_c = Δt/(1 + αΔt/2) (Δt without damping)."""
+    a_half = 0.5 * alpha * dt
+    c_inv = 1.0 / (1.0 + a_half)
+    return (1.0 - a_half) * c_inv, dt * c_inv if alpha > 0.0 else dt
+
+
+@njit(inline="always", **_FLAGS)
+def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
     """The central-difference update of every node (module docstring), gathering the beam
     resultants per node and adding the contact hook's force array ``fc`` (cleared here).
 
     Returns ``(ke, vd, wk_fix, pw_c, vmax2, bad)``: the kinetic energy at t_n (if ``record``),
     Σ m|v̄|² + J|Ω̄|² for the damping dissipation, the prescribed nodes' reaction work, Σ fc·v̄
-    (the hook's power), the largest |v_{n+½}|² and its node.
+    (the hook's power), the largest |v_{n+½}|² and its node. ``coef = (c_keep, dt_c)``: the damped
+    update's constant factors, v_{n+½} = c_keep v_{n−½} + (dt_c / m) f (:func:`damping_factors`).
     """
     x, q, v, w = state.x, state.q, state.v, state.w
     f, mom, eb = work.f, work.mom, work.eb
@@ -202,11 +212,7 @@ def update_nodes(model, scene, state, work, fc, dt, record, gyro):
     use_damp = alpha > 0.0
     has_fix = scene.fix_mask.shape[0] == N
     has_fc = fc.shape[0] == N
-    a_half = 0.5 * alpha * dt
-    c_inv = 1.0 / (1.0 + a_half)
-    # v_{n+½} = c_keep v_{n−½} + (Δt c_inv / m) f: the constant factors folded once per step
-    c_keep = (1.0 - a_half) * c_inv
-    dt_c = dt * c_inv if use_damp else dt
+    c_keep, dt_c = coef
     NF = node_offsets.shape[0] - 1
     ke = 0.0
     vd = 0.0
@@ -402,6 +408,8 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         if J[i, 0] != J[i, 1] or J[i, 0] != J[i, 2]:
             gyro = True
             break
+    # the constant factors of the update, folded once per call
+    coef = damping_factors(scene.alpha_per_s, dt)
     acc_before = np.zeros(ACC_SIZE)
     # the hook's own force array (a hook that declares one leaves its forces there; the update adds
     # them, books their work Δt f_n·v̄_n and clears the array); (0, 3) for hooks that add into f
@@ -433,7 +441,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
         eval_drives(scene.drives, t, dt)
         # ---- update ----
-        ke, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, record, gyro)
+        ke, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, coef, record, gyro)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
