@@ -315,7 +315,7 @@ def inspect(artifact, check):
 @click.option("--workers", type=int, help="Points run in parallel (local processes, or Dask workers).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
 def study(study_file, out, workers, scheduler):
-    """Sweep config keys; table and Pareto plot of error against wall time (SPEC section 9)."""
+    """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
     from fiberpipe.studies.sweep import run_study
 
     from fiberpipe.pipeline import ensure_output_dir
@@ -337,9 +337,9 @@ def study(study_file, out, workers, scheduler):
 @click.option("--skip", multiple=True, type=click.Choice(["solver", "contact", "pyelastica", "paper40", "imaging"]),
               help="Leave out a part (repeatable).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
-              help="Page to write (default docs/benchmarks.md of the checkout).")
+              help="Page to write (default docs/benchmarks.md of a source checkout, else ./benchmarks.md).")
 def bench(quick, skip, out):
-    """Performance benchmarks (SPEC section 10) into docs/benchmarks.md: solver element-steps/s
+    """Performance benchmarks into docs/benchmarks.md: solver element-steps/s
     (40/160/640 fibers, contact off/on), contact cost per pair, PyElastica ratio, paper-40
     time-to-solution, imaging throughput and memory. Run it on an idle machine."""
     from fiberpipe.bench import run_bench
@@ -354,7 +354,7 @@ def bench(quick, skip, out):
 @main.command()
 @click.option("--quick", is_flag=True, help="Only the fast cases.")
 def verify(quick):
-    """Run the verification cases of SPEC section 8 and print the table."""
+    """Run the verification cases (docs/verification.md) and print the table."""
     try:
         from fiberpipe.verification import __main__ as vmain
     except ImportError:

@@ -69,8 +69,8 @@ def _fibers_path(cfg: Config, run_dir: Path) -> Path:
 
 
 def _skeleton_needed(cfg: Config) -> bool:
-    """skeletonize runs unless ``skeletonize.enabled: false`` (SPEC §4: a run folder holds
-    ``skeleton.h5``); the skeleton tracer always needs it (config validation refuses false there)."""
+    """skeletonize runs unless ``skeletonize.enabled: false`` (a run folder holds
+    ``skeleton.h5``, docs/outputs.md); the skeleton tracer always needs it (config validation refuses false there)."""
     return cfg.trace.method == "skeleton" or cfg.skeletonize.enabled is not False
 
 
