@@ -362,5 +362,34 @@ def verify(quick):
     sys.exit(vmain.main(["--quick"] if quick else []))
 
 
+@main.group()
+def export():
+    """Write a config's scene in another program's input format."""
+
+
+@export.command("abaqus")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out_file", type=click.Path(dir_okay=False),
+              help="Deck to write (default: model.inp in the run folder).")
+@click.option("--run", "run_dir", type=click.Path(file_okay=False),
+              help="Run folder for the stages up to mesh (default: runs/<config name>).")
+def export_abaqus(config, out_file, run_dir):
+    """The scene of CONFIG as a complete Abaqus/Explicit input deck (docs/abaqus.md): runs the
+    stages up to mesh (cached), then writes fibers, plates, walls, contact, loading, step and
+    outputs."""
+    from fiberpipe.artifacts import read_mesh
+    from fiberpipe.io.abaqus import write_abaqus_deck
+    from fiberpipe.pipeline import run_pipeline
+
+    cfg = _load(config)
+    run_dir = Path(run_dir) if run_dir else _default_out(config)
+    run_pipeline(cfg, run_dir, to_stage="mesh", echo=_echo, progress=_progress())
+    out_file = Path(out_file) if out_file else run_dir / "model.inp"
+    figures = write_abaqus_deck(out_file, cfg, read_mesh(run_dir / "mesh.h5"))
+    fit = figures.get("contact_fit_error_full_scale")
+    _echo(f"Abaqus/Explicit deck: {out_file} (time period {figures['time_period_s']:.6g} s"
+          + ("" if fit is None else f"; contact table fit error {100 * fit:.3g} % of full scale") + ")")
+
+
 if __name__ == "__main__":
     main()

@@ -164,12 +164,12 @@ STAGES: dict[str, Stage] = {
     ),
     "mesh": Stage(
         "mesh",
-        ("mesh", "material", "fiber"),
+        ("mesh", "material", "fiber", "scene", "solver"),  # model.inp holds the whole scene
         lambda c, d: {"fibers": _fibers_path(c, d)},
         lambda c, d: [d / "mesh.h5", d / "mesh.vtu", d / "model.inp"],
         _do_mesh,
         "mesh",
-        code=("model", "polylines.py", "io", "stages/mesh.py"),
+        code=("model", "polylines.py", "io", "stages/mesh.py", "solver/laws.py"),
     ),
     "simulate": Stage(
         "simulate",

@@ -1,4 +1,5 @@
-"""Stage ``mesh``: ``fibers.h5`` -> ``mesh.h5``, ``mesh.vtu`` (ParaView) and ``model.inp`` (Abaqus)."""
+"""Stage ``mesh``: ``fibers.h5`` -> ``mesh.h5``, ``mesh.vtu`` (ParaView) and ``model.inp`` (the scene as an
+Abaqus/Explicit deck)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ from pathlib import Path
 
 from fiberpipe.artifacts import read_fibers, write_mesh
 from fiberpipe.config import Config
-from fiberpipe.io.abaqus import write_abaqus_inp
+from fiberpipe.errors import ConfigError
+from fiberpipe.io.abaqus import write_abaqus_deck, write_abaqus_inp
 from fiberpipe.io.vtk import mesh_vtu
 from fiberpipe.model.mesh import mesh_polylines, resolve_overlaps
 from fiberpipe.stages._common import input_hashes
@@ -31,14 +33,17 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
     )
     out = Path(out)
     mesh_vtu(out.with_name("mesh.vtu"), mesh)
-    write_abaqus_inp(
-        out.with_name("model.inp"),
-        mesh,
-        youngs_modulus_pa=m.youngs_modulus,
-        poisson_ratio=m.poisson_ratio_value,
-        density_kg_m3=m.density,
-        heading=f"fiberpipe {cfg.name}",
-    )
+    try:  # the whole scene as an Abaqus/Explicit deck (docs/abaqus.md)
+        write_abaqus_deck(out.with_name("model.inp"), cfg, mesh)
+    except ConfigError:  # a scene without a time period (no motion, no solver.end_time): the mesh alone
+        write_abaqus_inp(
+            out.with_name("model.inp"),
+            mesh,
+            youngs_modulus_pa=m.youngs_modulus,
+            poisson_ratio=m.poisson_ratio_value,
+            density_kg_m3=m.density,
+            heading=f"fiberpipe {cfg.name}",
+        )
     lengths = mesh.element_lengths_m()
     figures = {} if overlaps is None else {
         "initial_overlap_max_m": overlaps["max_overlap_before_m"],
