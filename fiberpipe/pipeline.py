@@ -124,8 +124,12 @@ def _do_mesh(cfg, run_dir, inputs, key):
 def _do_simulate(cfg, run_dir, inputs, key, *, resume="auto", echo=None, progress=False):
     from fiberpipe.stages.simulate import run_simulate
 
-    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume, echo=echo,
-                        progress=progress)
+    figures = run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume,
+                           echo=echo, progress=progress)
+    from fiberpipe.stages.mesh import write_deck
+
+    write_deck(cfg, inputs["mesh"], run_dir / "model.inp")  # model.inp: the scene this simulation ran
+    return figures
 
 
 def _do_post(cfg, run_dir, inputs, key):
@@ -164,12 +168,12 @@ STAGES: dict[str, Stage] = {
     ),
     "mesh": Stage(
         "mesh",
-        ("mesh", "material", "fiber", "scene", "solver"),  # model.inp holds the whole scene
+        ("mesh", "material", "fiber"),
         lambda c, d: {"fibers": _fibers_path(c, d)},
         lambda c, d: [d / "mesh.h5", d / "mesh.vtu", d / "model.inp"],
         _do_mesh,
         "mesh",
-        code=("model", "polylines.py", "io", "stages/mesh.py", "solver/laws.py"),
+        code=("model", "polylines.py", "io", "stages/mesh.py"),
     ),
     "simulate": Stage(
         "simulate",

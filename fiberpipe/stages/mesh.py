@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fiberpipe.artifacts import read_fibers, write_mesh
+from fiberpipe.artifacts import read_fibers, read_mesh, write_mesh
 from fiberpipe.config import Config
 from fiberpipe.errors import ConfigError
 from fiberpipe.io.abaqus import write_abaqus_deck, write_abaqus_inp
@@ -33,17 +33,7 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
     )
     out = Path(out)
     mesh_vtu(out.with_name("mesh.vtu"), mesh)
-    try:  # the whole scene as an Abaqus/Explicit deck (docs/abaqus.md)
-        write_abaqus_deck(out.with_name("model.inp"), cfg, mesh)
-    except ConfigError:  # a scene without a time period (no motion, no solver.end_time): the mesh alone
-        write_abaqus_inp(
-            out.with_name("model.inp"),
-            mesh,
-            youngs_modulus_pa=m.youngs_modulus,
-            poisson_ratio=m.poisson_ratio_value,
-            density_kg_m3=m.density,
-            heading=f"fiberpipe {cfg.name}",
-        )
+    write_deck(cfg, mesh, out.with_name("model.inp"))
     lengths = mesh.element_lengths_m()
     figures = {} if overlaps is None else {
         "initial_overlap_max_m": overlaps["max_overlap_before_m"],
@@ -57,3 +47,18 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
         "mean_element_length_m": float(lengths.mean()),
         "min_element_length_m": float(lengths.min()),
     }
+
+
+def write_deck(cfg: Config, mesh, path: Path) -> None:
+    """``model.inp``: the whole scene as an Abaqus/Explicit deck (docs/abaqus.md); the mesh stage
+    writes it, and the simulate stage again with the scene it ran (the mesh stage's cache does not
+    follow the scene). A scene without a time period (no motion, no ``solver.end_time``) gets the
+    mesh alone. ``mesh``: a Mesh or the path of ``mesh.h5``."""
+    if not hasattr(mesh, "nodes_m"):
+        mesh = read_mesh(mesh)
+    try:
+        write_abaqus_deck(path, cfg, mesh)
+    except ConfigError:
+        m = cfg.material
+        write_abaqus_inp(path, mesh, youngs_modulus_pa=m.youngs_modulus, poisson_ratio=m.poisson_ratio_value,
+                         density_kg_m3=m.density, heading=f"fiberpipe {cfg.name}")

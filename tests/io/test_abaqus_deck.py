@@ -244,3 +244,16 @@ def test_a_scene_without_a_time_period_is_a_one_line_error(write_yaml, tmp_path)
     mesh_only = (tmp_path / "run" / "model.inp").read_text()
     assert "*STEP" not in mesh_only and "*ELEMENT, TYPE=B31" in mesh_only
     assert math.isfinite(len(mesh_only))
+
+
+def test_simulate_rewrites_the_deck_with_the_scene_it_ran(write_yaml, tmp_path):
+    """The mesh stage's cache does not follow the scene; the simulate stage writes model.inp again."""
+    base = (REPO / "configs" / "verify" / "cantilever-small.yaml").read_text().replace("end_time: \"4 ms\"", "end_time: \"0.05 ms\"")
+    assert "0.05 ms" in base
+    out = tmp_path / "run"
+    for alpha in ("9000 1/s", "7000 1/s"):
+        cfg_path = write_yaml(base.replace('alpha: "9000 1/s"', f'alpha: "{alpha}"'), "c.yaml")
+        r = CliRunner().invoke(main, ["--quiet", "run", str(cfg_path), "--out", str(out), "--to", "simulate"])
+        assert r.exit_code == 0, r.output
+    (dmp,) = _kw(parse((out / "model.inp").read_text()), "DAMPING")
+    assert float(dmp.params["ALPHA"]) == pytest.approx(7000)
