@@ -186,7 +186,8 @@ def test_every_page_is_in_the_site_navigation():
 # -- reference text, not a lab notebook ------------------------------------------------------------
 
 NARRATION = [
-    (re.compile(r"\bSPEC\b|§"), "cites an outside document (link a page of docs/ instead)"),
+    (re.compile(r"\bSPEC\b"), "cites an outside document (link a page of docs/ instead)"),
+    (re.compile(r"\.md`?\)?,? *§"), "cites a page by section number (link its heading's anchor instead)"),
     (re.compile(r"\.\./shared|runs/energy|\bnotes/"), "cites a file that is not in the repository"),
     (re.compile(r"\bissues? ?#?\d+", re.I), "cites an issue number"),
     (re.compile(r"\b(sessions?|engineers?|reviewers?|helpers?)\b", re.I), "narrates who did the work"),
