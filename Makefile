@@ -14,11 +14,10 @@ help:
 	@echo "make setup    create .venv and install fiberpipe with its test extras"
 	@echo "make demo     run configs/quickstart.yaml on the bundled sample (runs/quickstart)"
 	@echo "make test     run the default test suite"
-	@echo "make verify   print the verification table (SPEC section 8)"
+	@echo "make verify   print the verification table (docs/verification.md)"
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
-	@echo "make fast-settings  paper-40 fast settings vs the study settings (≈ 15 min)"
-	@echo "make contact-ensemble  the study's contact models over 8 paper-40 specimens (≈ 25 min on 2 cores)"
-	@echo "make law-branch  the contact law's own effect: every law from the same state at U = 0.95 mm (≈ 40 min on 2 busy cores)"
+	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
+	@echo "make docs     build the documentation site into site/ (mkdocs-material, the docs extra)"
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,21 +41,21 @@ verify: setup
 
 bench-imaging: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
-	$(PY) benchmarks/bench_imaging.py
+	$(PY) -m fiberpipe.benchmarks.bench_imaging
 
 bench-solver: setup
-	$(PY) benchmarks/bench_solver.py
+	$(PY) -m fiberpipe.benchmarks.bench_solver
 
-.PHONY: bench-contact bench-pyelastica fast-settings contact-ensemble law-branch
+.PHONY: bench-contact bench-pyelastica fast-settings docs config-reference
 bench-contact: setup
-	$(PY) benchmarks/bench_contact.py
+	$(PY) -m fiberpipe.benchmarks.bench_contact
 
 bench-pyelastica: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
-	$(PY) benchmarks/bench_pyelastica.py
+	$(PY) -m fiberpipe.benchmarks.bench_pyelastica
 
-# every figure of SPEC section 10 in one run (solver, contact, PyElastica, paper-40, imaging)
-# into docs/benchmarks.md; ~10 min on an idle machine
+# every benchmark in one run (solver, contact, PyElastica, paper-40, imaging) into
+# docs/benchmarks.md; ~10 min on an idle machine
 bench: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(FP) bench
@@ -74,22 +73,24 @@ runs/reproduce/%: setup
 reproduce: $(REPRO_RUNS)
 	$(FP) compare $(REPRO_RUNS) --out runs/reproduce/comparison
 	$(PY) -m fiberpipe.verification three_beam_static rearrangement | tee runs/reproduce/three_beam.md
-	$(PY) benchmarks/results_doc.py --runs runs/reproduce
+	$(PY) tools/results_doc.py --runs runs/reproduce
 
 studies: setup
 	for s in configs/studies/*.yaml; do $(FP) study $$s --out runs/studies/$$(basename $$s .yaml) || exit 1; done
-	$(PY) benchmarks/accuracy_cost_doc.py --runs runs/studies --out docs/accuracy-cost.md
+	$(PY) tools/accuracy_cost_doc.py --runs runs/studies --out docs/accuracy-cost.md
 
-# paper-40's fast settings against the study settings (issue 7; ≈ 12 min on one core)
+# paper-40's fast settings against the study settings (configs/studies/paper40-fast-settings.yaml)
 fast-settings: setup
-	NUMBA_NUM_THREADS=1 $(PY) benchmarks/fast_settings.py --save runs/fast_settings --out runs/fast_settings/table.md
+	$(FP) study configs/studies/paper40-fast-settings.yaml --out runs/studies/paper40-fast-settings
 
-contact-ensemble: setup
-	NUMBA_NUM_THREADS=1 $(PY) benchmarks/contact_ensemble.py --seeds 0-7 --jobs 2 --out runs/contact_ensemble/table.md
+# the documentation site (docs/ and the generated config reference) into site/
+docs: setup config-reference
+	$(PY) -m pip install --quiet -e '.[docs]'
+	$(PY) -m mkdocs build --strict --site-dir site
 
-# the same specimens, every law continued from one state (benchmarks/law_branch.py)
-law-branch: setup
-	NUMBA_NUM_THREADS=1 $(PY) benchmarks/law_branch.py --seeds 0-7 --jobs 2
+config-reference: setup
+	( cat docs/config.head.md; echo; $(PY) -c 'from fiberpipe.config import reference_markdown; print(reference_markdown())' ) > docs/config.md.tmp
+	mv docs/config.md.tmp docs/config.md
 
 clean:
-	rm -rf runs .pytest_cache
+	rm -rf runs .pytest_cache site

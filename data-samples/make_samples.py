@@ -4,7 +4,7 @@ Run from the repository root: ``python data-samples/make_samples.py``. Determini
 14 curved quasi-parallel fibers of radius 4 voxels, a third of them in touching pairs, 150 slices
 of 64 x 64 voxels; voxel 62.5 um so fibers are 0.5 mm in diameter (the study's) and 9.4 mm long.
 Writes ``volume.tif`` (uint8, ImageJ voxel-size metadata) and ``truth.npz`` (points_m (P, 3) x y z
-in m, offsets (F+1), radius_m (F); the fibers artifact layout of SPEC section 4).
+in m, offsets (F+1), radius_m (F); the fibers artifact layout of docs/outputs.md).
 """
 
 from pathlib import Path

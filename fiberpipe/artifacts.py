@@ -1,4 +1,4 @@
-"""Versioned HDF5 artifacts (SPEC section 4).
+"""Versioned HDF5 artifacts (docs/outputs.md).
 
 Every artifact is one HDF5 file whose root attributes say what it is (``kind``,
 ``schema_version``) and where it came from (``fiberpipe_version``, ``created_utc``,
@@ -160,7 +160,7 @@ def write_artifact(
     datasets : dict
         ``{"fibers/points": array, ...}``: dataset paths (groups created as needed) to arrays.
     units : dict, optional
-        ``{"fibers/points": "m"}``. Every dataset gets a ``units`` attribute (SPEC section 4):
+        ``{"fibers/points": "m"}``. Every dataset gets a ``units`` attribute (docs/outputs.md):
         datasets without an entry, or with ``""``, are dimensionless and get
         :data:`DIMENSIONLESS` (``"1"``: counts, flags, ratios).
     attrs : dict, optional
@@ -271,7 +271,7 @@ def read_artifact(path: str | Path, kind: str | tuple[str, ...], *, names: tuple
 
 
 # ----------------------------------------------------------------------------------------------
-# Typed helpers for the artifacts whose layout SPEC section 4 fixes.
+# Typed helpers for the artifacts whose layout is fixed (docs/outputs.md).
 
 
 def write_fibers(path, polylines, **kw) -> Path:

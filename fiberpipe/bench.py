@@ -1,37 +1,37 @@
-"""``fiberpipe bench``: the performance benchmarks of SPEC section 10 in one run, written to
-``docs/benchmarks.md`` with the machine, the command and the date (between the page's
-``fiberpipe bench`` markers; the hand-written analysis around them is kept).
+"""``fiberpipe bench``: the performance benchmarks in one run, written to ``docs/benchmarks.md``
+(between the page's ``fiberpipe bench`` markers; the text around them is kept) with the machine,
+the command and the date.
 
 Parts (each can be skipped with ``--skip``):
 
 * ``solver``  — element-steps per second, 40/160/640 fibers of 50 elements, contact off and on
-  (``benchmarks/bench_solver.py``);
+  (:mod:`fiberpipe.benchmarks.bench_solver`);
 * ``contact`` — ns per candidate pair of the contact pass, loose and squeezed bundles, per law
-  (``benchmarks/bench_contact.py``);
+  (:mod:`fiberpipe.benchmarks.bench_contact`);
 * ``pyelastica`` — the same 40-rod bundle with contact in PyElastica and in fiberpipe, same steps,
-  as a ratio (``benchmarks/bench_pyelastica.py``; needs the ``bench`` extra);
+  as a ratio (:mod:`fiberpipe.benchmarks.bench_pyelastica`; needs the ``bench`` extra);
 * ``paper40`` — time-to-solution of ``configs/paper-40.yaml`` at the study's settings (and the fast
-  settings of ``--fast-overrides``): wall time, U reached, final load;
+  settings of ``FAST_OVERRIDES``): wall time, U reached, final load;
 * ``imaging`` — the imaging stages' wall time and peak memory on a 200×400×1000 volume
-  (``benchmarks/bench_imaging.py``, part b; ``--quick``: a quarter of the length).
+  (:mod:`fiberpipe.benchmarks.bench_imaging`, part b; ``--quick``: a quarter of the length).
 
-The benchmark scripts live in the repository's ``benchmarks/`` folder (a source checkout).
-Measure on an idle machine: the load average is recorded with every part.
+Everything it runs is in the package: outside a source checkout the paper-40 scene is the copy in
+``fiberpipe/benchmarks/data/`` and the page defaults to ``./benchmarks.md``. Measure on an idle
+machine: the load average is recorded with every part.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import importlib.util
 import os
 import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BENCH_DIR = ROOT / "benchmarks"
+CHECKOUT = (ROOT / "pyproject.toml").exists() and (ROOT / "configs" / "paper-40.yaml").exists()
+PACKAGED_PAPER40 = Path(__file__).resolve().parent / "benchmarks" / "data" / "paper-40.yaml"
 BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
 PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging")
@@ -42,15 +42,18 @@ FAST_WINDOW_M = 0.23e-3  # window of the curve comparison (one run of the study 
 
 
 def _load(name: str):
-    path = BENCH_DIR / f"{name}.py"
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found: fiberpipe bench needs a source checkout with benchmarks/")
-    if str(BENCH_DIR) not in sys.path:
-        sys.path.insert(0, str(BENCH_DIR))
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    import importlib
+    return importlib.import_module(f"fiberpipe.benchmarks.{name}")
+
+
+def default_paper40_config() -> Path:
+    """``configs/paper-40.yaml`` of a source checkout, else the copy shipped with the package."""
+    return ROOT / "configs" / "paper-40.yaml" if CHECKOUT else PACKAGED_PAPER40
+
+
+def default_page() -> Path:
+    """``docs/benchmarks.md`` of a source checkout, else ``benchmarks.md`` in the working folder."""
+    return ROOT / "docs" / "benchmarks.md" if CHECKOUT else Path("benchmarks.md")
 
 
 def machine() -> str:
@@ -87,7 +90,7 @@ def paper40_run(overrides: dict | None = None, config: Path | None = None) -> di
     from fiberpipe.solver.build import build_simulation
     from fiberpipe.solver import simulate
 
-    config = config or ROOT / "configs" / "paper-40.yaml"
+    config = config or default_paper40_config()
     cfg = load_config(config, overrides or {})
     model, effects, settings = build_simulation(config_mesh(cfg), cfg)
     first: list = []  # (wall, steps) at the end of the first jitted chunk (it includes compile / cache load)
@@ -148,7 +151,7 @@ def curve_error_binned(ref: dict, other: dict, window_m: float = 0.05e-3) -> flo
     The pointwise error of two paper-40 runs is dominated by the timing of contact bursts (fibers
     snapping past each other), which any change of rounding moves: on the settled specimen the same
     settings with gravity perturbed by ±1e-8 differ by 25–29 % pointwise, by up to 8.9 % in 0.05 mm
-    window means and 4.4 % in 0.23 mm ones (benchmarks/fast_settings.py, docs/benchmarks.md).
+    window means and 4.4 % in 0.23 mm ones (docs/benchmarks.md, "Fast settings").
     """
     import numpy as np
     u_ref, f_ref = ref["U_curve"], ref["F_curve"]
@@ -169,7 +172,7 @@ def curve_error_binned(ref: dict, other: dict, window_m: float = 0.05e-3) -> flo
 
 def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: int | None = None,
               echo=print) -> str:
-    out = Path(out) if out else ROOT / "docs" / "benchmarks.md"
+    out = Path(out) if out else default_page()
     started = _dt.datetime.now(_dt.timezone.utc)
     cmd = "fiberpipe bench" + (" --quick" if quick else "") + "".join(f" --skip {s}" for s in skip)
     sec: list[str] = []
@@ -182,7 +185,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
         rows = [bs.measure(f, n, 3, c) for c in (False, True) for f in (40, 160, 640)]
         loads["solver"] = load()
         sec += ["## Solver throughput", "",
-                f"`benchmarks/bench_solver.py` (one thread, best of 3 calls of {n} steps; {loads['solver']}). "
+                f"`python -m fiberpipe.benchmarks.bench_solver` (one thread, best of 3 calls of {n} steps; {loads['solver']}). "
                 "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r, clamps, damping, "
                 "gravity; contact = hertz_oriented with friction.", ""] + bs.table(rows) + [""]
     if "contact" not in skip:
@@ -191,7 +194,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
         rows = bc.main(["--repeats", "20" if quick else "100"])
         loads["contact"] = load()
         sec += ["## Contact pass", "",
-                f"`benchmarks/bench_contact.py` (40 fibers × 50 elements, hex bundle, 2 Gauss points; {loads['contact']}).", "",
+                f"`python -m fiberpipe.benchmarks.bench_contact` (40 fibers × 50 elements, hex bundle, 2 Gauss points; {loads['contact']}).", "",
                 *bc.table_lines(rows)]
         sec.append("")
     if "pyelastica" not in skip:
@@ -205,7 +208,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
             loads["pyelastica"] = load()
             fp, pe = r["fiberpipe"], r["pyelastica"]
             sec += ["## Against PyElastica (same 40-rod bundle, contact on, same steps)", "",
-                    f"`benchmarks/bench_pyelastica.py` ({loads['pyelastica']}).", "",
+                    f"`python -m fiberpipe.benchmarks.bench_pyelastica` ({loads['pyelastica']}).", "",
                     "| code | elements | steps | dt (s) | wall (s) | k element-steps/s |", "|---|---|---|---|---|---|"]
             for d in (fp, pe):
                 sec.append(f"| {d['code']} | {d['elements']} | {d['steps']} | {d['dt']:.3g} | {d['seconds']:.3f} | "
@@ -247,7 +250,7 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
             head, tab, acc = bi.perf_part(shape, 12.0, [], Path(td))
         loads["imaging"] = load()
         sec += [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
-                f"`benchmarks/bench_imaging.py` part (b) ({loads['imaging']}). {head}", "", tab, "", acc, ""]
+                f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({loads['imaging']}). {head}", "", tab, "", acc, ""]
     text = "\n".join([
         BEGIN, "", "## Latest `fiberpipe bench` run", "",
         f"- date: {started.strftime('%Y-%m-%d %H:%M UTC')}",

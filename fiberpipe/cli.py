@@ -315,7 +315,7 @@ def inspect(artifact, check):
 @click.option("--workers", type=int, help="Points run in parallel (local processes, or Dask workers).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
 def study(study_file, out, workers, scheduler):
-    """Sweep config keys; table and Pareto plot of error against wall time (SPEC section 9)."""
+    """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
     from fiberpipe.studies.sweep import run_study
 
     from fiberpipe.pipeline import ensure_output_dir
@@ -337,9 +337,9 @@ def study(study_file, out, workers, scheduler):
 @click.option("--skip", multiple=True, type=click.Choice(["solver", "contact", "pyelastica", "paper40", "imaging"]),
               help="Leave out a part (repeatable).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
-              help="Page to write (default docs/benchmarks.md of the checkout).")
+              help="Page to write (default docs/benchmarks.md of a source checkout, else ./benchmarks.md).")
 def bench(quick, skip, out):
-    """Performance benchmarks (SPEC section 10) into docs/benchmarks.md: solver element-steps/s
+    """Performance benchmarks into docs/benchmarks.md: solver element-steps/s
     (40/160/640 fibers, contact off/on), contact cost per pair, PyElastica ratio, paper-40
     time-to-solution, imaging throughput and memory. Run it on an idle machine."""
     from fiberpipe.bench import run_bench
@@ -354,12 +354,41 @@ def bench(quick, skip, out):
 @main.command()
 @click.option("--quick", is_flag=True, help="Only the fast cases.")
 def verify(quick):
-    """Run the verification cases of SPEC section 8 and print the table."""
+    """Run the verification cases (docs/verification.md) and print the table."""
     try:
         from fiberpipe.verification import __main__ as vmain
     except ImportError:
         raise FiberpipeError("verification cases are not available in this version yet") from None
     sys.exit(vmain.main(["--quick"] if quick else []))
+
+
+@main.group()
+def export():
+    """Write a config's scene in another program's input format."""
+
+
+@export.command("abaqus")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out_file", type=click.Path(dir_okay=False),
+              help="Deck to write (default: model.inp in the run folder).")
+@click.option("--run", "run_dir", type=click.Path(file_okay=False),
+              help="Run folder for the stages up to mesh (default: runs/<config name>).")
+def export_abaqus(config, out_file, run_dir):
+    """The scene of CONFIG as a complete Abaqus/Explicit input deck (docs/abaqus.md): runs the
+    stages up to mesh (cached), then writes fibers, plates, walls, contact, loading, step and
+    outputs."""
+    from fiberpipe.artifacts import read_mesh
+    from fiberpipe.io.abaqus import write_abaqus_deck
+    from fiberpipe.pipeline import run_pipeline
+
+    cfg = _load(config)
+    run_dir = Path(run_dir) if run_dir else _default_out(config)
+    run_pipeline(cfg, run_dir, to_stage="mesh", echo=_echo, progress=_progress())
+    out_file = Path(out_file) if out_file else run_dir / "model.inp"
+    figures = write_abaqus_deck(out_file, cfg, read_mesh(run_dir / "mesh.h5"))
+    fit = figures.get("contact_fit_error_full_scale")
+    _echo(f"Abaqus/Explicit deck: {out_file} (time period {figures['time_period_s']:.6g} s"
+          + ("" if fit is None else f"; contact table fit error {100 * fit:.3g} % of full scale") + ")")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""YAML configs: loading, ``extends:``, unit conversion and validation (SPEC section 3).
+"""YAML configs: loading, ``extends:``, unit conversion and validation (docs/config.md).
 
 # Strategy: read the YAML (and, recursively, the file it ``extends:``), resolve relative paths
 # against the folder of the file that names them, deep-merge the variant over its base, then
@@ -177,7 +177,7 @@ class SegmentConfig(Section):
 
 class SkeletonizeConfig(Section):
     enabled: Optional[bool] = Field(
-        None, description="compute the skeleton (skeleton.h5, SPEC §4); default: yes; false skips it when "
+        None, description="compute the skeleton (skeleton.h5); default: yes; false skips it when "
         "trace.method is slices, which does not read it"
     )
 
@@ -248,7 +248,7 @@ class FiberConfig(Section):
 
 
 # ----------------------------------------------------------------------------------------------
-# scene (SPEC section 3.1)
+# scene
 
 EFFECTS = ("gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives", "constraints")
 Effect = Literal["gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives",
@@ -534,7 +534,7 @@ class PostConfig(Section):
 
 
 class Config(Section):
-    """A whole fiberpipe config (SPEC section 3). All quantities are SI floats."""
+    """A whole fiberpipe config (docs/config.md). All quantities are SI floats."""
 
     name: str = "run"
     input: InputConfig

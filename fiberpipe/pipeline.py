@@ -69,8 +69,8 @@ def _fibers_path(cfg: Config, run_dir: Path) -> Path:
 
 
 def _skeleton_needed(cfg: Config) -> bool:
-    """skeletonize runs unless ``skeletonize.enabled: false`` (SPEC §4: a run folder holds
-    ``skeleton.h5``); the skeleton tracer always needs it (config validation refuses false there)."""
+    """skeletonize runs unless ``skeletonize.enabled: false`` (a run folder holds
+    ``skeleton.h5``, docs/outputs.md); the skeleton tracer always needs it (config validation refuses false there)."""
     return cfg.trace.method == "skeleton" or cfg.skeletonize.enabled is not False
 
 
@@ -124,8 +124,12 @@ def _do_mesh(cfg, run_dir, inputs, key):
 def _do_simulate(cfg, run_dir, inputs, key, *, resume="auto", echo=None, progress=False):
     from fiberpipe.stages.simulate import run_simulate
 
-    return run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume, echo=echo,
-                        progress=progress)
+    figures = run_simulate(cfg, inputs["mesh"], run_dir / "simulation.h5", config_sha256=key, resume=resume,
+                           echo=echo, progress=progress)
+    from fiberpipe.stages.mesh import write_deck
+
+    write_deck(cfg, inputs["mesh"], run_dir / "model.inp")  # model.inp: the scene this simulation ran
+    return figures
 
 
 def _do_post(cfg, run_dir, inputs, key):

@@ -1,6 +1,6 @@
 """Fiber mid-lines as one flat block of points with CSR-style offsets.
 
-This is the in-memory form of the ``fibers`` artifact (SPEC section 4): fiber ``i`` is
+This is the in-memory form of the ``fibers`` artifact (docs/outputs.md): fiber ``i`` is
 ``points_m[offsets[i]:offsets[i + 1]]``, ordered along the fiber. Coordinates are x y z in metres,
 where z is the volume's first (slice) axis scaled by its voxel size, y the second and x the third.
 """

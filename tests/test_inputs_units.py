@@ -1,4 +1,4 @@
-"""Every artifact of a tiny end-to-end run: each dataset has a ``units`` attribute (SPEC section 4,
+"""Every artifact of a tiny end-to-end run: each dataset has a ``units`` attribute (
 docs/outputs.md) and each file the mode a plain open() gives (0666 & ~umask)."""
 
 import os

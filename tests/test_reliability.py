@@ -1,4 +1,4 @@
-"""Reliability (issue 8): checkpoint/resume through a real Ctrl-C, divergence diagnoses that keep the
+"""Reliability: checkpoint/resume through a real Ctrl-C, divergence diagnoses that keep the
 last good frames and checkpoint, bad scene/solver input and bad checkpoints through the CLI (one
 line, non-zero exit, no traceback, earlier results unchanged). docs/reliability.md lists them all."""
 

@@ -35,5 +35,5 @@ def test_settling_then_loading(tmp_path, write_yaml):
     post = json.loads((out / "post" / "summary.json").read_text())
     # the loaded run's accounts start at the settled state (were they not reset, the residual would
     # be O(1)); the bounce of the falling fiber makes the value itself chaotic: 0.0025–0.013 for
-    # gravity perturbed by 1e-8 (measured 2026-11-22), hence the bound
+    # gravity perturbed by 1e-8 (measured), hence the bound
     assert post["energy_balance_residual_max"] < 3e-2

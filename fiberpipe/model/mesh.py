@@ -1,4 +1,4 @@
-"""Mesh fiber mid-lines into 2-node beam elements (SPEC section 6).
+"""Mesh fiber mid-lines into 2-node beam elements.
 
 All fibers share one flat node array; fiber ``i`` owns ``nodes_m[node_offsets[i]:node_offsets[i+1]]``
 and its elements join consecutive nodes, so element connectivity is implicit in the offsets.

@@ -1,7 +1,7 @@
 """Close the loop: render a simulated frame as a CT volume, trace it again, measure the error.
 
 This checks the imaging half against the mechanics half: the mid-lines the tracer recovers from a
-rendered frame must lie within a voxel of the simulated ones (issue 5).
+rendered frame must lie within a voxel of the simulated ones.
 """
 
 from __future__ import annotations

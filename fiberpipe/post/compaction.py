@@ -1,4 +1,4 @@
-"""Compaction laws fitted to the simulated curve (SPEC section 8, case 9; reported, not tested).
+"""Compaction laws fitted to the simulated curve (verification case 9 of docs/verification.md; reported, not tested).
 
 van Wyk (J. Textile Inst. 37:T285, 1946) and Toll (Polym. Eng. Sci. 38:1337, 1998):
 P = k E (v_f^n − v_f0^n), n = 3 for random bending-dominated assemblies; Gutowski et al.

@@ -50,7 +50,7 @@ def contact_energy_created(energy: dict[str, np.ndarray]) -> np.ndarray:
     ``W_n`` is minus the energy stored in the penalties (≥ 0): so ``max(0, W_n)`` bounds the created
     energy from below, tight up to that stored energy. A history without ``friction_work`` (written
     before it existed) gives ``max(0, ALLPW − ALLFD)``, which also subtracts the friction's loss and
-    its springs' energy: a weaker bound. docs/contact.md §11 has what creates energy.
+    its springs' energy: a weaker bound. docs/contact.md has what creates energy.
     """
     z = np.zeros_like(next(iter(energy.values())), dtype=float)
     pw = np.asarray(energy.get("contact", z), dtype=float)

@@ -226,7 +226,7 @@ def _created(s: dict) -> str:
         return "n/a"
     text = f"{_fmt(c, 'J')} ({_fmt(r)})"
     if r is not None and np.isfinite(r) and r > CREATED_WARN_FRACTION:
-        text += " **above 5 % of ALLWK: the contact created energy, see docs/contact.md §11**"
+        text += " **above 5 % of ALLWK: the contact created energy, see docs/contact.md**"
     return text
 
 

@@ -1,12 +1,14 @@
-"""Stage ``mesh``: ``fibers.h5`` -> ``mesh.h5``, ``mesh.vtu`` (ParaView) and ``model.inp`` (Abaqus)."""
+"""Stage ``mesh``: ``fibers.h5`` -> ``mesh.h5``, ``mesh.vtu`` (ParaView) and ``model.inp`` (the scene as an
+Abaqus/Explicit deck)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from fiberpipe.artifacts import read_fibers, write_mesh
+from fiberpipe.artifacts import read_fibers, read_mesh, write_mesh
 from fiberpipe.config import Config
-from fiberpipe.io.abaqus import write_abaqus_inp
+from fiberpipe.errors import ConfigError
+from fiberpipe.io.abaqus import write_abaqus_deck, write_abaqus_inp
 from fiberpipe.io.vtk import mesh_vtu
 from fiberpipe.model.mesh import mesh_polylines, resolve_overlaps
 from fiberpipe.stages._common import input_hashes
@@ -31,14 +33,7 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
     )
     out = Path(out)
     mesh_vtu(out.with_name("mesh.vtu"), mesh)
-    write_abaqus_inp(
-        out.with_name("model.inp"),
-        mesh,
-        youngs_modulus_pa=m.youngs_modulus,
-        poisson_ratio=m.poisson_ratio_value,
-        density_kg_m3=m.density,
-        heading=f"fiberpipe {cfg.name}",
-    )
+    write_deck(cfg, mesh, out.with_name("model.inp"))
     lengths = mesh.element_lengths_m()
     figures = {} if overlaps is None else {
         "initial_overlap_max_m": overlaps["max_overlap_before_m"],
@@ -52,3 +47,18 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
         "mean_element_length_m": float(lengths.mean()),
         "min_element_length_m": float(lengths.min()),
     }
+
+
+def write_deck(cfg: Config, mesh, path: Path) -> None:
+    """``model.inp``: the whole scene as an Abaqus/Explicit deck (docs/abaqus.md); the mesh stage
+    writes it, and the simulate stage again with the scene it ran (the mesh stage's cache does not
+    follow the scene). A scene without a time period (no motion, no ``solver.end_time``) gets the
+    mesh alone. ``mesh``: a Mesh or the path of ``mesh.h5``."""
+    if not hasattr(mesh, "nodes_m"):
+        mesh = read_mesh(mesh)
+    try:
+        write_abaqus_deck(path, cfg, mesh)
+    except ConfigError:
+        m = cfg.material
+        write_abaqus_inp(path, mesh, youngs_modulus_pa=m.youngs_modulus, poisson_ratio=m.poisson_ratio_value,
+                         density_kg_m3=m.density, heading=f"fiberpipe {cfg.name}")

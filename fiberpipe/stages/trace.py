@@ -54,7 +54,7 @@ def run_trace(
 
 
 def trace_accuracy_report(fibers_path: Path, truth_path: Path, voxel_size_m: float, out_json: Path | None = None) -> dict:
-    """Compare traced fibers with ground truth (SPEC section 5 metrics); optionally save as JSON."""
+    """Compare traced fibers with ground truth (the metrics of docs/imaging.md); optionally save as JSON."""
     from fiberpipe.imaging.accuracy import trace_accuracy
 
     acc = trace_accuracy(read_fibers(fibers_path), read_fibers(truth_path), voxel_size_m=voxel_size_m)

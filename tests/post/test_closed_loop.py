@@ -1,4 +1,4 @@
-"""Simulated (here: bent) fibers rendered as CT, traced again: error below one voxel (issue 5)."""
+"""Simulated (here: bent) fibers rendered as CT, traced again: error below one voxel."""
 
 import numpy as np
 

@@ -43,6 +43,13 @@ def _created_over_work(mesh_path, blend_length):
 
 
 @pytest.mark.slow
-def test_point_law_on_long_crossings_creates_energy_and_blend_length_stops_it(quickstart_mesh):
-    assert _created_over_work(quickstart_mesh, None) > 5.0  # measured ≈ 41
+@pytest.mark.xfail(strict=True, reason="known defect: with the default blend_length (1 mm) the point law on "
+                   "long crossings creates ≈ 40× the plate work (measured 0.195 J against 0.0047 J; docs/contact.md)")
+def test_default_hertz_oriented_creates_no_energy_on_long_crossings(quickstart_mesh):
+    """A conservative contact creates no energy: the bound stays below 1 % of the external work."""
+    assert _created_over_work(quickstart_mesh, None) < 1e-2
+
+
+@pytest.mark.slow
+def test_blend_length_of_half_an_element_creates_no_energy(quickstart_mesh):
     assert _created_over_work(quickstart_mesh, "0.15 mm") < 1e-2  # measured 0 (ALLPW − ALLFD < 0)

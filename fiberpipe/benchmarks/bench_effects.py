@@ -9,7 +9,7 @@ time per element-step of
 - the beam-only loop plus one effect at a time (gravity, damping, clamps, loads, plates, walls,
   drives, contact, contact + friction), the difference being that effect's cost per step.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_effects.py [--steps 3000]
+    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_effects [--steps 3000]
 
 Writes docs/bench/effects.md.
 """
@@ -26,8 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_solver import bundle  # noqa: E402
+from fiberpipe.benchmarks.bench_solver import bundle  # noqa: E402
 
 from fiberpipe.solver import (  # noqa: E402
     Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates, State, Walls,
@@ -74,7 +73,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--fibers", type=int, default=40)
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs/bench/effects.md"))
+    ap.add_argument("--out", default="docs/bench/effects.md")
     a = ap.parse_args(argv)
     m = bundle(a.fibers)
     E = m.n_elements
@@ -108,10 +107,10 @@ def main(argv=None):
     load = os.getloadavg()[0]
     ns = lambda t: 1e9 * t / E  # noqa: E731
     lines = [
-        "# What each effect costs (SPEC section 7: what a scene leaves out costs nothing)",
+        "# What each effect costs (what a scene leaves out costs nothing)",
         "",
         f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}; machine: {cpu}, 1 thread, load average {load:.2f}",
-        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_effects.py --steps {a.steps}`",
+        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_effects --steps {a.steps}`",
         f"- scene: {nf} fibers × 50 elements ({E} elements, 0.3 mm, r = 0.25 mm, wavy, not touching), stable dt × 0.9 = {dt:.3g} s;"
         f" best of {repeats} timed calls of {a.steps} steps, scenes timed in turn",
         "",

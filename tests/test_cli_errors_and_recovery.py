@@ -1,5 +1,6 @@
-"""Defects of the command-line layer found in review: each is a one-line error (or the right
-behaviour) through the CLI, never a traceback or a misleading message."""
+"""The command-line layer on bad options, damaged outputs, unwritable folders and interruptions:
+each is a one-line error (or the right behaviour) through the CLI, never a traceback or a
+misleading message."""
 
 import json
 import shutil
@@ -310,7 +311,7 @@ def test_missing_stage_output_names_the_stage_to_run(tmp_path):
     assert f"run `fiberpipe run {cfg} --out {out} --to input` first" in line, line
 
 
-# -- 10. skeletonize runs unless skeletonize.enabled: false (SPEC §4's run folder has skeleton.h5) --
+# -- 10. skeletonize runs unless skeletonize.enabled: false (a run folder has skeleton.h5) --------
 
 
 @pytest.mark.parametrize("extra, runs_skeleton", [

@@ -7,7 +7,7 @@ clamped at one end, damping α = 1e5 1/s, gravity across the fibers; with contac
 ``hertz_oriented`` hook with friction (μ = 0.2). Stable dt × 0.9; best of ``--repeats`` timed calls of
 ``Integrator.advance`` after a warm-up. Writes a markdown table to docs/bench/solver.md.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_solver.py [--steps 1000]
+    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_solver [--steps 1000]
 """
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--fibers", type=int, nargs="*", default=[40, 160, 640])
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs/bench/solver.md"))
+    ap.add_argument("--out", default="docs/bench/solver.md")
     a = ap.parse_args(argv)
     import numba
 
@@ -106,7 +106,7 @@ def main(argv=None):
         f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
         f"- machine: {cpu}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at the end, "
         f"Python {platform.python_version()}, numba {numba.__version__}",
-        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_solver.py --steps {a.steps}`",
+        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_solver --steps {a.steps}`",
         "- scene: see the module docstring; one thread; best of "
         f"{a.repeats} timed calls of `Integrator.advance`.",
         "",

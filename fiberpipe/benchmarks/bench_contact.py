@@ -4,7 +4,7 @@
 angles are small but not zero), centre spacing ``2r + gap``. Times :func:`contact_forces` (normal
 forces only) and the friction pass on the Verlet list the hook would use (skin 0.2 r).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_contact.py [--repeats 200]
+    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_contact [--repeats 200]
 """
 
 from __future__ import annotations
@@ -109,11 +109,9 @@ def main(argv=None):
                  f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
                  f"- machine: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, load average "
                  f"{os.getloadavg()[0]:.2f} at the end",
-                 f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_contact.py --repeats {a.repeats} --out {a.out}`",
+                 f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_contact --repeats {a.repeats} --out {a.out}`",
                  "- scene: see the script's docstring (hex bundle, 40 × 50 elements, 2 Gauss points, skin 0.2 r)", "",
                  ] + table_lines(rows)
-        lines += ["", "Before issue 7 (same script, same machine): hertz_oriented squeezed 714 ns per pair in contact "
-                  "(Lambert W by Halley iterations), linear 361 ns, scaled_stiffness 466 ns; reject path 16 ns per pair. The reject path measures 15–26 ns per pair across runs on this shared machine: the scalar rewrite of issue 7 brought no measurable gain there; the gain is the tabulated line law."]
         from pathlib import Path
         Path(a.out).write_text("\n".join(lines) + "\n")
     return rows

@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    python benchmarks/bench_imaging.py [--quick] [--out docs/bench/imaging.md]
+    python -m fiberpipe.benchmarks.bench_imaging [--quick] [--out docs/bench/imaging.md]
 
 (a) Accuracy over several seeds on phantoms of 40 curved quasi-parallel fibers (radius 5 voxels,
     a third in pairs touching along their whole length, PSF blur 1 voxel, contrast-to-noise 4 and
@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the folder holding the fiberpipe package
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
@@ -202,7 +202,7 @@ def perf_part(shape, radius, report, tmp: Path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer seeds, shorter phantoms, 1/4-length big volume")
-    ap.add_argument("--out", default=str(ROOT / "docs" / "bench" / "imaging.md"))
+    ap.add_argument("--out", default="docs/bench/imaging.md")
     ap.add_argument("--no-perf", action="store_true", help="skip part (b)")
     args = ap.parse_args(argv)
     seeds = [0, 1] if args.quick else [0, 1, 2, 3]
@@ -216,7 +216,7 @@ def main(argv=None):
         print("(b) throughput", flush=True)
         with tempfile.TemporaryDirectory() as tmp:
             perf = perf_part(shape, 12.0, report, Path(tmp))
-    cmd = "python benchmarks/bench_imaging.py" + (" --quick" if args.quick else "")
+    cmd = "python -m fiberpipe.benchmarks.bench_imaging" + (" --quick" if args.quick else "")
     md = [f"# Imaging benchmark\n",
           f"- date: {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}",
           f"- machine: {machine()}",
@@ -232,7 +232,7 @@ def main(argv=None):
         head, stages, acc = perf
         md += ["## (b) Throughput and memory, 200 x 400 x 1000 voxels\n", head, "",
                "Each path runs in a fresh subprocess; peak RSS is `ru_maxrss` of that process "
-               "after each stage. Target (SPEC section 10): < 60 s and < 4 GB.\n", stages, "",
+               "after each stage. Target: < 60 s and < 4 GB.\n", stages, "",
                "Accuracy of the slices tracer on this volume:\n", acc, ""]
     md += report
     text = "\n".join(md) + "\n"

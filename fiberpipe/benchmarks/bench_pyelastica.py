@@ -1,4 +1,4 @@
-"""fiberpipe against PyElastica on the same rod bundle with rod–rod contact (SPEC section 10).
+"""fiberpipe against PyElastica on the same rod bundle with rod–rod contact.
 
 40 straight rods of 50 elements (L = 15 mm, r = 0.25 mm, E = 15 GPa, ν = 0.3, ρ = 1380 kg/m³) on a
 square grid of pitch 2.2 r (gap 0.2 r, inside fiberpipe's Verlet skin, so every neighbouring
@@ -10,7 +10,7 @@ PyElastica: ``CosseratRod.straight_rod`` + ``OneEndFixedBC`` + ``GravityForces``
 damping, contact (hertz_oriented) and friction, one thread. Timing: best of ``--repeats`` runs of
 ``--steps`` steps after a warm-up (compilation excluded on both sides).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_pyelastica.py [--steps 100]
+    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_pyelastica [--steps 100]
 
 PyElastica is an optional benchmark dependency (``pip install -e '.[bench]'``), not a runtime one.
 """
@@ -117,7 +117,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs/bench/pyelastica.md"))
+    ap.add_argument("--out", default="docs/bench/pyelastica.md")
     a = ap.parse_args(argv)
     r = measure(a.steps, a.repeats)
     import elastica  # noqa: F401
@@ -126,7 +126,7 @@ def main(argv=None):
              f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
              f"- machine: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, load average "
              f"{os.getloadavg()[0]:.2f} at the end; PyElastica {version('pyelastica')}",
-             f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_pyelastica.py --steps {a.steps}`",
+             f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_pyelastica --steps {a.steps}`",
              "- scene and timing: see the script's docstring", "",
              "| code | elements | steps | dt (s) | wall (s) | k element-steps/s |", "|---|---|---|---|---|---|"]
     for k in ("fiberpipe", "pyelastica"):

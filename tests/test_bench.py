@@ -1,0 +1,57 @@
+"""``fiberpipe bench`` needs nothing from the source checkout: its benchmarks are modules of the
+package and the paper-40 scene ships with it (a copy that must equal configs/paper-40.yaml)."""
+
+import importlib
+from pathlib import Path
+
+import yaml
+
+import fiberpipe.bench as bench
+from fiberpipe.config import load_config
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "fiberpipe" / "benchmarks" / "data"
+
+
+def test_every_part_is_a_package_module():
+    for name in ("bench_solver", "bench_contact", "bench_pyelastica", "bench_imaging", "bench_effects"):
+        mod = bench._load(name)
+        assert mod.__name__ == f"fiberpipe.benchmarks.{name}"
+        assert Path(mod.__file__).resolve().parent == DATA.parent
+
+
+def test_packaged_paper40_scene_equals_the_shipped_one():
+    ours = yaml.safe_load((DATA / "paper-40.yaml").read_text())
+    shipped = yaml.safe_load((ROOT / "configs" / "paper-40.yaml").read_text())
+    for cfg in (ours, shipped):
+        cfg["input"].pop("fibers")
+        cfg["post"].pop("reference_fibers")
+    assert ours == shipped, "fiberpipe/benchmarks/data/paper-40.yaml differs from configs/paper-40.yaml"
+    assert (DATA / "paper-40-fibers.h5").read_bytes() == (ROOT / "data-samples" / "paper-40" / "fibers.h5").read_bytes(), \
+        "fiberpipe/benchmarks/data/paper-40-fibers.h5 differs from data-samples/paper-40/fibers.h5"
+
+
+def test_outside_a_checkout_bench_uses_the_packaged_scene_and_the_working_folder(monkeypatch, tmp_path):
+    monkeypatch.setattr(bench, "CHECKOUT", False)
+    monkeypatch.chdir(tmp_path)
+    assert bench.default_page() == Path("benchmarks.md")
+    cfg_path = bench.default_paper40_config()
+    assert cfg_path == DATA / "paper-40.yaml"
+    cfg = load_config(cfg_path)
+    assert Path(cfg.input.fibers).exists()
+    mesh = bench.config_mesh(cfg)
+    assert mesh.n_fibers == 40
+
+
+def test_a_part_runs_outside_the_checkout(monkeypatch, tmp_path):
+    """The page is written in the working folder, between the markers, with nothing but the package."""
+    monkeypatch.setattr(bench, "CHECKOUT", False)
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    fake = importlib.import_module("fiberpipe.benchmarks.bench_contact")
+    monkeypatch.setattr(fake, "main", lambda argv: calls.append(argv) or [])
+    monkeypatch.setattr(fake, "table_lines", lambda rows: ["| gap | law |", "|---|---|"])
+    bench.run_bench(skip=("solver", "pyelastica", "paper40", "imaging"), echo=lambda *_: None)
+    text = (tmp_path / "benchmarks.md").read_text()
+    assert bench.BEGIN in text and bench.END in text and "### Contact pass" in text
+    assert calls == [["--repeats", "100"]]

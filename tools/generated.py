@@ -1,0 +1,23 @@
+"""Replace the generated section of a docs page, between its begin and end markers.
+
+The text around the markers is the page's own (hand-written) prose; only the section between them
+comes from data."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def replace_section(page: Path, begin: str, end: str, text: str) -> None:
+    """Write ``text`` between the lines starting with ``begin`` and ``end`` in ``page`` (atomic)."""
+    old = page.read_text()
+    lines = old.splitlines(keepends=True)
+    try:
+        i = next(k for k, ln in enumerate(lines) if ln.startswith(begin))
+        j = next(k for k, ln in enumerate(lines) if k > i and ln.startswith(end))
+    except StopIteration:
+        raise SystemExit(f"{page}: markers '{begin}' … '{end}' not found") from None
+    new = "".join(lines[: i + 1]) + "\n" + text.strip("\n") + "\n\n" + "".join(lines[j:])
+    tmp = page.with_suffix(page.suffix + ".tmp")
+    tmp.write_text(new)
+    tmp.replace(page)
