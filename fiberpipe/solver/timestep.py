@@ -14,7 +14,7 @@ mass ρAL/2 and the isotropic lumped rotary inertia s·ρJ_pL/2 per node (J_p = 
              ω² = 4 k_s G/ρ · (1/L² + A/(4 J_p s)) = 4 k_s G/ρ · (1/L² + 1/(2 s r²))
 
 With the study's 0.3 mm polyester elements and s = 1 the axial mode governs,
-Δt = 9.1e-8 s (the table in notes/physics.md A3: full 12×12 Timoshenko eigenvalues).
+Δt = 9.1e-8 s (full 12×12 Timoshenko eigenvalues, docs/solver.md).
 Stiffness-proportional damping β adds ξ = β ω/2 in every mode.
 """
 

@@ -1,6 +1,6 @@
 """Stage ``simulate``: ``mesh.h5`` + scene -> ``simulation.h5``, ``frames/*.vtu``, ``simulation.pvd``.
 
-Layout of ``simulation.h5`` (SPEC section 4): ``/frames/time`` (K,), ``/frames/positions``
+Layout of ``simulation.h5`` (docs/outputs.md): ``/frames/time`` (K,), ``/frames/positions``
 (K, N, 3) in mesh node order, ``/history/time`` (T,), ``/history/plate_displacement`` (T, 2),
 ``/history/plate_force`` (T, 2), ``/history/wall_force`` (T, W), ``/history/energy/<name>`` (T,),
 plus whatever else the solver records under ``/history``; the mesh itself under ``/mesh``;

@@ -1,4 +1,4 @@
-"""Verification of the beam solver against analytical references (SPEC section 8).
+"""Verification of the beam solver against analytical references (docs/verification.md).
 
 ``python -m fiberpipe.verification [--quick]`` prints the table and exits non-zero on a FAIL.
 """

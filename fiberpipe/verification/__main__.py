@@ -18,7 +18,7 @@ ALL_CASES = {**CASES, **CONTACT_CASES}
 
 
 def run_all(quick: bool = False, only=None):
-    """Every verification case of SPEC section 8 (beams 1-4, contact and friction 5-8)."""
+    """Every verification case of docs/verification.md (beams 1-4, contact and friction 5-8)."""
     beam = [c for c in (only or CASES) if c in CASES]
     contact = [c for c in (only or CONTACT_CASES) if c in CONTACT_CASES]
     rows = run_beam_cases(quick=quick, only=beam) if beam else []

@@ -1,4 +1,4 @@
-"""The verification cases' configs: SPEC 8, "each case is a config in configs/verify/".
+"""The verification cases' configs: docs/verification.md, "each case is a config in configs/verify/".
 
 Each case of :mod:`fiberpipe.verification.cases` and :mod:`~fiberpipe.verification.contact_cases`
 reads its material, fiber radius, element length, fibers (straight polylines) and the scene values

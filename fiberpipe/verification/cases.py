@@ -1,4 +1,4 @@
-"""Verification cases of SPEC section 8 (beams), each returning one table row.
+"""Verification cases of docs/verification.md (beams), each returning one table row.
 
 Every case runs the real solver (``simulate``) on the scene of its config in ``configs/verify/``
 (:mod:`fiberpipe.verification.case_config`: material, radius, element length, the fiber, clamps,
@@ -18,7 +18,7 @@ import numpy as np
 from ..solver import Clamp, Clamps, Damping, Material, Plates, State, build_model, simulate
 from .case_config import CaseSetup, case_setup
 
-# The study's fiber (SPEC 7), as its configs give it; the contact references (K_CROSSED_SPEC) hold for it.
+# The study's fiber (docs/verification.md), as its configs give it; the contact references (K_CROSSED_REF) hold for it.
 E_PA = 15e9
 NU = 0.3
 RHO = 1380.0
@@ -244,7 +244,7 @@ def energy_drift(quick: bool = False) -> Row:
     tot = h["energy/total"]
     e0 = h["energy/strain"][0] + h["energy/kinetic"][0]
     drift = float(np.max(np.abs(tot - tot[0])) / e0)
-    span = "; the SPEC's 1e5 steps in the slow variant only" if quick else ""
+    span = "; the 1e5-step case in the slow variant only" if quick else ""
     return Row(f"energy drift, undamped free vibration ({res.steps} steps{span})", 0.0, drift, drift, 0.005)
 
 

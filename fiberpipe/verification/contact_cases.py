@@ -1,4 +1,4 @@
-"""Verification cases of SPEC section 8, cases 5–8 (fiber–fiber contact and friction), through the dynamics.
+"""Verification cases of docs/verification.md, cases 5–8 (fiber–fiber contact and friction), through the dynamics.
 
 Every case runs the real solver (``simulate``) with the contact hook of
 :mod:`fiberpipe.solver.contact_effect` on the scene of its config in ``configs/verify/``
@@ -6,7 +6,7 @@ Every case runs the real solver (``simulate``) with the contact hook of
 gravity, friction, plates, walls, drives, contact law, end time) — the study's fiber (r = 0.25 mm,
 E = 15 GPa, ν = 0.3, ρ = 1380 kg/m³, 0.3 mm elements) at 0.9 × the stable step — and returns
 :class:`Row` (or a list). ``quick=True`` is a shorter variant of the same case for the default test
-suite. ``sliding_parallel`` (not a SPEC 8 case: two element lengths, an initial velocity) has no config.
+suite. ``sliding_parallel`` (not a docs/verification.md case: two element lengths, an initial velocity) has no config.
 
 * ``contact_pair_*``: two fibers pressed together (parallel: a line load; crossed at Φ: a point
   load over the crossing), damped to rest; δ read from the settled centre lines, F = the applied
@@ -71,12 +71,12 @@ def johnson_line_load(delta_m, r=R_M, e_star=E_STAR):
 
 
 # Exact elliptical Hertz K(Φ) [N/m^1.5] (F = K δ^{3/2}) of two of the study's fibres (E = 15 GPa,
-# ν = 0.3, R = 0.25 mm) crossing at Φ: SPEC section 7 and /work/shared/notes/physics.md (Johnson,
+# ν = 0.3, R = 0.25 mm) crossing at Φ: docs/verification.md (Johnson,
 # Contact Mechanics, eq. 3.64: B/A = [E(e)/(1−e²) − K(e)]/[K(e) − E(e)], A = sin²(Φ/2)/R,
 # B = cos²(Φ/2)/R; at 90° K = (4/3)E*√R). Written here as numbers, not computed by the law under
 # test; tests/verification/test_contact_references.py recomputes them with scipy's elliptic integrals
 # (rounding ≤ 0.04 %).
-K_CROSSED_SPEC = {2.0: 2.288e9, 6.0: 9.275e8, 10.0: 6.205e8, 90.0: 1.738e8}
+K_CROSSED_REF = {2.0: 2.288e9, 6.0: 9.275e8, 10.0: 6.205e8, 90.0: 1.738e8}
 
 
 def _clamp_all(model, fiber):
@@ -127,10 +127,10 @@ def _line_load_z(s: CaseSetup, fiber: int) -> float:
 
 
 def _check_spec_fiber(s: CaseSetup) -> None:
-    """The SPEC's contact references (K_CROSSED_SPEC) hold for the study's fiber only."""
+    """The contact references (K_CROSSED_REF) hold for the study's fiber only."""
     if not (math.isclose(s.E, E_PA, rel_tol=1e-9) and math.isclose(s.nu, NU, rel_tol=1e-9)
             and math.isclose(s.r, R_M, rel_tol=1e-9)):
-        raise ValueError(f"{s.path}: SPEC 7's K(Φ) values are for E = 15 GPa, ν = 0.3, r = 0.25 mm; the config "
+        raise ValueError(f"{s.path}: the reference K(Φ) values are for E = 15 GPa, ν = 0.3, r = 0.25 mm; the config "
                          f"gives E = {s.E:g} Pa, ν = {s.nu:g}, r = {s.r:g} m")
 
 
@@ -138,7 +138,7 @@ def contact_pair_parallel(quick: bool = False) -> list[Row]:
     """Parallel fibers (15 mm), lower clamped, upper pressed by a line load p, damped to rest
     (configs/verify/contact-parallel.yaml; the full variant also runs p/10 and 10 p).
 
-    F(δ) against Johnson's line contact (SPEC 7), independent of the contact law the run uses:
+    F(δ) against Johnson's line contact (docs/verification.md), independent of the contact law the run uses:
     reference = Johnson's P at the simulated δ (:func:`johnson_line_load`), measured = the applied p
     (at rest the contact carries it). δ = 2r − centre-line distance, mean over the inner nodes."""
     s = case_setup("contact_parallel")
@@ -167,10 +167,10 @@ def contact_pair_parallel(quick: bool = False) -> list[Row]:
 def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
     """Crossed fibers at Φ (configs/verify/contact-crossed-<Φ>.yaml): lower clamped, upper pressed
     at the crossing by a point force F, damped to rest; F against K(Φ)δ^{3/2} with the exact Hertz
-    K(Φ) of SPEC 7 (:data:`K_CROSSED_SPEC`, numbers, not the law under test), δ from the settled
+    K(Φ) of docs/verification.md (:data:`K_CROSSED_REF`, numbers, not the law under test), δ from the settled
     centre lines. The quick variant settles for half the config's end time."""
-    if phi_deg not in K_CROSSED_SPEC:
-        raise ValueError(f"no reference K for Φ = {phi_deg}°: SPEC 7 gives {sorted(K_CROSSED_SPEC)}")
+    if phi_deg not in K_CROSSED_REF:
+        raise ValueError(f"no reference K for Φ = {phi_deg}°: the references give {sorted(K_CROSSED_REF)}")
     s = case_setup(f"contact_crossed_{phi_deg:g}")
     _check_spec_fiber(s)
     (a0, a1), (b0, b1) = s.fibers()
@@ -184,7 +184,7 @@ def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
     force_n = -float(ld.force[2])
     m = s.model()
     law = s.law()
-    K = K_CROSSED_SPEC[phi_deg]
+    K = K_CROSSED_REF[phi_deg]
     eff = [s.clamps(), s.loads(), Damping(s.damping_alpha), contact_hook(m, law=law)]
     T = s.end_time / 2 if quick else s.end_time
     res = simulate(m, eff, s.settings(end_time_s=T))
@@ -198,7 +198,7 @@ def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
     delta = 2 * s.r - dist
     ref = K * delta**1.5
     f_meas = pair_force(m, x, law, 0, 1)[2]
-    return Row(f"contact crossed Φ = {phi_deg:g}°: K(Φ)δ^1.5, K = {K:.4g} N/m^1.5 (SPEC), δ = {delta * 1e9:.2f} nm",
+    return Row(f"contact crossed Φ = {phi_deg:g}°: K(Φ)δ^1.5, K = {K:.4g} N/m^1.5 (exact Hertz), δ = {delta * 1e9:.2f} nm",
                ref, force_n, abs(force_n - ref) / ref, 0.02, "N",
                f"Hertz δ(F) = {(force_n / K) ** (2 / 3) * 1e9:.2f} nm; kernel force at rest {f_meas:.6g} N")
 
@@ -369,7 +369,7 @@ def rearrangement(quick: bool = False) -> list[Row]:
     beam 1 and do not move unless pushed). Full: 15 mm beams (the study's), reference = a 10×
     slower run (100 mm/min, α = 1e5), plus the kinematic curve; wall times of each run reported.
 
-    "The undamped fast run departs from it, as the study found" (SPEC 8; the study's Fig. 8(c): its
+    "The undamped fast run departs from it, as the study found" (docs/verification.md; the study's Fig. 8(c): its
     undamped beams lost contact with beam 1): the α = 0 row's criterion is a curve error outside
     the 5 % agreement band. It is informational: measured 2.1 % (quick and full), i.e. not
     reproduced (docs/contact.md: friction makes no moment, so our beams slide but cannot roll).

@@ -62,7 +62,7 @@ def test_bad_inputs_rejected():
 
 
 def test_stable_time_step_matches_notes_table():
-    # notes/physics.md A3: Timoshenko B31-like, 0.3 mm elements, physical rotary inertia → 9.10e-8 s (axial)
+    # Timoshenko B31-like, 0.3 mm elements, physical rotary inertia → 9.10e-8 s (axial)
     rep = stable_time_step(build_model(straight(), [0, 51], R, MAT))
     assert rep.dt_stable_s == pytest.approx(9.10e-8, rel=0.01)
     assert rep.governing_mode == "axial"

@@ -1,4 +1,4 @@
-"""Line-to-line / point contact kernel on static geometry (SPEC §7, §8 case 5)."""
+"""Line-to-line / point contact kernel on static geometry (docs/verification.md, case 5)."""
 
 import math
 
@@ -38,7 +38,7 @@ def test_parallel_fibers_total_force_is_P_times_overlap(law, delta):
     p = L.hertz_parallel_line(delta, ESTAR, R, R)[0]
     ref = p * (20 * LE - 0.13e-3)
     fa = _force_on(f, rng[0])
-    assert abs(-fa[2] / ref - 1) < 0.02  # SPEC: < 2 %; measured ~1e-14
+    assert abs(-fa[2] / ref - 1) < 0.02  # tolerance < 2 %; measured ~1e-14
     assert np.abs(f.sum(axis=0)).max() < 1e-12 * ref  # equal and opposite
     assert abs(fa[0]) < 1e-12 * ref and abs(fa[1]) < 1e-12 * ref
 

@@ -1,4 +1,4 @@
-"""Energy balance of prescribed motions (drives) with mass-proportional damping (issue 6).
+"""Energy balance of prescribed motions (drives) with mass-proportional damping.
 
 Mass-proportional damping acts on the absolute velocity of every node, driven ones included
 (docs/solver.md, ``Damping``): its dissipation on a driven node is in ALLVD, so the drive's reaction

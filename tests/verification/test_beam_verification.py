@@ -1,4 +1,4 @@
-"""SPEC section 8 cases 1–4 (beam solver): quick variants in the default suite, full ones slow."""
+"""docs/verification.md cases 1–4 (beam solver): quick variants in the default suite, full ones slow."""
 
 import pytest
 

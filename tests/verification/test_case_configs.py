@@ -1,4 +1,4 @@
-"""SPEC 8: "each case is a config in configs/verify/". Every verification case has a config that
+"""Each case of docs/verification.md is a config in configs/verify/. Every verification case has a config that
 validates, and its runner takes the material, geometry and scene values from it: a modified copy of
 the config must show up in what the case hands to ``simulate`` (spied; nothing runs)."""
 
@@ -15,7 +15,7 @@ from fiberpipe.verification import case_config, cases, contact_cases
 from fiberpipe.verification.__main__ import ALL_CASES
 from fiberpipe.verification.case_config import CASE_CONFIGS, CONFIG_DIR
 
-NO_CONFIG = {"sliding_parallel"}  # not a SPEC 8 case: two element lengths and an initial velocity
+NO_CONFIG = {"sliding_parallel"}  # not a docs/verification.md case: two element lengths and an initial velocity
 
 
 def test_every_case_has_a_config_that_validates():
@@ -32,7 +32,7 @@ class _Stop(Exception):
 
 def _modified_copy(tmp_path, name):
     """configs/verify copied to tmp_path, the case's config changed: density × 1.25, E × 1.1 (not for
-    the crossed cases, whose SPEC K values hold for E = 15 GPa only), fibers shifted by +1 mm along x,
+    the crossed cases, whose reference K values hold for E = 15 GPa only), fibers shifted by +1 mm along x,
     damping α × 2, loads × 1.5, μ = 0.3, gravity × 1.1. Returns the modified, validated config."""
     for p in CONFIG_DIR.glob("*.yaml"):
         shutil.copy(p, tmp_path / p.name)
@@ -132,7 +132,7 @@ def test_crossed_case_refuses_another_fiber(tmp_path, monkeypatch):
 
 
 def test_config_values_are_the_study_fiber():
-    """The shipped configs all hold the study's fiber and mesh (SPEC 7), which the tables quote."""
+    """The shipped configs all hold the study's fiber and mesh (docs/verification.md), which the tables quote."""
     for name in CASE_CONFIGS:
         s = case_config.case_setup(name)
         assert (s.E, s.nu, s.rho, s.r, s.element_length) == pytest.approx((15e9, 0.3, 1380.0, 0.25e-3, 0.3e-3)), name

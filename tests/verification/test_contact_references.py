@@ -1,11 +1,11 @@
-"""The analytical references of SPEC 8 case 5, checked independently of the contact law under test.
+"""The analytical references of docs/verification.md case 5, checked independently of the contact law under test.
 
-* Johnson's line contact of two equal parallel cylinders (SPEC 7): δ(P), its numerical inverse
+* Johnson's line contact of two equal parallel cylinders (docs/verification.md): δ(P), its numerical inverse
   (``johnson_line_load``, used as the case's reference) and the Lambert-W closed form agree.
-* Exact elliptical Hertz K(Φ) for crossed cylinders (SPEC 7: K ≈ 2.29e9, 9.28e8, 6.21e8, 1.74e8
+* Exact elliptical Hertz K(Φ) for crossed cylinders (docs/verification.md: K ≈ 2.29e9, 9.28e8, 6.21e8, 1.74e8
   N/m^1.5 at Φ = 2°, 6°, 10°, 90°): recomputed here from Johnson eq. 3.64 with scipy's complete
   elliptic integrals, then the law the verification case runs (``hertz_oriented``) must give them
-  within SPEC 8's 2 %.
+  within the 2 % tolerance of docs/verification.md.
 """
 
 import math
@@ -16,12 +16,12 @@ from scipy.optimize import brentq
 from scipy.special import ellipe, ellipk, lambertw
 
 from fiberpipe.solver.laws import make_law
-from fiberpipe.verification.contact_cases import K_CROSSED_SPEC, johnson_delta, johnson_line_load
+from fiberpipe.verification.contact_cases import K_CROSSED_REF, johnson_delta, johnson_line_load
 
 E, NU, R = 15e9, 0.3, 0.25e-3
 E_STAR = E / (2 * (1 - NU**2))  # 8.2418 GPa
-# SPEC 7 (4 digits: /work/shared/notes/physics.md, "CORRECTION"), F = K δ^1.5, N/m^1.5
-K_SPEC = {2.0: 2.288e9, 6.0: 9.275e8, 10.0: 6.205e8, 90.0: 1.738e8}
+# the exact crossed-cylinder Hertz K(Φ) of docs/verification.md (4 digits), F = K δ^1.5, N/m^1.5
+K_REF = {2.0: 2.288e9, 6.0: 9.275e8, 10.0: 6.205e8, 90.0: 1.738e8}
 
 
 def hertz_k_exact(phi_deg, r=R, e_star=E_STAR):
@@ -43,24 +43,24 @@ def hertz_k_exact(phi_deg, r=R, e_star=E_STAR):
 
 
 def test_exact_hertz_reference_reproduces_spec_values():
-    for phi, k in K_SPEC.items():
+    for phi, k in K_REF.items():
         assert hertz_k_exact(phi) == pytest.approx(k, rel=5e-4), phi
     # limits: 90° is the sphere-like (4/3)E*√R; near 90° the elliptic route joins it
     assert hertz_k_exact(89.99) == pytest.approx(4 / 3 * E_STAR * math.sqrt(R), rel=1e-6)
 
 
 def test_case_constants_are_the_spec_values():
-    assert K_CROSSED_SPEC == K_SPEC
+    assert K_CROSSED_REF == K_REF
 
 
-@pytest.mark.parametrize("phi", sorted(K_SPEC))
+@pytest.mark.parametrize("phi", sorted(K_REF))
 @pytest.mark.parametrize("delta", [5e-9, 3.2e-8, 1e-6])
 def test_hertz_oriented_point_law_gives_spec_k(phi, delta):
-    """The law case 5 runs: F(δ, Φ)/δ^1.5 within SPEC 8's 2 % of the exact K(Φ), at the case's δ
+    """The law case 5 runs: F(δ, Φ)/δ^1.5 within the 2 % tolerance of docs/verification.md of the exact K(Φ), at the case's δ
     (5.8–32 nm) and at 1 µm."""
     law = make_law("hertz_oriented", E_pa=E, nu=NU)
     k = float(law.point_force(delta, phi)) / delta**1.5
-    assert abs(k - K_SPEC[phi]) / K_SPEC[phi] < 0.02, f"Φ = {phi}°, δ = {delta:g} m: K = {k:.5g} vs {K_SPEC[phi]:.4g}"
+    assert abs(k - K_REF[phi]) / K_REF[phi] < 0.02, f"Φ = {phi}°, δ = {delta:g} m: K = {k:.5g} vs {K_REF[phi]:.4g}"
 
 
 def test_johnson_line_contact_values_and_inverse():
@@ -68,7 +68,7 @@ def test_johnson_line_contact_values_and_inverse():
     assert johnson_delta(66.0) == pytest.approx(3.2049e-8, rel=1e-4)
     for p in (6.6, 66.0, 660.0, 2.95e3):
         d = johnson_delta(p)
-        lam = -math.pi * E_STAR * d / lambertw(-math.e * d / (8 * R), -1).real  # SPEC 7's closed form
+        lam = -math.pi * E_STAR * d / lambertw(-math.e * d / (8 * R), -1).real  # Johnson's closed form
         assert lam == pytest.approx(p, rel=1e-10)
         assert johnson_line_load(d) == pytest.approx(p, rel=1e-10)
     # notes: δ = 1 µm ↔ P = 2.95 kN/m

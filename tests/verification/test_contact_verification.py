@@ -1,4 +1,4 @@
-"""SPEC 8 cases 5-8 through the dynamics (fiberpipe.verification.contact_cases).
+"""docs/verification.md cases 5-8 through the dynamics (fiberpipe.verification.contact_cases).
 
 Default suite: the quick variants; ``-m slow``: the full cases (longer settling, more loads, the
 study's 15 mm beams and the slow rearrangement reference run).
