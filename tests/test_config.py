@@ -210,3 +210,14 @@ def test_skeleton_tracer_with_skeletonize_disabled_is_refused(write_yaml):
 def test_consistent_skeletonize_and_trace_settings_are_accepted(write_yaml, extra):
     cfg = load_config(write_yaml(PHANTOM + extra, "ok.yaml"))
     assert cfg.trace.method in ("slices", "skeleton")
+
+
+def test_friction_stiffness_takes_units_and_a_misspelt_law_gets_a_suggestion():
+    from fiberpipe.config import validate_config
+    from fiberpipe.errors import ConfigError
+
+    base = {"name": "a", "input": {"fibers": "x.h5"}}
+    c = validate_config({**base, "scene": {"effects": ["contact", "friction"], "friction": {"stiffness": "10 N/mm"}}})
+    assert c.scene.friction.stiffness == pytest.approx(1e4)
+    with pytest.raises(ConfigError, match="did you mean 'hertz_oriented'"):
+        validate_config({**base, "scene": {"effects": ["contact"], "contact": {"law": "hertz_orientd"}}})
