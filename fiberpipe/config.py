@@ -290,16 +290,22 @@ class ContactConfig(Section):
         "element length keeps crossings spanning several elements off the point law, docs/contact.md)"
     )
 
+    @field_validator("law")
+    @classmethod
+    def _registered(cls, v):
+        from fiberpipe.solver.laws import LAWS
+
+        if v not in LAWS:
+            close = difflib.get_close_matches(v, list(LAWS), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ValueError(f"{v!r} is not a contact law{hint}; choose from {sorted(LAWS)}")
+        return v
+
     @model_validator(mode="after")
     def _check(self):
         from fiberpipe.solver.laws import LAWS
 
-        law = LAWS.get(self.law)
-        if law is None:
-            close = difflib.get_close_matches(self.law, list(LAWS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ValueError(f"contact.law {self.law!r} is not a contact law{hint}; choose from {sorted(LAWS)}")
-        law.check_config(self)
+        LAWS[self.law].check_config(self)
         if self.stiffness is not None:
             _positive("contact.stiffness", self.stiffness)
         if self.angle is not None and not (0 <= self.angle <= math.pi / 2 + 1e-12):

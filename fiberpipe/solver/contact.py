@@ -240,19 +240,19 @@ def contact_forces(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params,
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _point_part(x, seg_nodes, pair, nodes4, radii, geo, closest, point, law_id, law_params, off, f_out, rec):
+def _point_part(x, seg_nodes, a0, b0, ta, tb, law_params, f_out, rec, ints, scal):
     """The point part of a pair (module docstring, item 3): its force into ``f_out`` and ``rec``;
     returns the stored energy [J].
 
-    pair = (i, j) segments; nodes4 = their nodes (a0, a1, b0, b1); radii = (r_i, r_j);
-    geo = (a0, b0, ta, tb, aa, bb, ab) node positions, tangents and their dot products;
-    closest = (dist2, sc, tc) the clamped closest points; point = (w, F(δ_c), E(δ_c), Φ).
+    a0, b0 : (3,) first node of each segment; ta, tb : (3,) their tangents (scratch arrays);
+    ints = (i, j, a0, a1, b0, b1, law_id): the segments and their nodes;
+    scal = (r_i, r_j, aa, bb, ab, dist2, sc, tc, w, F(δ_c), E(δ_c), Φ, offset): radii, the tangents'
+    dot products, the clamped closest points, the point share and law at δ_c, the crossing angle and
+    the pair's initial-overlap offset (scalars only: no reference counting in the pair loop).
     """
-    i, j = pair
-    ra, rb = radii
-    a0, b0, ta, tb, aa, bb, ab = geo
-    dist2, sc, tc = closest
-    w, fp_c, ep_c, phi = point
+    i, j, na0, na1, nb0, nb1, law_id = ints
+    ra, rb, aa, bb, ab, dist2, sc, tc, w, fp_c, ep_c, phi, off = scal
+    nodes4 = (na0, na1, nb0, nb1)
     rr = ra + rb
     den = aa * bb - ab * ab
     # closest points of the infinite lines
@@ -314,22 +314,22 @@ def _point_part(x, seg_nodes, pair, nodes4, radii, geo, closest, point, law_id, 
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _store_record(out, k, rec, phi):
-    """Pair ``k``'s results from its accumulated ``rec`` (see :class:`PairRecords`)."""
+def _store_record(c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, k, rec, phi):
+    """Pair ``k``'s results from its accumulated ``rec`` (the fields of :class:`PairRecords`)."""
     fsum = rec[0]
     fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-    out.fn[k] = fv
+    c_fn[k] = fv
     if fv > 0.0:
-        out.normal[k, 0] = rec[1] / fv
-        out.normal[k, 1] = rec[2] / fv
-        out.normal[k, 2] = rec[3] / fv
-    out.s[k] = rec[4] / fsum
-    out.t[k] = rec[5] / fsum
-    out.phi[k] = phi
-    out.delta[k] = rec[6]
-    if out.share.shape[0] > 0:
-        out.share[k] = rec[7]
-        out.fsum[k] = fsum
+        c_n[k, 0] = rec[1] / fv
+        c_n[k, 1] = rec[2] / fv
+        c_n[k, 2] = rec[3] / fv
+    c_s[k] = rec[4] / fsum
+    c_t[k] = rec[5] / fsum
+    c_phi[k] = phi
+    c_delta[k] = rec[6]
+    if c_share.shape[0] > 0:
+        c_share[k] = rec[7]
+        c_fsum[k] = fsum
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -368,8 +368,8 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
     (energy, n_active) : stored penalty energy Σ∫F dδ [J] (exact for laws with a potential and a
     constant blend weight), number of pairs in contact.
     """
-    c_gap = out.gap
-    c_active = out.active
+    # the fields as local arrays: no attribute access in the pair loop
+    c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, c_gap, c_active = out
     use_gap = c_gap.shape[0] > 0
     use_list = c_active.shape[0] > 0
     use_off = c_off.shape[0] > 0
@@ -383,7 +383,7 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
     ta = np.empty(3)
     tb = np.empty(3)
     for k in range(n_pairs):
-        out.fn[k] = 0.0
+        c_fn[k] = 0.0
         if use_gap and c_gap[k] > reach:
             continue  # before any gather: most pairs stop here
         i = pairs[k, 0]
@@ -427,10 +427,10 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
         # the point force at δ_c comes with the weight (one Hertz evaluation for both)
         w, fp_c, ep_c = law_weight_point(law_id, law_params, delta_c, ra, rb, phi)
         den = aa * bb - ab * ab
-        nodes4 = (na0, na1, nb0, nb1)
         if w > 0.0 and den > 1e-10 * aa * bb:
-            energy += _point_part(x, seg_nodes, (i, j), nodes4, (ra, rb), (a0, b0, ta, tb, aa, bb, ab),
-                                  (dist2, sc, tc), (w, fp_c, ep_c, phi), law_id, law_params, off, f_out, rec)
+            energy += _point_part(x, seg_nodes, a0, b0, ta, tb, law_params, f_out, rec,
+                                  (i, j, na0, na1, nb0, nb1, law_id),
+                                  (ra, rb, aa, bb, ab, dist2, sc, tc, w, fp_c, ep_c, phi, off))
         elif w > 0.0:
             w = 0.0
         if w < 1.0:
@@ -443,7 +443,7 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
             if use_list:
                 c_active[n_active] = k
             n_active += 1
-            _store_record(out, k, rec, phi)
+            _store_record(c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, k, rec, phi)
     return energy, n_active
 
 

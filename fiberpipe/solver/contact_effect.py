@@ -101,7 +101,7 @@ def _rebuild(x, data):
         gap[k] = pair_gap(x, segs.nodes, segs.radius, spare.pairs, k)
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _move_planes(planes, t, dt):
     """The planes' positions and velocities at t_n (for their friction); returns how far any plane
     moved since its candidate nodes were listed."""
@@ -119,7 +119,7 @@ def _move_planes(planes, t, dt):
     return moved
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _update_neighbours(x, v, dt, data):
     """Rebuild the Verlet list when needed (step 1 of the module docstring); returns whether it was."""
     st = data.stats
@@ -162,7 +162,7 @@ def _record_initial_overlaps(x, data, reach):
     data.fc[:, :] = 0.0
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _overlap_offsets(data, t, dt):
     """The offsets at t_n, ``δ0·(1 − t/T_release)⁺`` per pair: ``(off, rel, rel_prev)`` (off of size 0
     once released)."""
@@ -186,7 +186,7 @@ def _overlap_offsets(data, t, dt):
     return off, rel, rel_prev
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _list_friction_nodes(data, n_active, plane_fric, calls):
     """List the nodes the friction forces act on (those of the pairs in contact and the plane
     candidates) in ``fwork.nodes``; returns their number."""
@@ -213,7 +213,7 @@ def _list_friction_nodes(data, n_active, plane_fric, calls):
     return n_ff
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _friction_pass(x, v, dt, acc, data, n_active, plane_fric, calls):
     """Fiber–fiber and fiber–plane friction into ``fc`` (step 3); books the friction forces' work
     ``Δt f_n·v̄_n = ½Δt f_n·(v_{n−½} + v_{n+½})`` apart (ACC_WF), on the nodes the forces act on:
@@ -253,7 +253,7 @@ def _friction_pass(x, v, dt, acc, data, n_active, plane_fric, calls):
     return diss
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def _statistics(data, n_active):
     """Σ normal force and the largest penetration of this step's contacts."""
     st, rec = data.stats, data.records[0]
