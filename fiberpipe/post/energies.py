@@ -20,14 +20,24 @@ ABAQUS_NAMES = {
 }
 
 
-def energy_balance(energy: dict[str, np.ndarray]) -> np.ndarray:
-    """Relative energy balance residual over time, (T,).
-
-    r(t) = |KE + SE + VD + FD − WK − PW − (same at t0)| / max(max |WK|, max(KE + SE), tiny).
-    """
+def state_total(energy: dict[str, np.ndarray]) -> np.ndarray:
+    """E = KE + SE + E_contact + VD + FD − WK over time, J, (T,), from state functions: the stored
+    contact energy (``contact_stored``) instead of the booked contact work ALLPW, so E stays
+    constant only if the contact creates no energy. A history without ``contact_stored`` (written
+    before it existed) gives Abaqus' ETOTAL = KE + SE + VD + FD − WK − PW, which closes whatever the
+    contact does."""
     z = np.zeros_like(next(iter(energy.values())), dtype=float)
     g = lambda k: np.asarray(energy.get(k, z), dtype=float)  # noqa: E731
-    total = g("kinetic") + g("strain") + g("damping") + g("friction") - g("external") - g("contact")
+    base = g("kinetic") + g("strain") + g("damping") + g("friction") - g("external")
+    return base + g("contact_stored") if "contact_stored" in energy else base - g("contact")
+
+
+def energy_balance(energy: dict[str, np.ndarray]) -> np.ndarray:
+    """Relative energy balance residual over time, (T,): r(t) = |E(t) − E(t0)| / max(max |WK|,
+    max(KE + SE), tiny) with E of :func:`state_total`."""
+    z = np.zeros_like(next(iter(energy.values())), dtype=float)
+    g = lambda k: np.asarray(energy.get(k, z), dtype=float)  # noqa: E731
+    total = state_total(energy)
     scale = max(np.max(np.abs(g("external"))), np.max(g("kinetic") + g("strain")), 1e-300)
     return np.abs(total - total[0]) / scale
 
@@ -41,7 +51,8 @@ def quasi_static_ratio(energy: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def contact_energy_created(energy: dict[str, np.ndarray]) -> np.ndarray:
-    """A lower bound of the energy the normal contact created so far, J, (T,).
+    """The energy the contact created so far, J, (T,): with the stored contact energy in the
+    history, the largest excess of :func:`state_total` over its start; without it, a lower bound:
 
     The contact and friction forces' work is booked as work (ALLPW = the work of the normal and the
     friction forces on the fibers + the friction loss ALLFD, docs/contact.md), so the balance residual
@@ -52,6 +63,9 @@ def contact_energy_created(energy: dict[str, np.ndarray]) -> np.ndarray:
     before it existed) gives ``max(0, ALLPW − ALLFD)``, which also subtracts the friction's loss and
     its springs' energy: a weaker bound. docs/contact.md has what creates energy.
     """
+    if "contact_stored" in energy:
+        # the energy no load supplied, from state functions (exact, not a bound)
+        return np.maximum(np.maximum.accumulate(state_total(energy) - state_total(energy)[0]), 0.0)
     z = np.zeros_like(next(iter(energy.values())), dtype=float)
     pw = np.asarray(energy.get("contact", z), dtype=float)
     fd = np.asarray(energy.get("friction", z), dtype=float)

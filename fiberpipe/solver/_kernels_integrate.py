@@ -35,8 +35,8 @@ from numba import njit
 from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
-from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
-                     H_CONTACTS, H_FD, H_KE, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WF, H_WK,
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
+                     H_CONTACTS, H_FD, H_KE, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
 _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
@@ -73,14 +73,16 @@ def eval_external(f, mom, f_ext):
 
 @njit(inline="always", **_FLAGS)
 def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
-    """Plane penalties at t_n into ``f``; the moving plates' prescribed work to ALLWK and the first
-    half of the penalty work ``½Δt f_n·v_{n−½}`` to ALLPW. Returns the number of touching nodes."""
+    """Plane penalties at t_n into ``f``; their stored energy to ``acc[ACC_STORED]``, the moving
+    plates' prescribed work to ALLWK and the first half of the penalty work ``½Δt f_n·v_{n−½}`` to
+    ALLPW. Returns the number of touching nodes."""
     P = planes.axis.shape[0]
     for p in range(P):
         planes.pos[p] = planes.pos0[p] + planes.sign[p] * planes.move[p] * ramp_fraction(
             t, planes.T[p], planes.ta[p], planes.mode[p])
-    n_pen = plane_contacts(x, radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos, f, planes.force,
-                           planes.pen_idx, planes.pen_f)
+    n_pen, stored = plane_contacts(x, radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos, f,
+                                   planes.force, planes.pen_idx, planes.pen_f)
+    acc[ACC_STORED] += stored
     wk = 0.0
     for p in range(P):
         if planes.move[p] != 0.0:
@@ -360,6 +362,7 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n
     hist[h_row, H_FD] = 0.5 * (acc_before[ACC_FD] + acc[ACC_FD])
     hist[h_row, H_WF] = 0.5 * (acc_before[ACC_WF] + acc[ACC_WF])
     hist[h_row, H_CONTACTS] = n_contacts
+    hist[h_row, H_STORED] = acc[ACC_STORED]
 
 
 @njit(**_FLAGS)
@@ -426,6 +429,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             for k in range(ACC_SIZE):
                 acc_before[k] = acc[k]
         # ---- forces at t_n ----
+        acc[ACC_STORED] = 0.0  # a state at t_n: the planes and the hook add their stored energy
         eval_external(work.f, work.mom, scene.f_ext)
         # _beam_pass: beam_resultants (serial) or beam_resultants_fibers (prange per fiber), bound per
         # loop variant by _specialise; it fills eb, the update gathers it

@@ -44,7 +44,7 @@ from .contact_state import (ContactData, ContactParams, FrictionWork, PairList, 
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
 from .geometry import pair_gap
-from .layout import ACC_FD, ACC_PW, ACC_WF, ACC_WK
+from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_WF, ACC_WK
 from .neighbours import build_pairs, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
@@ -325,6 +325,8 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     diss = 0.0
     if prm.friction_on or plane_fric:
         diss = _friction_pass(x, v, dt, acc, data, n_active, plane_fric, calls)
+    # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
+    acc[ACC_STORED] += energy + (st.e_spring_J[0] if prm.friction_on else 0.0)
     # the forces stay in fc: the step loop's update applies them, books their work and clears fc
     acc[ACC_PW] += diss
     acc[ACC_FD] += diss

@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._kernels_boundary import PLANE_ONSET_M, plane_onset
 from .contact_state import PairRecords, PlaneFriction
 from .geometry import apply_pair_force, pair_nodes
 
@@ -213,7 +214,7 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     ``planes`` : :class:`fiberpipe.solver.contact_state.PlaneFriction` (its ``pos``, ``vel``,
     ``hist``, ``tforce`` and the candidates ``cand_idx``, ``cand_off`` are read at this step).
     Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
-    ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·δ`` (added by the plate kernel
+    ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·g(δ)·g'(δ)`` (added by the plate kernel
     ``_kernels_boundary.plane_contacts``, not here). Here only the tangential force, from the
     node's velocity relative to the plane (``pl_vel`` (P, 3) m/s), with history ``hist`` (N, P, 3)
     [N], or (N, P, 4) with the step of each entry's last update in column 3 and ``step`` ≥ 0, this
@@ -273,7 +274,8 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
                     hist[i, p, 1] = 0.0
                     hist[i, p, 2] = 0.0
                 hist[i, p, 3] = step
-            fn = k_pen[i] * d
+            g, gp = plane_onset(d, PLANE_ONSET_M)
+            fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
             du0 = (v[i, 0] - pl_vel[p, 0]) * dt
             du1 = (v[i, 1] - pl_vel[p, 1]) * dt
             du2 = (v[i, 2] - pl_vel[p, 2]) * dt

@@ -12,6 +12,7 @@ ACC_VD = 1   # damping dissipation
 ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook)
 ACC_FD = 3   # friction dissipation (contact hook)
 ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW)
+ACC_STORED = 5  # stored contact energy at t_n (plane penalties + the hook's potential and springs): a state
 ACC_SIZE = 8
 
 # history columns (one row per recorded step)
@@ -26,7 +27,8 @@ H_PW = 9
 H_FD = 10
 H_CONTACTS = 11
 H_WF = 12          # work of the friction forces on the fibers (ACC_WF), J
-H_WALL = 13        # one column per wall plane from here on, N
+H_STORED = 13      # stored contact energy at t_n (ACC_STORED), J
+H_WALL = 14        # one column per wall plane from here on, N
 
 # node fixity bits (SceneArrays.fix_mask)
 FIX_X = 1
