@@ -19,7 +19,7 @@ RAMP_LINEAR = 0
 RAMP_SMOOTH = 1
 RAMP_SMOOTHSTEP = 2
 
-# onset length of the plane penalty, m: much longer than the approach per step (0.1 m/s × 82 ns ≈
+# onset length of the plane penalty, m: longer than the approach per step (0.1 m/s × 82 ns ≈
 # 8 nm at a fiber impact), so the stiffness switches on over many steps
 PLANE_ONSET_M = 1e-6
 
@@ -36,6 +36,21 @@ def plane_onset(delta, ds):
     u = delta / ds
     u2 = u * u
     return ds * u2 * u * (1.0 - 0.5 * u), u2 * (3.0 - 2.0 * u)
+
+
+def plane_static_penetration(force_over_k_m: float, ds: float = PLANE_ONSET_M) -> float:
+    """The penetration δ [m] at which the plane penalty holds a static force F, given F/k [m]:
+    k g(δ) g'(δ) = F (:func:`plane_onset`; g g' is increasing, so the root is unique)."""
+    if force_over_k_m <= 0.0:
+        return 0.0
+    if force_over_k_m >= 0.5 * ds:
+        return force_over_k_m + 0.5 * ds
+    lo, hi = 0.0, ds
+    for _ in range(200):  # bisection to rounding
+        mid = 0.5 * (lo + hi)
+        g, gp = plane_onset(mid, ds)
+        lo, hi = (mid, hi) if g * gp < force_over_k_m else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")

@@ -242,7 +242,9 @@ def _friction_pass(x, v, dt, acc, data, n_active, plane_fric, calls):
         diss += dff
         st.e_spring_J[0] = esp
     if plane_fric:
-        diss += plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
+        dpl, espl = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
+        diss += dpl
+        acc[ACC_STORED] += espl
     for kk in range(n_ff):
         i = nodes[kk]
         ff[i, 0] += fc[i, 0]

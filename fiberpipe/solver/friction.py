@@ -223,11 +223,12 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
     ``use_candidates`` (with time stamps): visit only the nodes ``cand_idx``, ``cand_off`` per plane
     (:func:`plane_candidates`; the caller keeps them valid), not all N.
-    Returns the dissipated energy [J].
+    Returns (the dissipated energy [J], the elastic energy of the tangential springs [J]).
     """
     radius_node, k_pen, pl_axis, pl_sign, pl_pos = planes.radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos
     pl_vel, hist, pl_tforce, cand_idx, cand_off = planes.vel, planes.hist, planes.tforce, planes.cand_idx, planes.cand_off
     diss = 0.0
+    espring = 0.0
     npl = pl_axis.shape[0]
     for p in range(npl):
         pl_tforce[p, 0] = 0.0
@@ -281,13 +282,14 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
             du2 = (v[i, 2] - pl_vel[p, 2]) * dt
             f0, f1, f2, dd = _return_map(hflat, i * npl + p, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
             diss += dd
+            espring += 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / k_t
             f_out[i, 0] += f0
             f_out[i, 1] += f1
             f_out[i, 2] += f2
             pl_tforce[p, 0] -= f0
             pl_tforce[p, 1] -= f1
             pl_tforce[p, 2] -= f2
-    return diss
+    return diss, espring
 
 
 def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None):

@@ -22,6 +22,7 @@ import numpy as np
 from ..errors import FiberpipeError, SimulationDiverged
 from ._kernels_integrate import step_loop_for
 from ._kernels_beam import EB_SIZE, beam_forces
+from ._kernels_boundary import PLANE_ONSET_M, plane_onset
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
 from .layout import (H_FD, H_KE, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
@@ -144,6 +145,20 @@ def choose_time_step(model: Model, effects: Sequence[Effect], settings: Simulati
             f"would blow up. Use dt ≤ {rep.dt_stable_s:.4g} s, leave dt unset to use dt_safety × limit, "
             f"or set force_dt to run anyway")
     return float(settings.dt_s), rep
+
+
+def _plane_energy(sc: SceneArrays, x: np.ndarray) -> float:
+    """The plane penalties' stored energy Σ ½ k g(δ)² at positions ``x`` (planes at their start)."""
+    if sc.pl_axis.size == 0:
+        return 0.0
+    k = sc.k_pen()
+    e = 0.0
+    for p in range(sc.pl_axis.size):
+        d = sc.model.radius_node - sc.pl_sign[p] * (x[:, sc.pl_axis[p]] - sc.pl_pos0[p])
+        for i in np.flatnonzero(d > 0.0):
+            g, _ = plane_onset(float(d[i]), PLANE_ONSET_M)
+            e += 0.5 * float(k[i]) * g * g
+    return e
 
 
 def _initial_energies(model: Model, state: State) -> tuple[float, float]:
@@ -521,6 +536,9 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
                        speed_limit_m_s=settings.speed_limit_m_s, runaway_m=settings.runaway_m,
                        e_ref_J=max(ke0 + se0, 1e-12), threads=settings.threads)
     sc = integ.scene
+    if resume is None:
+        e0_stored = _plane_energy(sc, state.x)  # the stored energy at t = 0, for the residual's start
+        se0 += e0_stored
     frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
     frame_set = {int(k) for k in frame_steps}
     ft, fx, fq = [], [], []

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates,
                       SimulationSettings, State, Walls, build_model, choose_time_step, simulate)
+from ..solver._kernels_boundary import plane_static_penetration
 from ..solver.contact import contact_forces, gauss_points
 from ..solver.laws import make_law
 from ..solver.neighbours import build_pairs
@@ -456,7 +457,7 @@ def inclined_plate(case: str = "friction_inclined_slide", quick: bool = False) -
     eff0 = [Gravity(gvec), Plates(**plates)]
     dt, _ = choose_time_step(probe, eff0, s.settings())
     # start at the static penetration of the plate penalty (k = 0.1 m (2/Δt)², same δ on every node)
-    d_s = g * math.cos(th) / (0.1 * (2.0 / dt) ** 2)
+    d_s = plane_static_penetration(g * math.cos(th) / (0.1 * (2.0 / dt) ** 2))
     m = s.model(nodes_m=probe.nodes_m - np.array([0.0, 0.0, d_s]))
     eff = [Gravity(gvec), Plates(**plates), contact_hook(m, contact=False, friction=True, mu=mu)]
     T = s.end_time / 3 if quick else s.end_time

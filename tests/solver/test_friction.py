@@ -6,6 +6,7 @@ import pytest
 from fiberpipe.solver import laws as L
 from _contact_geometry import LE, R, all_pairs_between, assemble, fiber
 from fiberpipe.solver.contact import compute_contact
+from fiberpipe.solver._kernels_boundary import PLANE_ONSET_M, plane_onset
 from fiberpipe.solver.friction import friction_forces, plane_friction, plane_friction_arrays, remap_history
 
 MU, KT, DT = 0.2, 1e5, 1e-7
@@ -94,7 +95,8 @@ def test_plane_friction_stick_and_slip():
     x = np.array([[0.0, 0.0, R - 1e-6]])
     v = np.array([[1.0, 0.0, 0.0]])
     kpen = np.array([1e6])
-    fn = 1e6 * 1e-6
+    g, gp = plane_onset(1e-6, PLANE_ONSET_M)  # the plane penalty's normal force k g g'
+    fn = 1e6 * g * gp
     args = (np.array([R]), kpen, np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
     hist = np.zeros((1, 1, 3))
     diss = 0.0
@@ -102,7 +104,7 @@ def test_plane_friction_stick_and_slip():
     for _ in range(n):
         f = np.zeros((1, 3))
         tf = np.zeros((1, 3))
-        diss += plane_friction(x, v, plane_friction_arrays(*args, hist, tf), MU, KT, DT, f)
+        diss += plane_friction(x, v, plane_friction_arrays(*args, hist, tf), MU, KT, DT, f)[0]
     assert f[0, 0] == pytest.approx(-MU * fn, rel=1e-12) and tf[0, 0] == pytest.approx(MU * fn)
     assert diss == pytest.approx(MU * fn * (1.0 * DT * n - MU * fn / KT), rel=1e-9)
     # off the plane: history reset
