@@ -191,6 +191,10 @@ class TraceConfig(Section):
     min_length_vox: Optional[float] = Field(None, ge=0, description="default max(10, 3 r)")
     smooth_sigma_vox: Optional[float] = Field(None, ge=0, description="default max(1, r/2)")
     expected_radius: Optional[Length] = None
+    min_length: Optional[Length] = Field(None, ge=0, description="shorter traced fibers are dropped, with a warning and a "
+                                         "count in summary.json; default: two mesh elements (2 × mesh.element_length)")
+    join_gap_vox: Optional[float] = Field(None, ge=0, description="largest gap bridged between two pieces of one fiber "
+                                          "(collinear, in line, similar radius); default max(4, 4 r); 0: no joining")
 
 
 class MeshConfig(Section):
@@ -198,6 +202,8 @@ class MeshConfig(Section):
     smooth_sigma: Length = 0.0
     resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input (strain-free adjustment; the simulate stage also moves surfaces up to 5 % of r inside a plate or wall back out)")
     max_overlap_shift: Length = Field(0.1e-3, description="refuse inputs whose overlaps need larger node shifts")
+    min_fiber_length: Optional[Length] = Field(None, ge=0, description="shorter fibers are dropped, with a warning and a count "
+                                               "in summary.json; default: two elements (2 × mesh.element_length)")
 
     @field_validator("element_length")
     @classmethod

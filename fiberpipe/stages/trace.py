@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_text_atomic
 from fiberpipe.config import Config
+from fiberpipe.errors import InputError
 from fiberpipe.stages._common import input_hashes
 from fiberpipe.stages.skeletonize import eval_list
+
+log = logging.getLogger("fiberpipe")
 
 
 def run_trace(
@@ -41,16 +45,57 @@ def run_trace(
         kwargs["skeleton"] = sk["skeleton"]
         kwargs["radius_vox"] = sk["radius_vox"]
         inputs["skeleton"] = Path(skeleton_path)
+    if t.join_gap_vox is not None:
+        kwargs["join_gap_vox"] = t.join_gap_vox
     fibers = trace(mask, **kwargs)
+    fibers, folds = split_folds_for_mesh(cfg, fibers)
+    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": t.method})
     figures = {
         "fibers": int(fibers.n_fibers),
+        "joined_gaps": int(fibers.meta.get("n_joins", 0)),
+        "cut_folds": folds,
+        "dropped_short_fibers": dropped,
+        "min_length_m": min_length_m(cfg),
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
     }
     if truth_path is not None and Path(truth_path).exists():
         figures["accuracy"] = trace_accuracy_report(out, truth_path, voxel_size[0], Path(out).with_name("trace_accuracy.json"))
     return figures
+
+
+def min_length_m(cfg: Config) -> float:
+    """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
+    return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
+
+
+def split_folds_for_mesh(cfg: Config, fibers):
+    """Cut traced fibers where they fold back (a turn above 90 deg between two consecutive mesh
+    elements, nodes placed as the mesh stage places them), which the mesh stage would refuse."""
+    from fiberpipe.imaging.fragments import split_folds
+    from fiberpipe.model.mesh import resample_polyline
+
+    el, sm = cfg.mesh.element_length, cfg.mesh.smooth_sigma
+    return split_folds(fibers, lambda p: resample_polyline(p, el, smooth_sigma_m=sm), max_turn_deg=90.0)
+
+
+def drop_short_fibers(fibers, min_length: float, key: str):
+    """Drop fibers shorter than ``min_length`` (m), logging one warning line that names ``key``.
+
+    Returns the kept fibers and the number dropped. Every fiber too short is an InputError (there
+    is nothing left to mesh).
+    """
+    from fiberpipe.imaging.fragments import drop_short
+
+    kept, dropped = drop_short(fibers, min_length)
+    if len(dropped) and kept.n_fibers == 0:
+        raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm "
+                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key} or mesh.element_length")
+    if len(dropped):
+        log.warning("%s: dropped %d of %d fibers shorter than %s = %.3g mm", key.split(".")[0], len(dropped),
+                    fibers.n_fibers, key, min_length * 1e3)
+    return kept, int(len(dropped))
 
 
 def trace_accuracy_report(fibers_path: Path, truth_path: Path, voxel_size_m: float, out_json: Path | None = None) -> dict:
