@@ -185,7 +185,11 @@ class SkeletonizeConfig(Section):
 class TraceConfig(Section):
     """Tracing options; ``None`` means the tracer's own default, scaled by the fiber radius."""
 
-    method: Literal["slices", "skeleton"] = "slices"
+    method: Literal["auto", "slices", "skeleton"] = Field(
+        "auto", description="auto: slices when the fibers are quasi-parallel (see min_aligned_fraction), else skeleton")
+    min_aligned_fraction: float = Field(0.9, ge=0, le=1, description="auto picks the slices tracer when at least this "
+                                        "fraction of the fiber volume runs within 45 deg of one volume axis (mask "
+                                        "structure tensor); slices below it warns")
     max_jump_vox: Optional[float] = Field(None, gt=0, description="slices: default max(2, 0.6 r)")
     max_skip: Optional[int] = Field(None, ge=0, description="slices: slices a track may miss (3)")
     min_length_vox: Optional[float] = Field(None, ge=0, description="default max(10, 3 r)")

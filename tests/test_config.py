@@ -209,4 +209,4 @@ def test_skeleton_tracer_with_skeletonize_disabled_is_refused(write_yaml):
 ])
 def test_consistent_skeletonize_and_trace_settings_are_accepted(write_yaml, extra):
     cfg = load_config(write_yaml(PHANTOM + extra, "ok.yaml"))
-    assert cfg.trace.method in ("slices", "skeleton")
+    assert cfg.trace.method in ("auto", "slices", "skeleton")

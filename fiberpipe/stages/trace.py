@@ -26,21 +26,23 @@ def run_trace(
     truth_path: Path | None = None,
     config_sha256: str = "",
 ) -> dict:
+    from fiberpipe.imaging.orientation import fiber_orientation
     from fiberpipe.imaging.trace import trace
 
     art = read_artifact(mask_path, "mask")
     mask = art["mask"]
     voxel_size = eval_list(art.attrs["voxel_size_m"])
     t = cfg.trace
+    method, orient_mask = choose_method(cfg, mask, voxel_size)
     kwargs = dict(
         voxel_size_m=voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
-        method=t.method,
+        method=method,
         expected_radius_m=t.expected_radius or cfg.fiber.radius,
     )
-    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if t.method == "slices" else ("min_length_vox", "smooth_sigma_vox")
+    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method == "slices" else ("min_length_vox", "smooth_sigma_vox")
     kwargs.update({k: getattr(t, k) for k in options if getattr(t, k) is not None})
     inputs = {"mask": Path(mask_path)}
-    if t.method == "skeleton":
+    if method == "skeleton" and skeleton_path is not None and Path(skeleton_path).exists():
         sk = read_artifact(skeleton_path, "skeleton")
         kwargs["skeleton"] = sk["skeleton"]
         kwargs["radius_vox"] = sk["radius_vox"]
@@ -50,8 +52,15 @@ def run_trace(
     fibers = trace(mask, **kwargs)
     fibers, folds = split_folds_for_mesh(cfg, fibers)
     fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
-    write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": t.method})
+    write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
+    orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
+    write_text_atomic(Path(out).with_name("orientation.json"), json.dumps(orientation, indent=2))
+    of = orientation["fibers"]
     figures = {
+        "method": method,
+        "aligned_fraction_45deg_mask": orient_mask.get("aligned_fraction_45deg"),
+        "orientation": {k: of[k] for k in ("tensor", "eigenvalues", "dominant_axis_xyz", "median_angle_deg",
+                                           "aligned_fraction_45deg", "angle_histogram") if k in of},
         "fibers": int(fibers.n_fibers),
         "joined_gaps": int(fibers.meta.get("n_joins", 0)),
         "cut_folds": folds,
@@ -59,6 +68,7 @@ def run_trace(
         "min_length_m": min_length_m(cfg),
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
+        "median_radius_m": float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0,
     }
     if truth_path is not None and Path(truth_path).exists():
         figures["accuracy"] = trace_accuracy_report(out, truth_path, voxel_size[0], Path(out).with_name("trace_accuracy.json"))
@@ -68,6 +78,31 @@ def run_trace(
 def min_length_m(cfg: Config) -> float:
     """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
     return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
+
+
+def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
+    """The tracer to run and the mask's orientation distribution.
+
+    ``trace.method: auto`` picks ``slices`` when at least ``trace.min_aligned_fraction`` of the
+    fiber volume runs within 45 deg of one volume axis, else ``skeleton``; an explicit ``slices`` on
+    fibers that are not quasi-parallel runs, with one warning line naming the key.
+    """
+    from fiberpipe.imaging.orientation import is_quasi_parallel, mask_orientation
+
+    t = cfg.trace
+    orient = mask_orientation(mask, voxel_size)
+    parallel = is_quasi_parallel(orient, t.min_aligned_fraction)
+    frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
+    if t.method == "auto":
+        method = "slices" if parallel else "skeleton"
+        log.info("trace: %.0f %% of the fiber volume within 45 deg of axis %s: method %s", frac,
+                 orient.get("nearest_volume_axis"), method)
+        return method, orient
+    if t.method == "slices" and not parallel:
+        log.warning("trace: only %.0f %% of the fiber volume runs within 45 deg of one volume axis (below "
+                    "trace.min_aligned_fraction = %g): the slices tracer needs quasi-parallel fibers; set "
+                    "trace.method: skeleton (or auto)", frac, t.min_aligned_fraction)
+    return t.method, orient
 
 
 def split_folds_for_mesh(cfg: Config, fibers):
