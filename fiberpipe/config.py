@@ -199,6 +199,7 @@ class TraceConfig(Section):
                                          "count in summary.json; default: two mesh elements (2 × mesh.element_length)")
     join_gap_vox: Optional[float] = Field(None, ge=0, description="largest gap bridged between two pieces of one fiber "
                                           "(collinear, in line, similar radius); default max(4, 4 r); 0: no joining")
+    pictures: bool = Field(True, description="write trace_slices.png, trace_midlines.png and orientation.png into the run folder")
 
 
 class MeshConfig(Section):

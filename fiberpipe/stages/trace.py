@@ -70,9 +70,29 @@ def run_trace(
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
         "median_radius_m": float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0,
     }
+    truth, matches = None, None
     if truth_path is not None and Path(truth_path).exists():
         figures["accuracy"] = trace_accuracy_report(out, truth_path, voxel_size[0], Path(out).with_name("trace_accuracy.json"))
+        truth, matches = read_fibers(truth_path), figures["accuracy"].get("matches")
+    if t.pictures and fibers.n_fibers:
+        figures["pictures"] = write_pictures(Path(out).parent, mask, fibers, voxel_size, orientation,
+                                             axis=int(fibers.meta.get("axis", 0) or 0), truth=truth, matches=matches)
     return figures
+
+
+def write_pictures(run_dir: Path, mask, fibers, voxel_size, orientation: dict, *, axis: int = 0, truth=None,
+                   matches=None) -> list[str]:
+    """The tracing check pictures in the run folder: slices at three depths with the traced centres
+    and radii over the mask (``trace_slices.png``; with ground truth, misses and false tracks
+    marked), the mid-lines in 3D (``trace_midlines.png``), the orientation histogram
+    (``orientation.png``). Returns their file names."""
+    from fiberpipe.imaging.overlay import midlines_3d_png, orientation_png, slice_overlay_png
+
+    names = ["trace_slices.png", "trace_midlines.png", "orientation.png"]
+    slice_overlay_png(run_dir / names[0], mask, fibers, voxel_size, axis=axis, truth=truth, matches=matches)
+    midlines_3d_png(run_dir / names[1], fibers)
+    orientation_png(run_dir / names[2], orientation)
+    return names
 
 
 def min_length_m(cfg: Config) -> float:

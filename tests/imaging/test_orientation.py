@@ -81,6 +81,18 @@ def test_auto_picks_the_skeleton_tracer_for_a_fiber_mat_and_reports_the_distribu
     assert np.allclose(np.trace(np.array(o["tensor"])), 1.0, atol=1e-4)
     saved = json.loads((tmp_path / "run" / "orientation.json").read_text())
     assert set(saved) == {"mask", "fibers"}
+    for name in ("trace_slices.png", "trace_midlines.png", "orientation.png"):
+        assert (tmp_path / "run" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    assert tr["pictures"] == ["trace_slices.png", "trace_midlines.png", "orientation.png"]
+
+
+def test_crossings_of_a_tilted_line_with_a_slice_are_where_the_line_meets_the_plane():
+    from fiberpipe.imaging.overlay import crossings
+
+    vs = (2e-5, 1e-5, 1e-5)  # dz = 2 dx: the z index of a point is its z / dz
+    p = np.array([[3.0, 4.0, 0.0], [13.0, 9.0, 40.0]]) * 1e-5  # x y z, m
+    P, ids = crossings(Polylines.from_list([p], 1e-5), 0, 10.0, vs)  # plane z index 10 = z 20e-5 m: halfway
+    assert list(ids) == [0] and np.allclose(P, [[6.5, 8.0]])  # (y, x) in voxels
 
 
 def test_explicit_slices_on_a_fiber_mat_warns_naming_the_key(tmp_path, write_yaml, caplog):
