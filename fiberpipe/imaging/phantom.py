@@ -326,3 +326,29 @@ def make_short_fiber_phantom(*, shape=(100, 180, 270), n_fibers: int = 150, radi
     truth = Polylines.from_list([voxel_to_xyz_m(l, voxel_size_m) for l in placed], r * voxel_size_m)
     truth.meta.update(voxel_size_m=float(voxel_size_m), radius_vox=r, seed=seed, orientation=orientation)
     return vol, truth
+
+
+#: The harder quasi-parallel family (:func:`make_hard_phantom`): ranges drawn per seed.
+HARD_FAMILY = {"n_fibers": 36, "shape": (160, 150, 150), "radius_vox": (4.0, 6.0), "contrast_to_noise": (3.0, 4.0),
+               "touching_fraction": 0.4, "max_tilt_deg": 10.0}
+
+
+def make_hard_phantom(seed: int, **overrides):
+    """A phantom of the harder quasi-parallel family: 36 fibers, 40 % of them in pairs touching
+    along their whole length, radius drawn from 4-6 voxels and contrast-to-noise from 3-4 per seed,
+    mean directions tilted by up to 10 degrees (each of the two slopes within +-tan(10 deg)/sqrt(2)).
+
+    ``overrides`` go to :func:`make_phantom`. Returns ``(volume, truth)``; ``truth.meta`` also
+    records the drawn ``contrast_to_noise``.
+    """
+    f = HARD_FAMILY
+    rng = np.random.default_rng(10_000 + seed)
+    r = float(rng.uniform(*f["radius_vox"]))
+    cnr = float(rng.uniform(*f["contrast_to_noise"]))
+    kw = dict(n_fibers=f["n_fibers"], shape=f["shape"], radius_vox=r, contrast_to_noise=cnr,
+              touching_fraction=f["touching_fraction"], max_tilt=np.tan(np.radians(f["max_tilt_deg"])) / np.sqrt(2),
+              seed=seed)
+    kw.update(overrides)
+    vol, truth = make_phantom(**kw)
+    truth.meta.update(contrast_to_noise=kw["contrast_to_noise"])
+    return vol, truth
