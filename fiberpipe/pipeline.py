@@ -156,7 +156,7 @@ STAGES: dict[str, Stage] = {
     "trace": Stage(
         "trace",
         ("trace", "fiber", "mesh"),
-        lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" or (c.trace.method == "auto" and _skeleton_needed(c)) else {})},
+        lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" or (c.trace.method == "auto" and (d / "skeleton.h5").exists()) else {})},
         lambda c, d: [d / "fibers.h5"],
         _do_trace,
         "fibers",
