@@ -47,6 +47,19 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) benchmarks/bench_solver.py
 
+# imaging on real and large scans: the real CT sample with default settings, the harder phantom
+# family (20 seeds, fibretracker beside), slab-by-slab segment of a 1000 x 2000 x 2000 uint16 volume
+.PHONY: bench-real-ct bench-hard-phantoms bench-segment-large
+bench-real-ct: setup
+	$(PY) benchmarks/bench_real_ct.py
+
+bench-hard-phantoms: setup
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) benchmarks/bench_hard_phantoms.py --seeds 0-19
+
+bench-segment-large: setup
+	$(PY) benchmarks/bench_segment_large.py --shape 1000 2000 2000 --slab 32
+
 .PHONY: bench-contact bench-pyelastica fast-settings contact-ensemble law-branch
 bench-contact: setup
 	$(PY) benchmarks/bench_contact.py
