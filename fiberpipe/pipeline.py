@@ -160,7 +160,7 @@ STAGES: dict[str, Stage] = {
         lambda c, d: [d / "fibers.h5"],
         _do_trace,
         "fibers",
-        code=("imaging", "polylines.py", "stages/trace.py"),
+        code=("imaging", "polylines.py", "stages/trace.py", "model/mesh.py"),
     ),
     "mesh": Stage(
         "mesh",
