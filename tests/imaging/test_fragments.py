@@ -171,3 +171,23 @@ def test_mesh_stage_drops_short_given_fibers_and_refuses_when_the_scene_names_fi
                                  "all.yaml"))
     with pytest.raises(InputError, match="all 3 fibers are shorter than mesh.min_fiber_length"):
         run_pipeline(cfg, tmp_path / "all")
+
+
+def test_a_tiff_folder_of_a_short_fiber_suspension_runs_through_mesh_with_default_settings(tmp_path, write_yaml):
+    import tifffile
+
+    from fiberpipe.config import load_config
+    from fiberpipe.imaging.phantom import make_short_fiber_phantom
+    from fiberpipe.pipeline import run_pipeline
+
+    vol, truth = make_short_fiber_phantom(shape=(60, 120, 180), n_fibers=80, radius_vox=2.7, length_vox=(30, 100), seed=6)
+    folder = tmp_path / "slices"
+    folder.mkdir()
+    for k, sl in enumerate(vol):
+        tifffile.imwrite(folder / f"slice_{k}.tif", sl)
+    cfg = load_config(write_yaml(f"input: {{volume: {folder}, voxel_size: 10 um}}\n"))
+    run_pipeline(cfg, tmp_path / "run")
+    st = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]
+    assert st["trace"]["method"] == "skeleton" and st["trace"]["dropped_short_fibers"] > 0
+    long_true = int((truth.lengths_m() >= 0.6e-3).sum())
+    assert 0.5 * long_true <= st["mesh"]["fibers"] <= 1.5 * long_true, (st["mesh"]["fibers"], long_true)
