@@ -96,6 +96,8 @@ def mask_orientation(mask: np.ndarray, voxel_size_m=1.0, *, max_voxels: int = 2_
     if r > 6.0:  # thick fibers: a coarser sample (radius ~3 samples) keeps the window small
         step *= int(r // 3.0)
         sub, scale, r = _subsample(mask, v, step)
+    if min(sub.shape) < 3:  # np.gradient and the window need a few samples along every axis
+        return {"source": "mask", "n_samples": 0}
     rho = float(np.clip(r, 1.0, 6.0))
     f = ndi.gaussian_filter(sub.astype(np.float32), 1.0)
     g = np.gradient(f, *scale)
@@ -117,15 +119,17 @@ def mask_orientation(mask: np.ndarray, voxel_size_m=1.0, *, max_voxels: int = 2_
     _, vecs = np.linalg.eigh(T)
     t_zyx = vecs[:, :, 0]
     out = _summary(t_zyx[:, ::-1].copy(), w)
-    out.update(source="mask", n_samples=n, radius_vox_subsampled=round(r, 3), subsample_step=step)
+    out.update(source="mask", n_samples=n, radius_vox_subsampled=round(r, 3), subsample_step=int(step))
     return out
 
 
 def _subsample(mask: np.ndarray, v: np.ndarray, step: int):
     """Strided sample of the mask, its relative spacing (z y x) and the fiber radius in samples
     from r = 2 V / S (digital surface faces x 2/3)."""
-    sub = np.ascontiguousarray(mask[::step, ::step, ::step])
-    scale = v * step / (v * step).min()
+    # a thin axis keeps at least 3 samples (a (3, 3000, 3000) volume is not cut to one slice)
+    st = [max(1, min(step, (n - 1) // 2)) for n in mask.shape]
+    sub = np.ascontiguousarray(mask[::st[0], ::st[1], ::st[2]])
+    scale = v * np.asarray(st) / (v * np.asarray(st)).min()
     V = float(sub.sum())
     faces = sum(float(np.count_nonzero(np.diff(sub, axis=a))) * scale[[i for i in range(3) if i != a]].prod()
                 for a in range(3))

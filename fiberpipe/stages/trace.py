@@ -111,7 +111,8 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
 
     t = cfg.trace
     orient = mask_orientation(mask, voxel_size)
-    parallel = is_quasi_parallel(orient, t.min_aligned_fraction)
+    # no measurable orientation (a mask too thin for the structure tensor): the slices tracer, as before auto
+    parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or not orient.get("n_samples")
     frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
     if t.method == "auto":
         method = "slices" if parallel else "skeleton"
