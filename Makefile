@@ -46,6 +46,19 @@ bench-imaging: setup
 bench-solver: setup
 	$(PY) -m fiberpipe.benchmarks.bench_solver
 
+# imaging on real and large scans: the real CT sample with default settings, the harder phantom
+# family (20 seeds, fibretracker beside), slab-by-slab segment of a 1000 x 2000 x 2000 uint16 volume
+.PHONY: bench-real-ct bench-hard-phantoms bench-segment-large
+bench-real-ct: setup
+	$(PY) -m fiberpipe.benchmarks.bench_real_ct
+
+bench-hard-phantoms: setup
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) -m fiberpipe.benchmarks.bench_hard_phantoms --seeds 0-19
+
+bench-segment-large: setup
+	$(PY) -m fiberpipe.benchmarks.bench_segment_large --shape 1000 2000 2000 --slab 32
+
 .PHONY: bench-contact bench-pyelastica fast-settings docs config-reference
 bench-contact: setup
 	$(PY) -m fiberpipe.benchmarks.bench_contact

@@ -185,12 +185,21 @@ class SkeletonizeConfig(Section):
 class TraceConfig(Section):
     """Tracing options; ``None`` means the tracer's own default, scaled by the fiber radius."""
 
-    method: Literal["slices", "skeleton"] = "slices"
+    method: Literal["auto", "slices", "skeleton"] = Field(
+        "auto", description="auto: slices when the fibers are quasi-parallel (see min_aligned_fraction), else skeleton")
+    min_aligned_fraction: float = Field(0.9, ge=0, le=1, description="auto picks the slices tracer when at least this "
+                                        "fraction of the fiber volume runs within 45 deg of one volume axis (mask "
+                                        "structure tensor); slices below it warns")
     max_jump_vox: Optional[float] = Field(None, gt=0, description="slices: default max(2, 0.6 r)")
     max_skip: Optional[int] = Field(None, ge=0, description="slices: slices a track may miss (3)")
     min_length_vox: Optional[float] = Field(None, ge=0, description="default max(10, 3 r)")
     smooth_sigma_vox: Optional[float] = Field(None, ge=0, description="default max(1, r/2)")
     expected_radius: Optional[Length] = None
+    min_length: Optional[Length] = Field(None, ge=0, description="shorter traced fibers are dropped, with a warning and a "
+                                         "count in summary.json; default: two mesh elements (2 × mesh.element_length)")
+    join_gap_vox: Optional[float] = Field(None, ge=0, description="largest gap bridged between two pieces of one fiber "
+                                          "(collinear, in line, similar radius); default max(4, 4 r); 0: no joining")
+    pictures: bool = Field(True, description="write trace_slices.png, trace_midlines.png and orientation.png into the run folder")
 
 
 class MeshConfig(Section):
@@ -198,6 +207,8 @@ class MeshConfig(Section):
     smooth_sigma: Length = 0.0
     resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input (strain-free adjustment; the simulate stage also moves surfaces up to 5 % of r inside a plate or wall back out)")
     max_overlap_shift: Length = Field(0.1e-3, description="refuse inputs whose overlaps need larger node shifts")
+    min_fiber_length: Optional[Length] = Field(None, ge=0, description="shorter fibers are dropped, with a warning and a count "
+                                               "in summary.json; default: two elements (2 × mesh.element_length)")
 
     @field_validator("element_length")
     @classmethod

@@ -159,12 +159,12 @@ STAGES: dict[str, Stage] = {
     ),
     "trace": Stage(
         "trace",
-        ("trace", "fiber"),
-        lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" else {})},
+        ("trace", "fiber", "mesh"),
+        lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" or (c.trace.method == "auto" and (d / "skeleton.h5").exists()) else {})},
         lambda c, d: [d / "fibers.h5"],
         _do_trace,
         "fibers",
-        code=("imaging", "polylines.py", "stages/trace.py"),
+        code=("imaging", "polylines.py", "stages/trace.py", "model/mesh.py"),
     ),
     "mesh": Stage(
         "mesh",

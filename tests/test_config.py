@@ -209,7 +209,7 @@ def test_skeleton_tracer_with_skeletonize_disabled_is_refused(write_yaml):
 ])
 def test_consistent_skeletonize_and_trace_settings_are_accepted(write_yaml, extra):
     cfg = load_config(write_yaml(PHANTOM + extra, "ok.yaml"))
-    assert cfg.trace.method in ("slices", "skeleton")
+    assert cfg.trace.method in ("auto", "slices", "skeleton")
 
 
 def test_friction_stiffness_takes_units_and_a_misspelt_law_gets_a_suggestion():

@@ -259,3 +259,96 @@ def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float
     truth.meta.update(touching=np.array(touching, dtype=bool), voxel_size_m=vs,
                       radius_vox=r, seed=seed)
     return vol, truth
+
+
+def make_short_fiber_phantom(*, shape=(100, 180, 270), n_fibers: int = 150, radius_vox: float = 2.7,
+                             length_vox=(25.0, 80.0), orientation: str = "planar", min_gap_vox: float = 0.5,
+                             voxel_size_m: float = 10e-6, contrast_to_noise: float = 4.0,
+                             blur_sigma_vox: float = 0.8, seed: int = 0, dtype="uint16",
+                             max_attempts: int = 200):
+    """Make a synthetic CT of a short-fiber suspension: straight fibers of random direction.
+
+    Parameters
+    ----------
+    shape : (3,) ints
+        Volume shape (z, y, x), voxels.
+    n_fibers : int
+        Fibers to place (fewer if the volume fills up: random sequential addition gives up on a
+        fiber after ``max_attempts`` placements).
+    radius_vox : float
+    length_vox : (min, max)
+        Uniform range of fiber lengths, voxels.
+    orientation : {"planar", "isotropic"}
+        Directions uniform in the y-x plane (a mat lying in the slices, as in a short-fiber
+        suspension that settled in layers, tilted out of the plane by at most 10 degrees), or
+        uniform on the sphere.
+    min_gap_vox, voxel_size_m, contrast_to_noise, blur_sigma_vox, seed, dtype
+        As :func:`make_phantom`.
+
+    Returns
+    -------
+    volume, truth : as :func:`make_phantom` (every fiber lies inside the volume).
+    """
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    shp = np.array(shape, dtype=float)
+    r = float(radius_vox)
+    margin = r + 1.5
+    placed, pts_all = [], np.zeros((0, 3))
+    tree = None
+    for _ in range(int(n_fibers)):
+        for _attempt in range(max_attempts):
+            L = rng.uniform(*length_vox)
+            if orientation == "planar":
+                phi = rng.uniform(0, np.pi)
+                el = np.radians(rng.uniform(-10.0, 10.0))
+                d = np.array([np.sin(el), np.cos(el) * np.sin(phi), np.cos(el) * np.cos(phi)])  # z y x
+            elif orientation == "isotropic":
+                d = rng.normal(size=3)
+                d /= np.linalg.norm(d)
+            else:
+                raise InputError(f"phantom: unknown orientation {orientation!r} (use 'planar' or 'isotropic')")
+            c = rng.uniform(margin, shp - 1 - margin)
+            a, b = c - 0.5 * L * d, c + 0.5 * L * d
+            if np.any(np.minimum(a, b) < margin) or np.any(np.maximum(a, b) > shp - 1 - margin):
+                continue
+            line = np.linspace(a, b, max(2, int(np.ceil(L)) + 1))
+            if tree is not None and np.isfinite(tree.query(line, k=1, distance_upper_bound=2 * r + min_gap_vox)[0]).any():
+                continue
+            placed.append(line)
+            pts_all = np.vstack([pts_all, line])
+            tree = cKDTree(pts_all)
+            break
+    vol = _render_vox(placed, [r] * len(placed), tuple(int(s) for s in shape), blur_sigma_vox=blur_sigma_vox,
+                      contrast_to_noise=contrast_to_noise, seed=seed + 1, background=0.0, foreground=1.0,
+                      dtype=dtype)
+    truth = Polylines.from_list([voxel_to_xyz_m(l, voxel_size_m) for l in placed], r * voxel_size_m)
+    truth.meta.update(voxel_size_m=float(voxel_size_m), radius_vox=r, seed=seed, orientation=orientation)
+    return vol, truth
+
+
+#: The harder quasi-parallel family (:func:`make_hard_phantom`): ranges drawn per seed.
+HARD_FAMILY = {"n_fibers": 36, "shape": (160, 150, 150), "radius_vox": (4.0, 6.0), "contrast_to_noise": (3.0, 4.0),
+               "touching_fraction": 0.4, "max_tilt_deg": 10.0}
+
+
+def make_hard_phantom(seed: int, **overrides):
+    """A phantom of the harder quasi-parallel family: 36 fibers, 40 % of them in pairs touching
+    along their whole length, radius drawn from 4-6 voxels and contrast-to-noise from 3-4 per seed,
+    mean directions tilted by up to 10 degrees (each of the two slopes within +-tan(10 deg)/sqrt(2)).
+
+    ``overrides`` go to :func:`make_phantom`. Returns ``(volume, truth)``; ``truth.meta`` also
+    records the drawn ``contrast_to_noise``.
+    """
+    f = HARD_FAMILY
+    rng = np.random.default_rng(10_000 + seed)
+    r = float(rng.uniform(*f["radius_vox"]))
+    cnr = float(rng.uniform(*f["contrast_to_noise"]))
+    kw = dict(n_fibers=f["n_fibers"], shape=f["shape"], radius_vox=r, contrast_to_noise=cnr,
+              touching_fraction=f["touching_fraction"], max_tilt=np.tan(np.radians(f["max_tilt_deg"])) / np.sqrt(2),
+              seed=seed)
+    kw.update(overrides)
+    vol, truth = make_phantom(**kw)
+    truth.meta.update(contrast_to_noise=kw["contrast_to_noise"])
+    return vol, truth

@@ -534,7 +534,10 @@ def trace(mask: np.ndarray, *, voxel_size_m, method: str = "slices", skeleton: n
         (max(10, 3 r)), ``merge_gap_vox`` (max(6, 3 r)), ``smooth_sigma_vox`` (max(1, r/2)),
         ``spacing_vox`` (1), ``peak_threshold`` (0.5, in units of r), ``refine`` (True),
         ``progress`` (callable(done, total)). ``skeleton``: see
-        :func:`fiberpipe.imaging.skeleton_trace.trace_skeleton`.
+        :func:`fiberpipe.imaging.skeleton_trace.trace_skeleton`. Both: ``join_gap_vox`` (max(4, 4 r);
+        0 turns joining off), ``join_offset_vox`` (max(1.5, r)), ``join_angle_deg`` (25), the bounds
+        of :func:`fiberpipe.imaging.fragments.join_fragments`, which chains the broken pieces of
+        one fiber after tracing.
 
     Returns
     -------
@@ -548,11 +551,32 @@ def trace(mask: np.ndarray, *, voxel_size_m, method: str = "slices", skeleton: n
         mask = mask.astype(bool)
     if not mask.any():
         raise InputError("trace: the mask is empty")
+    join = {k: options.pop(k) for k in ("join_gap_vox", "join_offset_vox", "join_angle_deg") if k in options}
     if method == "slices":
-        return trace_slices(mask, voxel_size_m, expected_radius_m=expected_radius_m, **options)
-    if method == "skeleton":
+        out = trace_slices(mask, voxel_size_m, expected_radius_m=expected_radius_m, **options)
+    elif method == "skeleton":
         from .skeleton_trace import trace_skeleton
 
-        return trace_skeleton(mask, voxel_size_m, skeleton=skeleton, radius_vox=radius_vox,
-                              expected_radius_m=expected_radius_m, **options)
-    raise InputError(f"trace: unknown method {method!r} (use 'slices' or 'skeleton')")
+        out = trace_skeleton(mask, voxel_size_m, skeleton=skeleton, radius_vox=radius_vox,
+                             expected_radius_m=expected_radius_m, **options)
+    else:
+        raise InputError(f"trace: unknown method {method!r} (use 'slices' or 'skeleton')")
+    return _join(out, voxel_size_m, **join)
+
+
+def _join(fibers: Polylines, voxel_size_m, *, join_gap_vox: float | None = None,
+          join_offset_vox: float | None = None, join_angle_deg: float | None = None) -> Polylines:
+    """Join broken pieces of one fiber (:func:`fiberpipe.imaging.fragments.join_fragments`) with
+    bounds scaled by the radius estimate r: gap max(4, 4 r), offset max(1.5, r) voxels, 25 deg."""
+    from .fragments import join_fragments
+
+    vmin = float(voxel_size_zyx(voxel_size_m).min())
+    r = float(fibers.meta.get("radius_vox_estimate") or 1.0)
+    gap = max(4.0, 4.0 * r) if join_gap_vox is None else float(join_gap_vox)
+    off = max(1.5, r) if join_offset_vox is None else float(join_offset_vox)
+    ang = 25.0 if join_angle_deg is None else float(join_angle_deg)
+    n_before = fibers.n_fibers
+    joined, n_joins = join_fragments(fibers, max_gap_m=gap * vmin, max_offset_m=off * vmin, max_angle_deg=ang)
+    joined.meta.update(n_fibers=joined.n_fibers, n_fibers_before_join=n_before, n_joins=n_joins,
+                       join=dict(gap_vox=gap, offset_vox=off, angle_deg=ang))
+    return joined

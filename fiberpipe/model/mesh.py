@@ -149,6 +149,12 @@ def resample_polyline(points_m: np.ndarray, element_length_m: float, *, smooth_s
     return resample_arclength(pts, element_length_m)
 
 
+def short_fibers(polylines: Polylines, min_fiber_length_m: float) -> np.ndarray:
+    """Indices of the fibers shorter than ``min_fiber_length_m`` (m), the ones the mesh stage drops
+    (``mesh.min_fiber_length``) instead of refusing the whole input, (k,) int64."""
+    return np.flatnonzero(polylines.lengths_m() < min_fiber_length_m)
+
+
 def mesh_polylines(
     polylines: Polylines,
     element_length_m: float = 0.3e-3,

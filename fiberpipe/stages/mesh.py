@@ -16,10 +16,12 @@ from fiberpipe.stages._common import input_hashes
 
 def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = "") -> dict:
     polylines = read_fibers(fibers_path)
+    polylines, dropped, min_len = _drop_short(cfg, polylines)
     mesh = mesh_polylines(
         polylines,
         cfg.mesh.element_length,
         smooth_sigma_m=cfg.mesh.smooth_sigma,
+        min_fiber_length_m=min_len,
         radius_m=cfg.fiber.radius,
     )
     overlaps = resolve_overlaps(mesh, max_shift_m=cfg.mesh.max_overlap_shift) if cfg.mesh.resolve_overlaps else None
@@ -42,6 +44,8 @@ def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = 
     return {
         **figures,
         "fibers": mesh.n_fibers,
+        "dropped_short_fibers": dropped,
+        "min_fiber_length_m": min_len,
         "nodes": mesh.n_nodes,
         "elements": mesh.n_elements,
         "mean_element_length_m": float(lengths.mean()),
@@ -62,3 +66,34 @@ def write_deck(cfg: Config, mesh, path: Path) -> None:
         m = cfg.material
         write_abaqus_inp(path, mesh, youngs_modulus_pa=m.youngs_modulus, poisson_ratio=m.poisson_ratio_value,
                          density_kg_m3=m.density, heading=f"fiberpipe {cfg.name}")
+
+
+def _drop_short(cfg: Config, polylines):
+    """Drop the fibers shorter than ``mesh.min_fiber_length`` (default two elements), with one
+    warning line; refuse when the scene refers to fibers by index (dropping one renumbers them)."""
+    import logging
+
+    import numpy as np
+
+    from fiberpipe.errors import InputError
+    from fiberpipe.model.mesh import short_fibers
+    from fiberpipe.polylines import Polylines
+
+    min_len = cfg.mesh.min_fiber_length if cfg.mesh.min_fiber_length is not None else 2.0 * cfg.mesh.element_length
+    short = short_fibers(polylines, min_len)
+    if len(short) == 0:
+        return polylines, 0, min_len
+    lengths = polylines.lengths_m()
+    what = f"{len(short)} of {polylines.n_fibers} fibers are shorter than mesh.min_fiber_length = {min_len * 1e3:.3g} mm"
+    if len(short) == polylines.n_fibers:
+        raise InputError(f"all {polylines.n_fibers} fibers are shorter than mesh.min_fiber_length = {min_len * 1e3:.3g} "
+                         f"mm (longest {lengths.max() * 1e3:.3g} mm); lower mesh.min_fiber_length or mesh.element_length")
+    by_index = [n for n in ("clamps", "loads", "drives") if n in cfg.scene.effects and getattr(cfg.scene, n)]
+    if by_index:
+        raise InputError(f"{what} (fiber {int(short[0])}: {lengths[short[0]] * 1e3:.3g} mm) and would be dropped, "
+                         f"which renumbers the fibers scene.{by_index[0]} refers to; remove them from the input or "
+                         "lower mesh.min_fiber_length")
+    keep = np.setdiff1d(np.arange(polylines.n_fibers), short)
+    kept = Polylines.from_list([polylines.fiber(i) for i in keep], polylines.radius_m[keep])
+    logging.getLogger("fiberpipe").warning("mesh: dropped %s", what)
+    return kept, int(len(short)), min_len

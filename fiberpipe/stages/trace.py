@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_text_atomic
 from fiberpipe.config import Config
+from fiberpipe.errors import InputError
 from fiberpipe.stages._common import input_hashes
 from fiberpipe.stages.skeletonize import eval_list
+
+log = logging.getLogger("fiberpipe")
 
 
 def run_trace(
@@ -22,35 +26,132 @@ def run_trace(
     truth_path: Path | None = None,
     config_sha256: str = "",
 ) -> dict:
+    from fiberpipe.imaging.orientation import fiber_orientation
     from fiberpipe.imaging.trace import trace
 
     art = read_artifact(mask_path, "mask")
     mask = art["mask"]
     voxel_size = eval_list(art.attrs["voxel_size_m"])
     t = cfg.trace
+    method, orient_mask = choose_method(cfg, mask, voxel_size)
     kwargs = dict(
         voxel_size_m=voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
-        method=t.method,
+        method=method,
         expected_radius_m=t.expected_radius or cfg.fiber.radius,
     )
-    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if t.method == "slices" else ("min_length_vox", "smooth_sigma_vox")
+    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method == "slices" else ("min_length_vox", "smooth_sigma_vox")
     kwargs.update({k: getattr(t, k) for k in options if getattr(t, k) is not None})
     inputs = {"mask": Path(mask_path)}
-    if t.method == "skeleton":
+    if method == "skeleton" and skeleton_path is not None and Path(skeleton_path).exists():
         sk = read_artifact(skeleton_path, "skeleton")
         kwargs["skeleton"] = sk["skeleton"]
         kwargs["radius_vox"] = sk["radius_vox"]
         inputs["skeleton"] = Path(skeleton_path)
+    if t.join_gap_vox is not None:
+        kwargs["join_gap_vox"] = t.join_gap_vox
     fibers = trace(mask, **kwargs)
-    write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": t.method})
+    fibers, folds = split_folds_for_mesh(cfg, fibers)
+    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
+    write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
+    orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
+    write_text_atomic(Path(out).with_name("orientation.json"), json.dumps(orientation, indent=2))
+    of = orientation["fibers"]
     figures = {
+        "method": method,
+        "aligned_fraction_45deg_mask": orient_mask.get("aligned_fraction_45deg"),
+        "orientation": {k: of[k] for k in ("tensor", "eigenvalues", "dominant_axis_xyz", "median_angle_deg",
+                                           "aligned_fraction_45deg", "angle_histogram") if k in of},
         "fibers": int(fibers.n_fibers),
+        "joined_gaps": int(fibers.meta.get("n_joins", 0)),
+        "cut_folds": folds,
+        "dropped_short_fibers": dropped,
+        "min_length_m": min_length_m(cfg),
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
+        "median_radius_m": float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0,
     }
+    truth, matches = None, None
     if truth_path is not None and Path(truth_path).exists():
         figures["accuracy"] = trace_accuracy_report(out, truth_path, voxel_size[0], Path(out).with_name("trace_accuracy.json"))
+        truth, matches = read_fibers(truth_path), figures["accuracy"].get("matches")
+    if t.pictures and fibers.n_fibers:
+        figures["pictures"] = write_pictures(Path(out).parent, mask, fibers, voxel_size, orientation,
+                                             axis=int(fibers.meta.get("axis", 0) or 0), truth=truth, matches=matches)
     return figures
+
+
+def write_pictures(run_dir: Path, mask, fibers, voxel_size, orientation: dict, *, axis: int = 0, truth=None,
+                   matches=None) -> list[str]:
+    """The tracing check pictures in the run folder: slices at three depths with the traced centres
+    and radii over the mask (``trace_slices.png``; with ground truth, misses and false tracks
+    marked), the mid-lines in 3D (``trace_midlines.png``), the orientation histogram
+    (``orientation.png``). Returns their file names."""
+    from fiberpipe.imaging.overlay import midlines_3d_png, orientation_png, slice_overlay_png
+
+    names = ["trace_slices.png", "trace_midlines.png", "orientation.png"]
+    slice_overlay_png(run_dir / names[0], mask, fibers, voxel_size, axis=axis, truth=truth, matches=matches)
+    midlines_3d_png(run_dir / names[1], fibers)
+    orientation_png(run_dir / names[2], orientation)
+    return names
+
+
+def min_length_m(cfg: Config) -> float:
+    """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
+    return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
+
+
+def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
+    """The tracer to run and the mask's orientation distribution.
+
+    ``trace.method: auto`` picks ``slices`` when at least ``trace.min_aligned_fraction`` of the
+    fiber volume runs within 45 deg of one volume axis, else ``skeleton``; an explicit ``slices`` on
+    fibers that are not quasi-parallel runs, with one warning line naming the key.
+    """
+    from fiberpipe.imaging.orientation import is_quasi_parallel, mask_orientation
+
+    t = cfg.trace
+    orient = mask_orientation(mask, voxel_size)
+    # no measurable orientation (a mask too thin for the structure tensor): the slices tracer, as before auto
+    parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or not orient.get("n_samples")
+    frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
+    if t.method == "auto":
+        method = "slices" if parallel else "skeleton"
+        log.info("trace: %.0f %% of the fiber volume within 45 deg of axis %s: method %s", frac,
+                 orient.get("nearest_volume_axis"), method)
+        return method, orient
+    if t.method == "slices" and not parallel:
+        log.warning("trace: only %.0f %% of the fiber volume runs within 45 deg of one volume axis (below "
+                    "trace.min_aligned_fraction = %g): the slices tracer needs quasi-parallel fibers; set "
+                    "trace.method: skeleton (or auto)", frac, t.min_aligned_fraction)
+    return t.method, orient
+
+
+def split_folds_for_mesh(cfg: Config, fibers):
+    """Cut traced fibers where they fold back (a turn above 90 deg between two consecutive mesh
+    elements, nodes placed as the mesh stage places them), which the mesh stage would refuse."""
+    from fiberpipe.imaging.fragments import split_folds
+    from fiberpipe.model.mesh import resample_polyline
+
+    el, sm = cfg.mesh.element_length, cfg.mesh.smooth_sigma
+    return split_folds(fibers, lambda p: resample_polyline(p, el, smooth_sigma_m=sm), max_turn_deg=90.0)
+
+
+def drop_short_fibers(fibers, min_length: float, key: str):
+    """Drop fibers shorter than ``min_length`` (m), logging one warning line that names ``key``.
+
+    Returns the kept fibers and the number dropped. Every fiber too short is an InputError (there
+    is nothing left to mesh).
+    """
+    from fiberpipe.imaging.fragments import drop_short
+
+    kept, dropped = drop_short(fibers, min_length)
+    if len(dropped) and kept.n_fibers == 0:
+        raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm "
+                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key} or mesh.element_length")
+    if len(dropped):
+        log.warning("%s: dropped %d of %d fibers shorter than %s = %.3g mm", key.split(".")[0], len(dropped),
+                    fibers.n_fibers, key, min_length * 1e3)
+    return kept, int(len(dropped))
 
 
 def trace_accuracy_report(fibers_path: Path, truth_path: Path, voxel_size_m: float, out_json: Path | None = None) -> dict:

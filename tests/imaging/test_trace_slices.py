@@ -86,3 +86,15 @@ def test_trace_output_layout():
     z = traced.fiber(0)[:, 2]
     assert z.min() < 2 * vs and z.max() > 57 * vs
     assert traced.meta["method"] == "slices" and "params" in traced.meta
+
+
+@pytest.mark.parametrize("seed", [0, 7])
+def test_harder_family_touching_tilted_low_contrast(seed):
+    """36 fibers, 40 % touching, r 4-6, CNR 3-4, tilts up to 10 degrees (make_hard_phantom)."""
+    from fiberpipe.imaging.phantom import make_hard_phantom
+
+    vol, truth = make_hard_phantom(seed)
+    vs = truth.meta["voxel_size_m"]
+    acc = trace_accuracy(trace(segment(vol)[0], voxel_size_m=vs), truth, voxel_size_m=vs)
+    assert acc["recall"] >= 0.98 and acc["precision"] >= 0.98, acc
+    assert acc["mean_error_vox"] <= 0.30 and acc["coverage"] >= 0.95, acc
