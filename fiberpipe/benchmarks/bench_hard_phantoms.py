@@ -39,7 +39,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     try:
-        from bench_imaging import run_fibretracker
+        from fiberpipe.benchmarks.bench_imaging import run_fibretracker
     except Exception:  # noqa: BLE001 — fibretracker is optional (bench extra)
         run_fibretracker = None
     rows = ["| seed | r (vox) | CNR | auto | recall | precision | mean err (vox) | p95 (vox) | coverage | time (s) | fibretracker recall / precision / mean err |",
