@@ -1,4 +1,4 @@
-"""Accuracy of traced mid-lines against ground truth (SPEC section 5, Accuracy)."""
+"""Accuracy of traced mid-lines against ground truth (docs/imaging.md, accuracy)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Tracing: fiber mask (and optionally its skeleton) -> one mid-line polyline per fiber.
 
-Two methods (SPEC section 5):
+Two methods (docs/imaging.md):
 
 - ``slices`` (default): fiber centres found slice by slice across the dominant fiber axis and linked
   between slices. Works for quasi-parallel fibers that touch along their length, which a 3D

@@ -1,1 +1,1 @@
-"""Parameter sweeps: what accuracy costs in wall time (SPEC section 9)."""
+"""Parameter sweeps: what accuracy costs in wall time (docs/accuracy-cost.md)."""
