@@ -334,6 +334,27 @@ def study(study_file, out, workers, scheduler):
 
 @main.command()
 @click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--target", required=True, type=click.Path(dir_okay=False), help="CSV with columns U_m,load_N.")
+@click.option("--param", "params", multiple=True, required=True, metavar="KEY=LO:HI",
+              help="A config key (specimen keys too) and its bounds, units accepted; repeatable.")
+@click.option("--seeds", default=1, show_default=True, type=int, help="Specimen seeds the curve is averaged over.")
+@click.option("--budget", default=20, show_default=True, type=int, help="Largest number of evaluations.")
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/fits/<config name>).")
+@click.option("--workers", default=1, show_default=True, type=int, help="Runs in parallel (local processes).")
+@click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
+def fit(config, target, params, seeds, budget, out, workers, scheduler):
+    """Fit config keys so that the simulated load matches a measured curve (fit.json, fit.png, history.csv)."""
+    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.studies.fit import run_fit
+
+    out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
+    ensure_output_dir(out)
+    run_fit(config, target, list(params), seeds=seeds, budget=budget, out=out, workers=workers,
+            scheduler=scheduler, echo=_echo)
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/specimens/<config name>).")
 @click.option("--seed", type=int, help="Replaces specimen.seed.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help="Override a config key (repeatable), e.g. specimen.n_fibers=400.")
