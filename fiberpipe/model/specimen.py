@@ -572,9 +572,17 @@ def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3,
         return a * (1 - u) + b * u + bow_y
 
     def gaps(dx_, a, b):
-        if len(near) == 0:
+        yc_ = ycurve(a, b)
+        # only fibers whose distance at equal z comes within reach: a pair's closest points are at
+        # most 3 segments apart in z, so the others' gaps exceed 3 trust_max (slopes below 0.5) and
+        # enter neither the linear program nor the overlap check (the same result, far fewer pairs)
+        cand = near
+        if len(near):
+            d_same = np.min(np.hypot(X[near] - (x + dx_), Y[near] - yc_), axis=1)
+            cand = near[d_same < need + 3 * trust_max + 1e-3]
+        if len(cand) == 0:
             return np.zeros(0), np.zeros((0, 3)), np.zeros(0)
-        g, nvec, zp, _which = _pair_geometry(x + dx_, ycurve(a, b), X[near], Y[near], z, need)
+        g, nvec, zp, _which = _pair_geometry(x + dx_, yc_, X[cand], Y[cand], z, need)
         return g, nvec, (zp - z[0]) / length
 
     trust = trust0
