@@ -151,7 +151,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
         "box_min_m": box_min, "box_max_m": box_max,
         "pile_top_m": top, "top_clearance_m": float(height - top), "lowest_surface_m": lowest,
         "contacts_at_U0": {
-            "fiber_fiber": fiber_contacts(pts, off, r),
+            "fiber_fiber": fiber_contacts(pts, off, r, tol_m=sp.gap + 1e-7),
             "fibers_on_lower_plate": int(np.sum(per_fiber_low <= sp.gap + 1e-7)),
             "fibers_at_upper_plate": int(np.sum(per_fiber_top >= height - sp.gap - 1e-7)),
         },
