@@ -520,10 +520,18 @@ class SolverConfig(Section):
         return self
 
 
+class ReferenceStageConfig(Section):
+    displacement: Length = Field(description="the plate displacement U at which the stage was scanned")
+    fibers: str = Field(description="the stage's scanned mid-lines (a fibers.h5)")
+
+
 class PostConfig(Section):
     reference_fibers: Optional[str] = None
     plots: bool = True
     quasi_static_ratio: float = Field(1e-2, gt=0)
+    reference_stages: list[ReferenceStageConfig] = Field(
+        default_factory=list, description="scans at stages of the compaction: the position error of the "
+        "simulated mid-lines at each stage's U (post/reference_stages.csv, .png)")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -732,6 +740,10 @@ def _resolve_paths(data: dict, folder: Path) -> None:
             p = Path(sec[key]).expanduser()
             if not p.is_absolute():
                 sec[key] = str((folder / p).resolve())
+    stages = data.get("post", {}).get("reference_stages") if isinstance(data.get("post"), dict) else None
+    for st in stages if isinstance(stages, list) else []:  # post.reference_stages[*].fibers
+        if isinstance(st, dict) and isinstance(st.get("fibers"), str) and not Path(st["fibers"]).expanduser().is_absolute():
+            st["fibers"] = str((folder / Path(st["fibers"]).expanduser()).resolve())
 
 
 def _deep_merge(base: dict, over: dict) -> dict:
