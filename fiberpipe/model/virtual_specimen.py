@@ -202,11 +202,15 @@ def run_specimen_command(config: str, out: Path, *, seed: int | None = None, ove
     """``fiberpipe specimen``: load ``config`` (dotted ``overrides`` applied), build, report."""
     from fiberpipe.config import set_dotted
 
+    import time
+
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     raw = load_raw(config)
     for k, v in (overrides or {}).items():
         set_dotted(raw, k, v)
     info = build_specimen(raw, out, where=str(config), seed=seed, echo=echo)
     echo(specimen_report(info, out))
+    echo(f"  built in {time.perf_counter() - wall0:.0f} s wall, {time.process_time() - cpu0:.0f} s CPU (one process)")
     return info
 
 
