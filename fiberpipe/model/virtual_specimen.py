@@ -143,6 +143,10 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     counts, _ = np.histogram(nb["phi_deg"], bins=edges)
     per_fiber_low = np.array([np.min(pts[off[i]:off[i + 1], 1]) - r for i in range(fibers.n_fibers)])
     per_fiber_top = np.array([np.max(pts[off[i]:off[i + 1], 1]) + r for i in range(fibers.n_fibers)])
+    if settle:  # the settled pile's own figures (contacts within 0.1 µm: pressed by the weight)
+        settle.update(pile_top_before_m=float(deposit["pile_top_m"]), pile_top_m=top, top_clearance_m=float(height - top),
+                      fiber_contacts=fiber_contacts(pts, off, r), lowest_surface_m=lowest,
+                      fibers_on_lower_plate=int(np.sum(per_fiber_low <= 1e-7)))
     info = {
         "width_m": sp.width, "height_m": float(height), "length_m": sp.length,
         "volume_fraction": float(sp.n_fibers * math.pi * r**2 / (sp.width * height)),
@@ -161,6 +165,8 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
         "generator": {"function": "fiberpipe.model.specimen.cassette_specimen",
                       **{k: (list(v) if isinstance(v, tuple) else v) for k, v in params.items()},
                       "spool_radius_m": sp.bow.spool_radius, "spool_radius_range_m": sp.bow.spool_radius_range,
+                      **({"settle": {k: settle[k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial", "mass_scaling",
+                                                            "gravity_scale") if k in settle}} if settle else {}),
                       "specimen": sp.model_dump(mode="json")},
         "statistics": stats,
     }
