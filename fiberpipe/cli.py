@@ -348,9 +348,15 @@ def fit(config, target, params, seeds, budget, out, workers, scheduler):
     from fiberpipe.studies.fit import run_fit
 
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
+    created = not out.exists()
     ensure_output_dir(out)
-    run_fit(config, target, list(params), seeds=seeds, budget=budget, out=out, workers=workers,
-            scheduler=scheduler, echo=_echo)
+    try:
+        run_fit(config, target, list(params), seeds=seeds, budget=budget, out=out, workers=workers,
+                scheduler=scheduler, echo=_echo)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # bad input leaves no empty folder behind
+        raise
 
 
 @main.command()
@@ -371,8 +377,14 @@ def specimen(config, out, seed, sets):
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         overrides[key.strip()] = yaml_value(value)
     out = Path(out) if out else Path("runs") / "specimens" / Path(config).stem
+    created = not out.exists()
     ensure_output_dir(out)
-    run_specimen_command(config, out, seed=seed, overrides=overrides, echo=click.echo)
+    try:
+        run_specimen_command(config, out, seed=seed, overrides=overrides, echo=click.echo)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a refused specimen leaves no empty folder behind
+        raise
 
 
 def yaml_value(text: str):

@@ -91,6 +91,7 @@ def test_bad_target_curves_are_refused_with_one_line(tmp_path, text, words):
     assert r.exit_code == 2, r.output
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and words in lines[0] and "t.csv" in lines[0], r.output
+    assert not (tmp_path / "o").exists()  # no empty folder left behind
 
 
 @pytest.mark.parametrize("param, words", [
