@@ -157,9 +157,18 @@ def run_point(raw: dict, run_dir: str, where: str) -> dict:
 
 
 def load_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The run's ``post/force_displacement.csv`` (U_m, load_N), repeated U averaged."""
-    U, F = read_target(Path(run_dir) / "post" / "force_displacement.csv")
-    Uu, inv = np.unique(U, return_inverse=True)
+    """The loading branch of the run's ``post/force_displacement.csv`` (U_m, load_N): the samples
+    up to the largest U, repeated U averaged."""
+    path = Path(run_dir) / "post" / "force_displacement.csv"
+    if not path.is_file():
+        raise InputError("the run wrote no force-displacement curve (no plates?)", where=str(path))
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    U, F = np.atleast_1d(data["U_m"]), np.atleast_1d(data["load_N"])
+    ok = np.isfinite(U) & np.isfinite(F)
+    U, F = U[ok], F[ok]
+    end = int(np.argmax(U)) + 1
+    Uu, inv = np.unique(U[:end], return_inverse=True)
+    F = F[:end]
     Fu = np.bincount(inv, weights=F) / np.bincount(inv)
     return Uu, Fu
 
