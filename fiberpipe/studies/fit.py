@@ -236,8 +236,6 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
             out: str | Path | None = None, workers: int = 1, scheduler: str | None = None, echo=print) -> dict:
     """Fit ``params`` (``KEY=LO:HI`` strings) of ``config`` to the ``target`` curve; writes
     ``out/fit.json``, ``out/history.csv`` and ``out/fit.png``; returns fit.json's dict."""
-    from scipy.optimize import minimize, minimize_scalar
-
     where = str(config)
     base = load_raw(config)
     U_t, F_t = read_target(target)
@@ -265,6 +263,30 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     seed_list = [seed0 + k for k in range(seeds)] if seed0 is not None else [None]
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
     out.mkdir(parents=True, exist_ok=True)
+    cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None
+    try:
+        return _search(base, ps, U_t, F_t, seed_list, out, workers,
+                       cluster.scheduler_address if cluster is not None else scheduler, where, echo, config, target,
+                       budget, keys)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def _local_cluster(workers: int):
+    """One local Dask cluster for the whole fit (not one per evaluation); None without Dask (each
+    evaluation then runs its seeds on a local process pool)."""
+    try:
+        from dask.distributed import LocalCluster
+    except ImportError:
+        return None
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env={"NUMBA_NUM_THREADS": "1"})
+
+
+def _search(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo, config, target, budget, keys) -> dict:
+    """The search of :func:`run_fit` with its evaluator; writes the outputs."""
+    from scipy.optimize import minimize, minimize_scalar
+
     ev = _Evaluator(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo)
     echo(f"fit {', '.join(keys)} of {config} to {target} ({len(U_t)} samples), {len(seed_list)} seed(s), "
          f"budget {budget} evaluations")

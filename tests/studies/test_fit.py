@@ -124,3 +124,36 @@ def test_seeds_need_a_specimen_section(tmp_path, target):
     r = CliRunner().invoke(main, ["fit", str(cfg), "--target", str(target[1]), "--param", "material.youngs_modulus=1e9:2e9",
                                   "--seeds", "3", "--out", str(tmp_path / "o")])
     assert r.exit_code == 2 and "no specimen section" in r.output, r.output
+
+
+def test_specimen_keys_are_fitted_over_seeds_with_the_mean_curve(tmp_path):
+    """A specimen key (the spool radius) over two specimen seeds: each evaluation builds both
+    specimens and runs them; the objective is the RMS of the seeds' mean curve against the target,
+    recomputed here from the runs' own force_displacement.csv."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    raw = {"extends": str(repo / "configs" / "paper-40.yaml"), "name": "tiny",
+           "specimen": {"n_fibers": 6, "width": "1.5 mm", "volume_fraction": 0.2, "candidates": 1,
+                        "upper_plate": "pile", "settle": {"enabled": False}},
+           "scene": {"loading": {"displacement": "0.05 mm", "velocity": "10000 mm/min", "ramp": "smooth",
+                                 "ramp_fraction": 0.1}},
+           "solver": {"output_frames": 3}, "post": {"plots": False}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(raw))
+    (tmp_path / "t.csv").write_text("U_m,load_N\n0,0\n2.5e-5,0.001\n5e-5,0.002\n")
+    res = run_fit(tmp_path / "c.yaml", tmp_path / "t.csv", ["specimen.bow.spool_radius=100 mm:1 m"], seeds=2,
+                  budget=2, out=tmp_path / "f", echo=lambda *_: None)
+    assert res["seeds"] == [0, 1] and res["evaluations"] == 2
+    assert 0.1 <= res["best"]["specimen.bow.spool_radius"] <= 1.0
+    curves = []
+    for run in res["best_runs"]:
+        d = tmp_path / "f" / "evaluations" / run
+        assert (d / "specimen" / "fibers.h5").exists()
+        rows = list(csv.DictReader((d / "post" / "force_displacement.csv").open()))
+        U = np.array([float(r["U_m"]) for r in rows])
+        F = np.array([float(r["load_N"]) for r in rows])
+        Uu, inv = np.unique(U, return_inverse=True)
+        curves.append(np.interp([0, 2.5e-5, 5e-5], Uu, np.bincount(inv, weights=F) / np.bincount(inv)))
+    mean = np.mean(curves, axis=0)
+    assert res["objective_N"] == pytest.approx(float(np.sqrt(np.mean((mean - [0, 0.001, 0.002]) ** 2))), rel=1e-9)
+    assert res["spread_over_seeds"]["final_load_N"] == pytest.approx([c[-1] for c in curves], rel=1e-9)
