@@ -136,4 +136,6 @@ def test_a_400_fiber_specimen_builds(tmp_path):
     assert r.exit_code == 0, r.output
     info = json.loads((tmp_path / "o" / "specimen.json").read_text())
     assert info["generator"]["n_fibers"] == 400
-    assert info["statistics"]["min_gap_m"] >= 0 and info["statistics"]["max_outside_m"] <= 1e-9
+    # settled with gravity × 100 (and mass × 100): contacts and plates pressed a few tenths of a µm
+    assert info["statistics"]["min_gap_m"] >= -1e-6 and info["statistics"]["max_outside_m"] <= 0.1e-6
+    assert info["settle"]["kinetic_energy_end_J"] < 0.05 * info["settle"]["kinetic_energy_max_J"]
