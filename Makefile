@@ -107,3 +107,15 @@ config-reference: setup
 
 clean:
 	rm -rf runs .pytest_cache site
+
+# virtual specimens and the fit of the study's curve (docs/specimen.md, docs/fit.md)
+.PHONY: specimen-400 study-fit
+specimen-400: setup
+	$(FP) specimen configs/specimens/bundle-400.yaml --out runs/specimens/bundle-400
+
+# the spool radius of the study-like specimen fitted to the study's curve as its text describes it
+# (data-samples/paper-40-fit/target.csv); each evaluation builds and settles a specimen and compacts it
+# (≈ 8 min on one core), 8 evaluations
+study-fit: setup
+	$(FP) fit configs/specimens/paper-40.yaml --target data-samples/paper-40-fit/target.csv \
+	    --param "specimen.bow.spool_radius=40 mm:400 mm" --budget 8 --out runs/fits/paper-40-spool

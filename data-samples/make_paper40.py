@@ -1,6 +1,9 @@
 """Make the study-like 40-fiber specimen in data-samples/paper-40/ (committed with its outputs).
 
 Run from the repository root: ``python data-samples/make_paper40.py``. Deterministic (seed 0).
+With the shipped options it is one call of ``fiberpipe specimen configs/specimens/paper-40.yaml
+--out data-samples/paper-40`` (docs/specimen.md), which also writes a ready ``config.yaml``; the
+variants below keep their own path.
 40 quasi-parallel fibers, Ø 0.5 mm, 15 mm long, along z, in a 3 mm wide cassette (x from −1.5 to
 1.5 mm) at v_f0 = 37.7 % (height ≈ 6.94 mm along y, from 0), as in the study, shaped to match the
 statistics the study gives for its scanned specimen (data-samples/paper-40/README.md):
@@ -109,76 +112,34 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
                 frames=SETTLE_FRAMES, gap_m=1e-6, mass_scaling=None,
                 gravity_scale=None):
     """Settle ``fibers`` (a deposited pile) in the solver under gravity with friction; returns the
-    settled Polylines (the node positions of the last frame, per fiber) and ``info`` updated to
-    the settled pile (height = its top + ``gap_m``, v_f0, contacts, the settling figures).
+    settled Polylines and ``info`` updated to the settled pile (height = its top + ``gap_m``, v_f0,
+    contacts, the settling figures).
 
-    The scene is configs/paper-40.yaml's (material, radius, contact law, walls, mesh) with the
+    The scene is configs/paper-40.yaml's (material, radius, contact law, mesh) settled by
+    :func:`fiberpipe.model.specimen_settle.settle_pile` (what ``fiberpipe specimen`` runs): the
     lower plate fixed at y = 0, no upper plate, μ = ``mu``, α = ``alpha_per_s`` and, with
-    ``lock`` = "all" | "ends", the axial lock (``scene.constraints``).
+    ``lock`` = "all" | "ends", the axial lock.
     """
-    import time as _time
-
-    from fiberpipe.config import load_raw, validate_config
-    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.config import load_raw
+    from fiberpipe.model import specimen_settle
     from fiberpipe.model.specimen import _box_info
-    from fiberpipe.polylines import Polylines
-    from fiberpipe.solver import simulate
-    from fiberpipe.solver.build import build_simulation
-    from fiberpipe.units import to_si
 
     raw = load_raw(REPO / "configs" / "paper-40.yaml")
-    sc = raw["scene"]
-    sc["effects"] = [e for e in sc["effects"] if e not in ("plates", "constraints")] + ["plates"] + (
-        ["constraints"] if lock else [])
-    sc.pop("constraints", None)
-    sc["plates"] = {"axis": "y", "lower": "fixed", "upper": "none", "lower_position": 0.0}
-    sc["loading"] = {"displacement": 0.0}
-    sc["damping"] = {"alpha": float(alpha_per_s), "beta": 0.0}
-    sc["friction"] = {"mu": float(mu)}
-    if lock:
-        sc["constraints"] = {"lock_axial": lock}
-    raw["solver"] = {**raw.get("solver", {}), "end_time": float(time_s), "output_frames": int(frames)}
-    if mass_scaling is not None:  # the wavy pile: see WAVY_SETTLE_MASS_SCALING
-        raw["solver"]["mass_scaling"] = float(mass_scaling)
-    if gravity_scale is not None:  # the config's gravity, scaled
-        sc["gravity"] = {"acceleration": [to_si(a, "acceleration") * float(gravity_scale)
-                                          for a in sc["gravity"]["acceleration"]]}
-    cfg = validate_config(raw, where="settle_pile")
-    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
-    model, effects, settings = build_simulation(mesh, cfg)
-    t0 = _time.perf_counter()
-    res = simulate(model, effects, settings)
-    wall = _time.perf_counter() - t0
-    X = np.asarray(res.frames_positions)
-    off = np.asarray(mesh.node_offsets)
-    r = float(cfg.fiber.radius)
-    x = X[-1]
-    settled = Polylines.from_list([x[off[i]:off[i + 1]] for i in range(len(off) - 1)], r)
-    moved = np.linalg.norm(x - mesh.nodes_m, axis=1)
-    dtf = float(res.frames_time[-1] - res.frames_time[-2])
-    last = np.linalg.norm(X[-1] - X[-2], axis=1)
-    h = res.history
+    settled, fig = specimen_settle.settle_pile(
+        fibers, raw, width_m=float(info["width_m"]), alpha_per_s=alpha_per_s, time_s=time_s, mu=mu, lock=lock,
+        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale, where="settle_pile")
+    x = settled.points_m
+    off = settled.offsets
+    r = float(settled.radius_m[0])
     top = float(np.max(x[:, 1] + r))
     height = top + gap_m
     width, length = float(info["width_m"]), float(info["length_m"])
     out = {k: v for k, v in info.items() if k != "deposit"}
     out.update(_box_info(width, height, length, float(len(off) - 1) * np.pi * r**2 * length))
     out["deposit"] = {k: v for k, v in info["deposit"].items() if k != "supports"}
+    wall = fig.pop("wall_time_s")
     out["settle"] = {
-        "alpha_per_s": float(alpha_per_s), "time_s": float(time_s), "mu": float(mu), "lock_axial": lock,
-        **({"mass_scaling": float(mass_scaling)} if mass_scaling is not None else {}),
-        **({"gravity_scale": float(gravity_scale)} if gravity_scale is not None else {}),
-        "dt_s": float(res.dt_s), "steps": int(res.steps),
-        "max_displacement_m": float(moved.max()), "median_fiber_max_displacement_m":
-            float(np.median([moved[off[i]:off[i + 1]].max() for i in range(len(off) - 1)])),
-        "last_frame_interval_s": dtf, "max_speed_last_interval_m_s": float(last.max() / dtf),
-        "kinetic_energy_end_J": float(h["energy/kinetic"][-1]), "strain_energy_end_J": float(h["energy/strain"][-1]),
-        "kinetic_energy_max_J": float(np.max(h["energy/kinetic"])),
-        "frame_times_s": [float(t) for t in res.frames_time],
-        "kinetic_energy_at_frames_J": [float(np.interp(t, h["time"], h["energy/kinetic"])) for t in res.frames_time],
-        "max_speed_per_frame_interval_m_s": [float(v) for v in np.max(np.linalg.norm(np.diff(X, axis=0), axis=2), axis=1)
-                                             / np.diff(res.frames_time)],
-        "contacts_end": int(h["contacts"][-1]) if "contacts" in h and len(h["contacts"]) else None,
+        **fig,
         "pile_top_before_m": float(info["deposit"]["pile_top_m"]), "pile_top_m": top,
         "top_clearance_m": gap_m,
         "fiber_contacts": fiber_contacts(x, off, r),
@@ -191,21 +152,9 @@ def settle_pile(fibers, info, *, alpha_per_s=SETTLE_ALPHA_PER_S, time_s=SETTLE_T
 
 def fiber_contacts(x, off, r, tol_m=1e-7) -> int:
     """Fiber pairs whose centre lines (node-to-node segments) come within 2r + ``tol_m``."""
-    from scipy.spatial import cKDTree
+    from fiberpipe.model.specimen_settle import fiber_contacts as contacts
 
-    from fiberpipe.model.specimen_stats import segment_distances
-
-    fib = np.repeat(np.arange(len(off) - 1), np.diff(off))
-    seg = np.flatnonzero(np.r_[fib[1:] == fib[:-1], False])  # segment k: nodes k, k+1
-    mid = 0.5 * (x[seg] + x[seg + 1])
-    half = float(np.max(np.linalg.norm(x[seg + 1] - x[seg], axis=1)))
-    pairs = cKDTree(mid).query_pairs(2 * r + half + tol_m, output_type="ndarray")
-    a, b = seg[pairs[:, 0]], seg[pairs[:, 1]]
-    keep = fib[a] != fib[b]
-    a, b = a[keep], b[keep]
-    d, _, _ = segment_distances(x[a], x[a + 1], x[b], x[b + 1])
-    hit = d <= 2 * r + tol_m
-    return len({(min(i, j), max(i, j)) for i, j in zip(fib[a[hit]], fib[b[hit]])})
+    return contacts(x, off, r, tol_m)
 
 
 # the options whose default depends on the variant: (shipped paper-40, --wavy)
@@ -261,8 +210,17 @@ def options(argv=None) -> argparse.Namespace:
     return args
 
 
+SPECIMEN_CONFIG = REPO / "configs" / "specimens" / "paper-40.yaml"
+
+
 def main(argv=None):
     args = options(argv)
+    if _is_shipped_variant(args):
+        # data-samples/paper-40 is one call of `fiberpipe specimen` (configs/specimens/paper-40.yaml)
+        from fiberpipe.model.virtual_specimen import run_specimen_command
+
+        run_specimen_command(str(SPECIMEN_CONFIG), args.out, seed=args.seed)
+        return
     params = parameters(args.phi_mean_deg, args.seed, args.original, args.rigid,
                         candidates=args.candidates, wave_curvature_per_m=args.wave_curvature,
                         wave_lengths_m=[v * 1e-3 for v in args.wave_lengths_mm], wave_modes=args.wave_modes)
@@ -306,6 +264,14 @@ def main(argv=None):
         f"curvature xz {stats['curvature_xz_per_m']:.3f} yz {stats['curvature_yz_per_m']:.3f} 1/m; "
         f"min gap {stats['min_gap_m'] * 1e6:.2f} um; v_f {stats['volume_fraction']:.4f}"
     )
+
+
+def _is_shipped_variant(args) -> bool:
+    """The shipped specimen's options (any seed or --out): configs/specimens/paper-40.yaml says the same."""
+    plain = options([])
+    same = ("phi_mean_deg", "original", "rigid", "settle", "settle_alpha", "settle_time", "settle_lock", "wavy",
+            "wave_curvature", "candidates", "settle_mass_scaling", "settle_gravity_scale")
+    return all(getattr(args, k) == getattr(plain, k) for k in same)
 
 
 if __name__ == "__main__":

@@ -333,6 +333,71 @@ def study(study_file, out, workers, scheduler):
 
 
 @main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--target", required=True, type=click.Path(dir_okay=False), help="CSV with columns U_m,load_N.")
+@click.option("--param", "params", multiple=True, required=True, metavar="KEY=LO:HI",
+              help="A config key (specimen keys too) and its bounds, units accepted; repeatable.")
+@click.option("--seeds", default=1, show_default=True, type=int, help="Specimen seeds the curve is averaged over.")
+@click.option("--budget", default=20, show_default=True, type=int, help="Largest number of evaluations.")
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/fits/<config name>).")
+@click.option("--workers", default=1, show_default=True, type=int, help="Runs in parallel (local processes).")
+@click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
+def fit(config, target, params, seeds, budget, out, workers, scheduler):
+    """Fit config keys so that the simulated load matches a measured curve (fit.json, fit.png, history.csv)."""
+    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.studies.fit import run_fit
+
+    out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
+    created = not out.exists()
+    ensure_output_dir(out)
+    try:
+        run_fit(config, target, list(params), seeds=seeds, budget=budget, out=out, workers=workers,
+                scheduler=scheduler, echo=_echo)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # bad input leaves no empty folder behind
+        raise
+
+
+@main.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/specimens/<config name>).")
+@click.option("--seed", type=int, help="Replaces specimen.seed.")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help="Override a config key (repeatable), e.g. specimen.n_fibers=400.")
+def specimen(config, out, seed, sets):
+    """Build the virtual specimen of CONFIG's specimen section: fibers.h5, specimen.json and a ready config.yaml."""
+    from fiberpipe.errors import ConfigError
+    from fiberpipe.model.virtual_specimen import run_specimen_command
+    from fiberpipe.pipeline import ensure_output_dir
+
+    overrides = {}
+    for item in sets:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
+        overrides[key.strip()] = yaml_value(value)
+    out = Path(out) if out else Path("runs") / "specimens" / Path(config).stem
+    created = not out.exists()
+    ensure_output_dir(out)
+    try:
+        run_specimen_command(config, out, seed=seed, overrides=overrides, echo=click.echo)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a refused specimen leaves no empty folder behind
+        raise
+
+
+def yaml_value(text: str):
+    """A command-line value read as YAML (``400`` an int, ``"60 mm"`` a string, ``[a, b]`` a list)."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+@main.command()
 @click.option("--quick", is_flag=True, help="Small sizes and short runs only (minutes, not the headline figures).")
 @click.option("--skip", multiple=True, type=click.Choice(["solver", "contact", "pyelastica", "paper40", "imaging"]),
               help="Leave out a part (repeatable).")

@@ -544,10 +544,102 @@ class SolverConfig(Section):
         return self
 
 
+class ReferenceStageConfig(Section):
+    displacement: Length = Field(description="the plate displacement U at which the stage was scanned")
+    fibers: str = Field(description="the stage's scanned mid-lines (a fibers.h5)")
+
+
 class PostConfig(Section):
     reference_fibers: Optional[str] = None
     plots: bool = True
     quasi_static_ratio: float = Field(1e-2, gt=0)
+    reference_stages: list[ReferenceStageConfig] = Field(
+        default_factory=list, description="scans at stages of the compaction: the position error of the "
+        "simulated mid-lines at each stage's U (post/reference_stages.csv, .png)")
+
+
+# ----------------------------------------------------------------------------------------------
+# virtual specimens (``fiberpipe specimen``)
+
+
+class SpecimenBowConfig(Section):
+    spool_radius: Optional[Length] = Field(
+        2 / (math.pi * 0.2445), description="every fiber a circular arc of this radius (the spool it came off); 2.604 m is the "
+        "curvature (π/2)·0.2445 1/m whose random-plane projection matches the study's Table 4 read in 1/m")
+    spool_radius_range: Optional[list[Length]] = Field(
+        None, description="[lo, hi]: each fiber's radius drawn uniformly between them (a wound spool's layers); "
+        "replaces spool_radius")
+    plane: Literal["random", "flat", "upright"] = Field(
+        "random", description="the bow's plane: random (stratified over 360°), flat (bow horizontal, in x-z) "
+        "or upright (bow vertical, in y-z)")
+
+    @model_validator(mode="after")
+    def _check(self):
+        r = self.spool_radius_range
+        if r is not None:
+            if len(r) != 2 or not 0 < r[0] < r[1]:
+                raise ValueError(f"specimen.bow.spool_radius_range must be [lo, hi] with 0 < lo < hi, got {r}")
+            object.__setattr__(self, "spool_radius", None)
+        elif self.spool_radius is not None:
+            _positive("specimen.bow.spool_radius", self.spool_radius)
+        return self
+
+
+class SpecimenWavinessConfig(Section):
+    curvature_per_m: float = Field(0.0, ge=0, description="short-wave waviness: projected curvature (1/m) of "
+                                   "a sum of sines added in x and in y; 0: none")
+    wavelengths: list[Length] = Field(default_factory=lambda: [1.8e-3, 2.5e-3],
+                                      description="[lo, hi] of the log-uniform wavelengths")
+    modes: int = Field(2, ge=1, description="sines per component")
+
+    @model_validator(mode="after")
+    def _check(self):
+        w = self.wavelengths
+        if len(w) != 2 or not 0 < w[0] <= w[1]:
+            raise ValueError(f"specimen.waviness.wavelengths must be [lo, hi] with 0 < lo <= hi, got {w}")
+        return self
+
+
+class SpecimenSettleConfig(Section):
+    enabled: bool = Field(True, description="settle the deposited pile in the solver (gravity, friction, axial lock)")
+    time: Time = Field(0.15, description="settling time")
+    damping_alpha: Rate = 300.0
+    mu: float = Field(0.2, ge=0)
+    lock_axial: Literal["all", "ends", "none"] = "all"
+    mass_scaling: float = Field(1.0, ge=1, description="solver.mass_scaling while settling (a larger step)")
+    gravity_scale: float = Field(1.0, gt=0, description="gravity × this while settling (with mass_scaling: "
+                                 "the same fall speed)")
+    frames: int = Field(9, ge=2)
+
+
+class SpecimenConfig(Section):
+    """A virtual specimen: ``n_fibers`` fibers of ``fiber.radius`` deposited in a cassette."""
+
+    seed: int = 0
+    n_fibers: int = Field(40, ge=1, le=100000)
+    length: Length = 15e-3
+    width: Length = 3e-3
+    volume_fraction: float = Field(0.377, gt=0, lt=0.9069,
+                                   description="target v_f0: sets the cassette height (the plate gap)")
+    upper_plate: Literal["target", "pile"] = Field(
+        "target", description="target: the upper plate at the height of the target v_f0 (the pile must fit "
+        "under it); pile: on the settled pile's top (v_f0 follows the pile)")
+    points_per_fiber: int = Field(61, ge=3)
+    phi_mean: Angle = Field(math.radians(6.0), ge=0, description="mean angle between neighbouring fibers (the Φ "
+                            "spread): tilts normal with σ = phi_mean/√π per component")
+    y_tilt_scale: float = Field(1.0, gt=0, description="vertical tilt drawn for the drop, × σ")
+    candidates: int = Field(2, ge=1, description="trial drops per fiber, the lowest kept (denser piles)")
+    gap: Length = Field(1e-6, description="contact clearance in the pile")
+    bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
+    waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
+    settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("specimen.length", self.length)
+        _positive("specimen.width", self.width)
+        _positive("specimen.gap", self.gap)
+        return self
 
 
 class Config(Section):
@@ -564,6 +656,7 @@ class Config(Section):
     scene: SceneConfig = Field(default_factory=SceneConfig)
     solver: SolverConfig = Field(default_factory=SolverConfig)
     post: PostConfig = Field(default_factory=PostConfig)
+    specimen: Optional[SpecimenConfig] = None
 
     # Where the config came from, for messages and relative paths (not part of the YAML).
     source_path: Optional[str] = Field(None, exclude=True)
@@ -671,6 +764,10 @@ def _resolve_paths(data: dict, folder: Path) -> None:
             p = Path(sec[key]).expanduser()
             if not p.is_absolute():
                 sec[key] = str((folder / p).resolve())
+    stages = data.get("post", {}).get("reference_stages") if isinstance(data.get("post"), dict) else None
+    for st in stages if isinstance(stages, list) else []:  # post.reference_stages[*].fibers
+        if isinstance(st, dict) and isinstance(st.get("fibers"), str) and not Path(st["fibers"]).expanduser().is_absolute():
+            st["fibers"] = str((folder / Path(st["fibers"]).expanduser()).resolve())
 
 
 def _deep_merge(base: dict, over: dict) -> dict:

@@ -38,6 +38,8 @@ def cassette_specimen(
     wave_curvature_per_m: float = 0.0,
     wave_lengths_m: tuple[float, float] = (1.8e-3, 2.5e-3),
     wave_modes: int = 2,
+    bow_plane: str = "random",
+    curvatures_per_m=None,
 ) -> tuple[Polylines, dict]:
     """Quasi-parallel fibers along z in a box of ``width_m`` (x) × height (y) × ``length_m`` (z).
 
@@ -73,6 +75,12 @@ def cassette_specimen(
     Φ ≈ 6° and v_f0 ≈ 38 % only short waves fit (data-samples/paper-40-wavy/README.md). 0 (the
     default) draws nothing: the other specimens are unchanged, bit for bit.
 
+    ``bow_plane`` (``placement="deposit"`` only) is the bow's plane: ``"random"`` (stratified over
+    360°, :func:`_bow_planes`), ``"flat"`` (horizontal, x-z: the fiber lies on its bow) or
+    ``"upright"`` (vertical, y-z); the same draws are made for each, so the other draws stay the
+    same. ``curvatures_per_m`` (one per fiber) replaces ``curvature_per_m`` fiber by fiber (a
+    spool radius distribution).
+
     Returns
     -------
     Polylines, and a dict with ``height_m``, ``width_m``, ``volume_fraction`` and the box bounds
@@ -91,7 +99,8 @@ def cassette_specimen(
             tilt_rad=tilt_rad, curvature_per_m=curvature_per_m,
             z=np.linspace(0.0, length_m, points_per_fiber), gap_m=gap_m, y_tilt_scale=y_tilt_scale, top=top,
             settle=settle, slide_cost=slide_cost, candidates=candidates,
-            wave=(wave_curvature_per_m, wave_lengths_m, wave_modes),
+            wave=(wave_curvature_per_m, wave_lengths_m, wave_modes), bow_plane=bow_plane,
+            curvatures_per_m=curvatures_per_m,
         )
     rows = int(np.ceil(n_fibers / columns))
     px, py = width_m / columns, height / rows
@@ -309,7 +318,7 @@ def _relax_rigid(ends, bows, z, lo, hi, min_distance, *, max_iterations, coarse=
 
 def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad, curvature_per_m,
                       z, gap_m, y_tilt_scale, top="plate", settle="slide", slide_cost=1e-3, candidates=1,
-                      wave=(0.0, None, 0)):
+                      wave=(0.0, None, 0), bow_plane="random", curvatures_per_m=None):
     """``placement="deposit"`` of :func:`cassette_specimen`: a gravity-deposited loose pile.
 
     # Strategy: random sequential deposition of rigid fibers, each the smooth arc of the
@@ -331,13 +340,15 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
     sigma = np.broadcast_to(np.asarray(tilt_rad, float), (2,))
     zc = z - length_m / 2
     sag = _arc_sagitta(zc, length_m, curvature_per_m)
-    planes = _bow_planes(rng, n)
+    planes = _plane_angles(_bow_planes(rng, n), bow_plane)
     waves = _wave_offsets(rng, n, z, *wave) if wave[0] > 0 else None
     xlo, xhi = -width_m / 2 + r + gap_m, width_m / 2 - r - gap_m
     X = np.zeros((n, len(z)))
     Y = np.zeros((n, len(z)))
     supports = []
     for k in range(n):
+        if curvatures_per_m is not None:
+            sag = _arc_sagitta(zc, length_m, float(curvatures_per_m[k]))
         bow = sag[:, None] * np.array([np.cos(planes[k]), np.sin(planes[k])])
         if waves is not None:
             bow = bow + waves[k]
@@ -384,6 +395,18 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
         "supports": supports,
     }
     return fibers, info
+
+
+def _plane_angles(planes, mode):
+    """The drawn bow planes ``planes`` (rad) for ``mode``: as drawn (random), turned to the
+    horizontal (flat, x-z) or to the vertical (upright, y-z), keeping the side the bow points to."""
+    if mode == "random":
+        return planes
+    if mode == "flat":
+        return np.where(np.cos(planes) >= 0, 0.0, np.pi)
+    if mode == "upright":
+        return np.where(np.sin(planes) >= 0, np.pi / 2, 3 * np.pi / 2)
+    raise ValueError(f"bow_plane must be 'random', 'flat' or 'upright', got {mode!r}")
 
 
 def _wave_offsets(rng, n, z, curvature_per_m, wavelengths_m, modes, refine=8, iterations=4):
@@ -540,15 +563,26 @@ def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3,
     zmid = 0.5 * (z[0] + z[-1])
     h, _, _ = _drop_height(s0 * (z - zmid) + bow_y, x, X, Y, z, r, need, gap_m)
     yA, yB, dx = h - s0 * length / 2, h + s0 * length / 2, 0.0
-    near = np.flatnonzero(np.min(np.abs(X - x), axis=1) < need + 2 * (xhi - xlo)) if len(X) else np.zeros(0, int)
+    # fibers within reach of a sideways slide: the whole cassette up to 3 mm wide (5 mm reach),
+    # the neighbourhood in wider ones (a slide is a few radii)
+    reach = min(2 * (xhi - xlo), 5e-3)
+    near = np.flatnonzero(np.min(np.abs(X - x), axis=1) < need + reach) if len(X) else np.zeros(0, int)
 
     def ycurve(a, b):
         return a * (1 - u) + b * u + bow_y
 
     def gaps(dx_, a, b):
-        if len(near) == 0:
+        yc_ = ycurve(a, b)
+        # only fibers whose distance at equal z comes within reach: a pair's closest points are at
+        # most 3 segments apart in z, so the others' gaps exceed 3 trust_max (slopes below 0.5) and
+        # enter neither the linear program nor the overlap check (the same result, far fewer pairs)
+        cand = near
+        if len(near):
+            d_same = np.min(np.hypot(X[near] - (x + dx_), Y[near] - yc_), axis=1)
+            cand = near[d_same < need + 3 * trust_max + 1e-3]
+        if len(cand) == 0:
             return np.zeros(0), np.zeros((0, 3)), np.zeros(0)
-        g, nvec, zp, _which = _pair_geometry(x + dx_, ycurve(a, b), X[near], Y[near], z, need)
+        g, nvec, zp, _which = _pair_geometry(x + dx_, yc_, X[cand], Y[cand], z, need)
         return g, nvec, (zp - z[0]) / length
 
     trust = trust0

@@ -186,6 +186,10 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
         summary["position_error_final_m"] = float(geo["position_error_m"][-1])
         plots.plot_series(out_dir / "position_error.png", xg, {"mean": geo["position_error_m"] * 1e3}, xlabel=xgl, ylabel="fiber-position error [mm]")
         made.append("position_error.png")
+    if cfg.post.reference_stages:  # scans at stages of the compaction
+        from fiberpipe.post.positions import write_reference_stages
+
+        made += write_reference_stages(out_dir, cfg, sim, geo.get("U_m"), summary)
 
     # -- compaction law fit -------------------------------------------------------------------
     if has_plates and len(ft) >= 5:

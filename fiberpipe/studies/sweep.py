@@ -405,10 +405,12 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     return out
 
 
-def _execute(jobs, nworkers, scheduler, where, echo) -> dict:
+def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
     """Run ``jobs`` ``(id, raw, run_dir)``: on the Dask scheduler at ``scheduler``; else, with more
     than one worker, on a local Dask cluster of ``nworkers`` processes (a local process pool without
-    Dask); else one after the other in this process. Returns ``{id: _run_point result}``."""
+    Dask); else one after the other in this process. Returns ``{id: fn result}``; ``fn(raw, run_dir,
+    where)`` is :func:`_run_point` unless given (a module-level function, so workers can import it)."""
+    _run_point = fn or globals()["_run_point"]
     if scheduler or nworkers > 1:
         try:
             from dask.distributed import Client, LocalCluster  # optional extra: fiberpipe[dask]
@@ -432,6 +434,9 @@ def _execute(jobs, nworkers, scheduler, where, echo) -> dict:
         results[jid] = _run_point(raw, d, where)
         echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
     return results
+
+
+execute = _execute
 
 
 def _collect(futures: dict, echo) -> dict:

@@ -1,0 +1,125 @@
+"""Settling a deposited pile in the solver: gravity, contact, Coulomb friction and the axial lock.
+
+The deposit (:func:`fiberpipe.model.specimen.cassette_specimen`, ``placement="deposit"``) leaves a
+frictionless rest state of rigid fibers, which is not an equilibrium of the beam model with point
+contacts and friction; a short damped run under gravity settles it, and its end positions become
+the specimen's mid-lines (the rest shape of the compaction run).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from fiberpipe.polylines import Polylines
+
+
+def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float, lock: str | None,
+                 frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None) -> dict:
+    """The raw config of the settling run made from the compaction config ``raw``: its material,
+    fiber, mesh, contact law and solver settings; the lower plate fixed at y = 0, no upper plate,
+    walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), damping α =
+    ``alpha_per_s``, friction μ = ``mu`` and, with ``lock`` = "all" | "ends", the axial lock."""
+    from fiberpipe.config import GravityConfig
+    from fiberpipe.units import to_si
+
+    raw = copy.deepcopy(raw)
+    raw.pop("specimen", None)
+    sc = raw.setdefault("scene", {})
+    # the compaction scene's effects in its order (the force sums run in that order), the loads and
+    # drives left out, what settling needs added, then the plates and the lock
+    effects = [e for e in sc.get("effects", []) if e not in ("plates", "constraints", "clamps", "loads", "drives")]
+    effects += [e for e in ("gravity", "damping", "contact", "friction", "walls") if e not in effects]
+    sc["effects"] = effects + ["plates"] + (["constraints"] if lock else [])
+    for name in ("clamps", "loads", "drives"):
+        sc.pop(name, None)
+    sc.pop("constraints", None)
+    sc["plates"] = {"axis": "y", "lower": "fixed", "upper": "none", "lower_position": 0.0}
+    sc["walls"] = {"x": [-width_m / 2, width_m / 2]}
+    sc["loading"] = {"displacement": 0.0}
+    sc["damping"] = {"alpha": float(alpha_per_s), "beta": 0.0}
+    sc["friction"] = {**(sc.get("friction") or {}), "mu": float(mu)}
+    if lock:
+        sc["constraints"] = {"lock_axial": lock}
+    given = (sc.get("gravity") or {}).get("acceleration")
+    g = float(np.linalg.norm([to_si(a, "acceleration") for a in (given or GravityConfig().acceleration)]))
+    sc["gravity"] = {"acceleration": [0.0, -g * float(gravity_scale or 1.0), 0.0]}
+    solver = {k: v for k, v in (raw.get("solver") or {}).items() if k not in ("checkpoint_every", "settle_time")}
+    raw["solver"] = {**solver, "end_time": float(time_s), "output_frames": int(frames)}
+    if mass_scaling is not None and mass_scaling != 1.0:
+        raw["solver"]["mass_scaling"] = float(mass_scaling)
+    raw.setdefault("post", {})["plots"] = False
+    return raw
+
+
+def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float = 0.2,
+                lock: str | None = "all", frames: int = 9, mass_scaling: float | None = None,
+                gravity_scale: float | None = None, where: str = "settle") -> tuple[Polylines, dict]:
+    """Settle ``fibers`` (a deposited pile) in the solver (:func:`settle_scene` of ``raw``); returns
+    the settled Polylines (the node positions of the last frame, per fiber) and the settling
+    figures (time step, steps, displacements, kinetic energy per frame, contacts, wall time)."""
+    import time as _time
+
+    from fiberpipe.config import validate_config
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.solver import simulate
+    from fiberpipe.solver.build import build_simulation
+
+    sraw = settle_scene(raw, width_m=width_m, alpha_per_s=alpha_per_s, time_s=time_s, mu=mu, lock=lock,
+                        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale)
+    sraw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
+    cfg = validate_config(sraw, where=where)
+    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
+    model, effects, settings = build_simulation(mesh, cfg)
+    t0 = _time.perf_counter()
+    res = simulate(model, effects, settings)
+    wall = _time.perf_counter() - t0
+    X = np.asarray(res.frames_positions)
+    off = np.asarray(mesh.node_offsets)
+    r = float(cfg.fiber.radius)
+    x = X[-1]
+    settled = Polylines.from_list([x[off[i]:off[i + 1]] for i in range(len(off) - 1)], r)
+    moved = np.linalg.norm(x - mesh.nodes_m, axis=1)
+    dtf = float(res.frames_time[-1] - res.frames_time[-2])
+    last = np.linalg.norm(X[-1] - X[-2], axis=1)
+    h = res.history
+    out = {
+        "alpha_per_s": float(alpha_per_s), "time_s": float(time_s), "mu": float(mu), "lock_axial": lock,
+        **({"mass_scaling": float(mass_scaling)} if mass_scaling not in (None, 1.0) else {}),
+        **({"gravity_scale": float(gravity_scale)} if gravity_scale not in (None, 1.0) else {}),
+        "dt_s": float(res.dt_s), "steps": int(res.steps),
+        "max_displacement_m": float(moved.max()), "median_fiber_max_displacement_m":
+            float(np.median([moved[off[i]:off[i + 1]].max() for i in range(len(off) - 1)])),
+        "last_frame_interval_s": dtf, "max_speed_last_interval_m_s": float(last.max() / dtf),
+        "kinetic_energy_end_J": float(h["energy/kinetic"][-1]), "strain_energy_end_J": float(h["energy/strain"][-1]),
+        "kinetic_energy_max_J": float(np.max(h["energy/kinetic"])),
+        "frame_times_s": [float(t) for t in res.frames_time],
+        "kinetic_energy_at_frames_J": [float(np.interp(t, h["time"], h["energy/kinetic"])) for t in res.frames_time],
+        "max_speed_per_frame_interval_m_s": [float(v) for v in np.max(np.linalg.norm(np.diff(X, axis=0), axis=2), axis=1)
+                                             / np.diff(res.frames_time)],
+        "contacts_end": int(h["contacts"][-1]) if "contacts" in h and len(h["contacts"]) else None,
+        "wall_time_s": wall,
+    }
+    return settled, out
+
+
+def fiber_contacts(x, off, r, tol_m=1e-7) -> int:
+    """Fiber pairs whose centre lines (node-to-node segments) come within 2r + ``tol_m``."""
+    from scipy.spatial import cKDTree
+
+    from fiberpipe.model.specimen_stats import segment_distances
+
+    fib = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    seg = np.flatnonzero(np.r_[fib[1:] == fib[:-1], False])  # segment k: nodes k, k+1
+    if len(seg) == 0:
+        return 0
+    mid = 0.5 * (x[seg] + x[seg + 1])
+    half = float(np.max(np.linalg.norm(x[seg + 1] - x[seg], axis=1)))
+    pairs = cKDTree(mid).query_pairs(2 * r + half + tol_m, output_type="ndarray")
+    a, b = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    keep = fib[a] != fib[b]
+    a, b = a[keep], b[keep]
+    d, _, _ = segment_distances(x[a], x[a + 1], x[b], x[b + 1])
+    hit = d <= 2 * r + tol_m
+    return len({(min(i, j), max(i, j)) for i, j in zip(fib[a[hit]], fib[b[hit]])})

@@ -1,0 +1,246 @@
+"""``fiberpipe specimen CONFIG``: a virtual specimen from the config's ``specimen`` section.
+
+# Strategy: ``specimen.n_fibers`` fibers of ``fiber.radius`` and ``specimen.length``, each a
+# circular arc (``specimen.bow``: one spool radius or a uniform range of them, in a random,
+# horizontal or vertical plane) with an optional short-wave waviness and a random tilt of
+# σ = Φ_mean/√π per component (the angle between two such fibers is Rayleigh-distributed with
+# mean √π σ), are deposited under gravity in a cassette of ``specimen.width``
+# (:func:`fiberpipe.model.specimen.cassette_specimen`, ``placement="deposit"``), then settled in
+# the solver with friction and the axial lock (:func:`fiberpipe.model.specimen_settle.settle_pile`).
+# The upper plate goes at the height of the target v_f0 (v_f0 = N π r² / (w h)), or on the
+# settled pile. The command writes ``fibers.h5``, ``specimen.json`` (box, generator settings,
+# statistics) and ``config.yaml``: the input config with ``input.fibers`` set to the specimen and
+# the plates and walls set to the cassette, ready for ``fiberpipe run``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fiberpipe.config import PATH_KEYS, load_raw, validate_config
+from fiberpipe.errors import ConfigError
+
+
+def specimen_config(raw: dict, where: str):
+    """The validated config of ``raw`` (a config with a ``specimen`` section; ``input`` may be
+    missing: the specimen is the input) and its specimen section."""
+    raw = copy.deepcopy(raw)
+    raw.setdefault("input", {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]})
+    cfg = validate_config(raw, where=where)
+    if cfg.specimen is None:
+        raise ConfigError("has no specimen section (specimen: {n_fibers: 40, ...})", where=where)
+    if cfg.fiber.radius is None:
+        raise ConfigError("the specimen needs fiber.radius (e.g. fiber: {radius: '0.25 mm'})", where=where)
+    if "plates" in cfg.scene.effects and cfg.scene.plates.axis != "y":
+        raise ConfigError(f"scene.plates.axis is {cfg.scene.plates.axis}: a specimen is built with y vertical "
+                          "(set scene.plates.axis: y)", where=where)
+    return cfg, cfg.specimen
+
+
+def target_height_m(sp, radius_m: float) -> float:
+    """The plate gap of the target v_f0: N π r² L / (w h L) = v_f0."""
+    return sp.n_fibers * math.pi * radius_m**2 / (sp.volume_fraction * sp.width)
+
+
+def check_fits(sp, radius_m: float, where: str) -> None:
+    """Refuse, before anything is drawn, a specimen whose fibers cannot fit its cassette."""
+    free = sp.width - 2 * radius_m - 2 * sp.gap
+    if free <= 0:
+        raise ConfigError(f"specimen.width = {sp.width * 1e3:.4g} mm cannot hold a fiber of diameter "
+                          f"{2 * radius_m * 1e3:.4g} mm (plus the clearance): widen the cassette", where=where)
+    radii = [sp.bow.spool_radius] if sp.bow.spool_radius is not None else list(sp.bow.spool_radius_range or [])
+    if radii and min(radii) <= sp.length / 2:
+        raise ConfigError(f"specimen.bow: a spool radius of {min(radii) * 1e3:.4g} mm cannot bend a "
+                          f"{sp.length * 1e3:.4g} mm fiber (it must exceed half the length)", where=where)
+    if radii and sp.bow.plane != "upright":
+        rmin = min(radii)
+        sag = rmin - math.sqrt(rmin**2 - sp.length**2 / 4)
+        if sag > 0.9 * free:
+            raise ConfigError(f"specimen: a fiber bowed by the spool radius {rmin * 1e3:.4g} mm spans {sag * 1e3:.3g} mm "
+                              f"across, more than the {0.9 * free * 1e3:.3g} mm its cassette (specimen.width = "
+                              f"{sp.width * 1e3:.4g} mm) leaves: widen it, raise the spool radius or set "
+                              "specimen.bow.plane: upright", where=where)
+    h = target_height_m(sp, radius_m)
+    if sp.upper_plate == "target" and h < 2 * radius_m:
+        raise ConfigError(f"specimen.volume_fraction = {sp.volume_fraction:g} makes the cassette {h * 1e3:.3g} mm high, "
+                          f"less than a fiber diameter: lower it or add fibers", where=where)
+
+
+def fiber_curvatures(sp, seed: int):
+    """One curvature (1/m) per fiber: 1/spool_radius, or 1/R with R uniform over the range
+    (its own random stream, so the deposit's draws do not depend on it)."""
+    if sp.bow.spool_radius is not None:
+        return None, 1.0 / sp.bow.spool_radius
+    lo, hi = sp.bow.spool_radius_range
+    rr = np.random.default_rng([seed, 1]).uniform(lo, hi, sp.n_fibers)
+    return 1.0 / rr, float(np.mean(1.0 / rr))
+
+
+def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print) -> dict:
+    """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict."""
+    from fiberpipe.artifacts import write_fibers, write_text_atomic
+    from fiberpipe.model.specimen import cassette_specimen
+    from fiberpipe.model.specimen_settle import fiber_contacts, settle_pile
+    from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
+
+    cfg, sp = specimen_config(raw, where)
+    seed = sp.seed if seed is None else int(seed)
+    r = float(cfg.fiber.radius)
+    check_fits(sp, r, where)
+    curvatures, kappa = fiber_curvatures(sp, seed)
+    params = {
+        "seed": seed, "n_fibers": sp.n_fibers, "width_m": sp.width, "length_m": sp.length, "radius_m": r,
+        "volume_fraction": sp.volume_fraction, "points_per_fiber": sp.points_per_fiber, "placement": "deposit",
+        "tilt_rad": float(sp.phi_mean / math.sqrt(math.pi)), "curvature_per_m": float(kappa),
+        "candidates": sp.candidates, "top": "pile", "gap_m": sp.gap, "y_tilt_scale": sp.y_tilt_scale,
+        "bow_plane": sp.bow.plane,
+    }
+    if sp.waviness.curvature_per_m > 0:
+        params.update(wave_curvature_per_m=sp.waviness.curvature_per_m,
+                      wave_lengths_m=tuple(sp.waviness.wavelengths), wave_modes=sp.waviness.modes)
+    try:
+        fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures)
+    except ValueError as exc:
+        if "does not fit the cassette" in str(exc):
+            raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
+                              f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
+                              where=where) from None
+        raise
+    deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
+    settle = None
+    if sp.settle.enabled:
+        st = sp.settle
+        fibers, settle = settle_pile(
+            fibers, raw, width_m=sp.width, alpha_per_s=st.damping_alpha, time_s=st.time, mu=st.mu,
+            lock=None if st.lock_axial == "none" else st.lock_axial, frames=st.frames,
+            mass_scaling=st.mass_scaling, gravity_scale=st.gravity_scale, where=where)
+    pts = fibers.points_m
+    top = float(np.max(pts[:, 1] + r))
+    lowest = float(np.min(pts[:, 1] - r))
+    if sp.upper_plate == "pile":
+        height = top + sp.gap
+    else:
+        height = target_height_m(sp, r)
+        if top > height:
+            vmax = sp.n_fibers * math.pi * r**2 / (sp.width * top)
+            raise ConfigError(
+                f"specimen: the {'settled' if settle else 'deposited'} pile (top {top * 1e3:.4g} mm) does not fit its "
+                f"cassette under the upper plate at {height * 1e3:.4g} mm (v_f0 = {sp.volume_fraction:g}): lower "
+                f"specimen.volume_fraction to at most {vmax:.4g}, raise specimen.candidates (a denser pile) or set "
+                "specimen.upper_plate: pile", where=where)
+    box_min, box_max = [-sp.width / 2, 0.0, 0.0], [sp.width / 2, height, sp.length]
+    stats = specimen_statistics(fibers, box_min_m=box_min, box_max_m=box_max)
+    off = fibers.offsets
+    nb = neighbour_orientations(fibers)
+    edges = np.arange(0.0, max(20.0, math.ceil(float(nb["phi_deg"].max()) if nb["phi_deg"].size else 0.0)) + 1.0)
+    counts, _ = np.histogram(nb["phi_deg"], bins=edges)
+    per_fiber_low = np.array([np.min(pts[off[i]:off[i + 1], 1]) - r for i in range(fibers.n_fibers)])
+    per_fiber_top = np.array([np.max(pts[off[i]:off[i + 1], 1]) + r for i in range(fibers.n_fibers)])
+    if settle:  # the settled pile's own figures (contacts within 0.1 µm: pressed by the weight)
+        settle.update(pile_top_before_m=float(deposit["pile_top_m"]), pile_top_m=top, top_clearance_m=float(height - top),
+                      fiber_contacts=fiber_contacts(pts, off, r), lowest_surface_m=lowest,
+                      fibers_on_lower_plate=int(np.sum(per_fiber_low <= 1e-7)))
+    info = {
+        "width_m": sp.width, "height_m": float(height), "length_m": sp.length,
+        "volume_fraction": float(sp.n_fibers * math.pi * r**2 / (sp.width * height)),
+        "target_volume_fraction": sp.volume_fraction,
+        "pile_volume_fraction": float(sp.n_fibers * math.pi * r**2 / (sp.width * top)),
+        "box_min_m": box_min, "box_max_m": box_max,
+        "pile_top_m": top, "top_clearance_m": float(height - top), "lowest_surface_m": lowest,
+        "contacts_at_U0": {
+            "fiber_fiber": fiber_contacts(pts, off, r, tol_m=sp.gap + 1e-7),
+            "fibers_on_lower_plate": int(np.sum(per_fiber_low <= sp.gap + 1e-7)),
+            "fibers_at_upper_plate": int(np.sum(per_fiber_top >= height - sp.gap - 1e-7)),
+        },
+        "phi_histogram_deg": {"edges": edges.tolist(), "counts": counts.astype(int).tolist()},
+        "deposit": deposit,
+        **({"settle": {k: v for k, v in settle.items() if k != "wall_time_s"}} if settle else {}),
+        "generator": {"function": "fiberpipe.model.specimen.cassette_specimen",
+                      **{k: (list(v) if isinstance(v, tuple) else v) for k, v in params.items()},
+                      "spool_radius_m": sp.bow.spool_radius, "spool_radius_range_m": sp.bow.spool_radius_range,
+                      **({"settle": {k: settle[k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial", "mass_scaling",
+                                                            "gravity_scale") if k in settle}} if settle else {}),
+                      "specimen": sp.model_dump(mode="json")},
+        "statistics": stats,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    write_fibers(out / "fibers.h5", fibers)
+    write_text_atomic(out / "specimen.json", json.dumps(info, indent=2) + "\n")
+    write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, sp.width, where))
+    if settle:
+        info["settle_wall_time_s"] = settle["wall_time_s"]
+    return info
+
+
+def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, where: str) -> str:
+    """``raw`` without its specimen section, its input the specimen (``fibers.h5`` next to it), its
+    plates at 0 and ``height_m`` and its x walls at ±``width_m``/2; paths relative to ``out``."""
+    ready = copy.deepcopy(raw)
+    ready.pop("specimen", None)
+    source = (ready.get("input") or {}).get("fibers")
+    ready["input"] = {"fibers": "fibers.h5"}
+    post = ready.get("post")
+    if isinstance(post, dict) and post.get("reference_fibers") is not None and post["reference_fibers"] == source:
+        post["reference_fibers"] = "fibers.h5"  # the base compared with its own specimen: so does this
+    for section, key in PATH_KEYS:
+        sec = ready.get(section)
+        if isinstance(sec, dict) and isinstance(sec.get(key), str) and os.path.isabs(sec[key]):
+            sec[key] = os.path.relpath(sec[key], out.resolve())
+    sc = ready.setdefault("scene", {})
+    if isinstance(sc.get("plates"), dict):
+        sc["plates"] = {**sc["plates"], "lower_position": 0.0, "upper_position": float(height_m)}
+    if isinstance(sc.get("walls"), dict) or "walls" in sc.get("effects", []):
+        sc["walls"] = {**(sc.get("walls") or {}), "x": [-width_m / 2, width_m / 2]}
+    head = (f"# Made by `fiberpipe specimen` from {where}: the specimen in fibers.h5 (specimen.json: its\n"
+            f"# box, generator settings and statistics); plate gap {height_m * 1e3:.6g} mm, cassette {width_m * 1e3:.6g} mm.\n")
+    return head + yaml.safe_dump(ready, sort_keys=False, default_flow_style=None, width=110)
+
+
+def run_specimen_command(config: str, out: Path, *, seed: int | None = None, overrides: dict | None = None,
+                         echo=print) -> dict:
+    """``fiberpipe specimen``: load ``config`` (dotted ``overrides`` applied), build, report."""
+    from fiberpipe.config import set_dotted
+
+    import time
+
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    raw = load_raw(config)
+    for k, v in (overrides or {}).items():
+        set_dotted(raw, k, v)
+    info = build_specimen(raw, out, where=str(config), seed=seed, echo=echo)
+    echo(specimen_report(info, out))
+    echo(f"  built in {time.perf_counter() - wall0:.0f} s wall, {time.process_time() - cpu0:.0f} s CPU (one process)")
+    return info
+
+
+def specimen_report(info: dict, out: Path) -> str:
+    """The command's summary: v_f0, contacts at U = 0, the Φ histogram, Table 4's curvatures."""
+    st, c = info["statistics"], info["contacts_at_U0"]
+    n = info["generator"]["n_fibers"]
+    lines = [
+        f"wrote {out}/fibers.h5 ({n} fibers), {out}/specimen.json, {out}/config.yaml",
+        f"  cassette {info['width_m'] * 1e3:.4g} mm x {info['height_m'] * 1e3:.5g} mm (plate gap) x "
+        f"{info['length_m'] * 1e3:.4g} mm; v_f0 {info['volume_fraction']:.4f} (target {info['target_volume_fraction']:.4f}; "
+        f"the pile's own {info['pile_volume_fraction']:.4f}, top {info['pile_top_m'] * 1e3:.5g} mm)",
+        f"  contacts at U = 0: {c['fiber_fiber']} fiber-fiber ({2 * c['fiber_fiber'] / max(n, 1):.2f} per fiber), "
+        f"{c['fibers_on_lower_plate']} fibers on the lower plate, {c['fibers_at_upper_plate']} at the upper plate",
+        f"  Phi of neighbours: mean {st['phi_mean_deg']:.2f} deg (median {st['phi_median_deg']:.2f}, "
+        f"10-90 % {st['phi_p10_deg']:.2f}-{st['phi_p90_deg']:.2f}), {st['neighbour_pairs']} pairs",
+        "  Phi histogram (deg: pairs): " + ", ".join(
+            f"{int(e)}-{int(e) + 1}: {k}" for e, k in zip(info["phi_histogram_deg"]["edges"], info["phi_histogram_deg"]["counts"])
+            if k),
+        f"  Table 4 curvatures at U = 0: XZ {st['curvature_xz_per_m']:.4g} 1/m, YZ {st['curvature_yz_per_m']:.4g} 1/m",
+    ]
+    if "settle" in info:
+        s = info["settle"]
+        lines.append(f"  settled {s['time_s'] * 1e3:.3g} ms ({s['steps']} steps, "
+                     f"{info.get('settle_wall_time_s', float('nan')):.0f} s wall): moved up to {s['max_displacement_m'] * 1e6:.1f} um, "
+                     f"kinetic energy at the end {s['kinetic_energy_end_J']:.3g} J (max {s['kinetic_energy_max_J']:.3g} J)")
+    return "\n".join(lines)
