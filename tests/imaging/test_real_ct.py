@@ -1,4 +1,4 @@
-"""Smoke test on real CT (quanfima polymer scaffold, 128^3 uint8); skipped without ../shared."""
+"""Smoke test on real CT (quanfima polymer scaffold, 128^3 uint8); skipped when the sample is not beside the checkout."""
 
 from pathlib import Path
 

@@ -1,5 +1,5 @@
 """placement="deposit" of fiberpipe.model.specimen.cassette_specimen: a gravity-deposited loose
-pile (issue #5): no overlaps, inside the cassette, every fiber supported on both sides of its
+pile: no overlaps, inside the cassette, every fiber supported on both sides of its
 centre of mass (or on the plate), the upper plate touching the top, the study's statistics; and
 the shipped data-samples/paper-40 specimen, which is made with it."""
 

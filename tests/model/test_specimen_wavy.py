@@ -1,4 +1,4 @@
-"""The smooth-waviness option of the deposit placement (``wave_curvature_per_m``, issue #5: Table 4
+"""The smooth-waviness option of the deposit placement (``wave_curvature_per_m``: Table 4
 read as 1/mm): the waves' projected curvature is the one asked for, converged in the point spacing,
 the wavy pile has no overlaps and stays in the cassette, and without the option nothing changes."""
 
