@@ -99,7 +99,7 @@ def write_reference_stages(out_dir, cfg, sim, U_frames, summary: dict) -> list[s
 
     from fiberpipe.artifacts import read_fibers
     from fiberpipe.errors import ConfigError
-    from fiberpipe.post.report import write_csv
+    from fiberpipe.post.tables import write_csv
 
     if U_frames is None:
         raise ConfigError("post.reference_stages needs plates (the stages are given by the plate displacement U)")

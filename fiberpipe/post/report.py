@@ -5,7 +5,6 @@ Every column and axis is defined, with its unit, in ``docs/outputs.md``.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -22,23 +21,9 @@ from fiberpipe.post.geometry import fiber_volume_m3, projected_curvature, volume
 from fiberpipe.post.phases import compaction_phases, describe
 from fiberpipe.post.history import load_simulation
 from fiberpipe.post.positions import position_error
+from fiberpipe.post.tables import write_csv  # noqa: F401  (the post stage's CSV writer)
 
 AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
-    """Write equal-length columns to CSV atomically (header = column names with units)."""
-    names = list(columns)
-    rows = zip(*[np.asarray(columns[n]).tolist() for n in names])
-    import io
-
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(names)
-    for r in rows:
-        w.writerow([f"{v:.9g}" if isinstance(v, float) else v for v in r])
-    write_text_atomic(path, buf.getvalue())
-    return path
 
 
 def _fmt(v, unit="", digits=4):

@@ -338,7 +338,7 @@ def _simplex(d: int) -> np.ndarray:
 
 def _write(out: Path, result: dict, ev: _Evaluator, U_t, F_t, best) -> None:
     from fiberpipe.artifacts import write_text_atomic
-    from fiberpipe.post.report import write_csv
+    from fiberpipe.post.tables import write_csv
 
     keys = [p["key"] for p in ev.params]
     cols = {k: [h[k] for h in ev.history] for k in keys}

@@ -449,7 +449,7 @@ def _collect(futures: dict, echo) -> dict:
 
 
 def _write_outputs(out: Path, spec: StudySpec, rows: list[dict], ref: dict, echo) -> None:
-    from fiberpipe.post.report import write_csv
+    from fiberpipe.post.tables import write_csv
 
     if not rows:
         return
