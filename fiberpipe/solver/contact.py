@@ -240,11 +240,11 @@ def contact_forces(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params,
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _point_part(x, seg_nodes, a0, b0, ta, tb, law_params, f_out, rec, ints, scal):
+def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb):
     """The point part of a pair (module docstring, item 3): its force into ``f_out`` and ``rec``;
     returns the stored energy [J].
 
-    a0, b0 : (3,) first node of each segment; ta, tb : (3,) their tangents (scratch arrays);
+    a0, b0 : 3-tuples, the first node of each segment; ta, tb : 3-tuples, their tangents;
     ints = (i, j, a0, a1, b0, b1, law_id): the segments and their nodes;
     scal = (r_i, r_j, aa, bb, ab, dist2, sc, tc, w, F(δ_c), E(δ_c), Φ, offset): radii, the tangents'
     dot products, the clamped closest points, the point share and law at δ_c, the crossing angle and
@@ -313,25 +313,6 @@ def _point_part(x, seg_nodes, a0, b0, ta, tb, law_params, f_out, rec, ints, scal
     return w * wst * ep
 
 
-@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _store_record(c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, k, rec, phi):
-    """Pair ``k``'s results from its accumulated ``rec`` (the fields of :class:`PairRecords`)."""
-    fsum = rec[0]
-    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-    c_fn[k] = fv
-    if fv > 0.0:
-        c_n[k, 0] = rec[1] / fv
-        c_n[k, 1] = rec[2] / fv
-        c_n[k, 2] = rec[3] / fv
-    c_s[k] = rec[4] / fsum
-    c_t[k] = rec[5] / fsum
-    c_phi[k] = phi
-    c_delta[k] = rec[6]
-    if c_share.shape[0] > 0:
-        c_share[k] = rec[7]
-        c_fsum[k] = fsum
-
-
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out, out, c_off,
                       reach):
@@ -373,6 +354,7 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
     use_gap = c_gap.shape[0] > 0
     use_list = c_active.shape[0] > 0
     use_off = c_off.shape[0] > 0
+    use_share = c_share.shape[0] > 0
     energy = 0.0
     n_active = 0
     rec = np.zeros(8)
@@ -428,9 +410,10 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
         w, fp_c, ep_c = law_weight_point(law_id, law_params, delta_c, ra, rb, phi)
         den = aa * bb - ab * ab
         if w > 0.0 and den > 1e-10 * aa * bb:
-            energy += _point_part(x, seg_nodes, a0, b0, ta, tb, law_params, f_out, rec,
-                                  (i, j, na0, na1, nb0, nb1, law_id),
-                                  (ra, rb, aa, bb, ab, dist2, sc, tc, w, fp_c, ep_c, phi, off))
+            energy += _point_part(x, seg_nodes, law_params, f_out, rec, (i, j, na0, na1, nb0, nb1, law_id),
+                                  (ra, rb, aa, bb, ab, dist2, sc, tc, w, fp_c, ep_c, phi, off),
+                                  (a0[0], a0[1], a0[2]), (b0[0], b0[1], b0[2]), (ta[0], ta[1], ta[2]),
+                                  (tb[0], tb[1], tb[2]))
         elif w > 0.0:
             w = 0.0
         if w < 1.0:
@@ -443,7 +426,20 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
             if use_list:
                 c_active[n_active] = k
             n_active += 1
-            _store_record(c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, k, rec, phi)
+            fsum = rec[0]
+            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+            c_fn[k] = fv
+            if fv > 0.0:
+                c_n[k, 0] = rec[1] / fv
+                c_n[k, 1] = rec[2] / fv
+                c_n[k, 2] = rec[3] / fv
+            c_s[k] = rec[4] / fsum
+            c_t[k] = rec[5] / fsum
+            c_phi[k] = phi
+            c_delta[k] = rec[6]
+            if use_share:
+                c_share[k] = rec[7]
+                c_fsum[k] = fsum
     return energy, n_active
 
 
