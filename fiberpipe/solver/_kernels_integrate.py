@@ -36,7 +36,7 @@ from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
-                     H_CONTACTS, H_FD, H_KE, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_STORED, H_TIME, H_VD, H_WF, H_WK,
+                     H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
 _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
@@ -200,7 +200,8 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
     """The central-difference update of every node (module docstring), gathering the beam
     resultants per node and adding the contact hook's force array ``fc`` (cleared here).
 
-    Returns ``(ke, vd, wk_fix, pw_c, vmax2, bad)``: the kinetic energy at t_n (if ``record``),
+    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad)``: the kinetic energy at t_n and the
+    leapfrog's kinetic term ½ v_{n−½}·M v_{n+½} (if ``record``),
     Σ m|v̄|² + J|Ω̄|² for the damping dissipation, the prescribed nodes' reaction work, Σ fc·v̄
     (the hook's power), the largest |v_{n+½}|² and its node. ``coef = (c_keep, dt_c)``: the damped
     update's constant factors, v_{n+½} = c_keep v_{n−½} + (dt_c / m) f (:func:`damping_factors`).
@@ -217,6 +218,7 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
     c_keep, dt_c = coef
     NF = node_offsets.shape[0] - 1
     ke = 0.0
+    ke_lf = 0.0
     vd = 0.0
     wk_fix = 0.0
     pw_c = 0.0
@@ -314,6 +316,10 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
             ke += 0.25 * (m * (v0x * v0x + v0y * v0y + v0z * v0z + v1x * v1x + v1y * v1y + v1z * v1z)
                           + jx * (w0x * w0x + w1x * w1x) + jy * (w0y * w0y + w1y * w1y)
                           + jz * (w0z * w0z + w1z * w1z))
+            # ½ v_{n−½}·M v_{n+½}: exactly conserved with a quadratic potential (the leapfrog's own
+            # kinetic term), it differs from the mean of the half-step energies by ¼Δt² Σ|f|²/m
+            ke_lf += 0.5 * (m * (v0x * v1x + v0y * v1y + v0z * v1z) + jx * w0x * w1x + jy * w0y * w1y
+                            + jz * w0z * w1z)
             if not (v2 <= vmax2):
                 if not (v2 == v2) or v2 > vmax2:
                     vmax2 = v2 if v2 == v2 else np.inf
@@ -328,12 +334,14 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
         x[i, 1] += dt * v1y
         x[i, 2] += dt * v1z
         rotate_node(q, i, dt, w1x, w1y, w1z)
-    return ke, vd, wk_fix, pw_c, vmax2, bad
+    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
 
 
 @njit(**_FLAGS)
-def write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n_contacts):
-    """One history row at t_n; the works are the mean of the accumulators before and after the step."""
+def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies, n_contacts):
+    """One history row at t_n (``energies`` = (ALLKE, the leapfrog kinetic term, ALLSE)); the works
+    are the mean of the accumulators before and after the step."""
+    ke, ke_lf, se = energies
     x, v, acc, hist = state.x, state.v, state.acc, work.hist
     f_ext, x0 = scene.f_ext, model.x0
     planes = scene.planes
@@ -363,6 +371,7 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n
     hist[h_row, H_WF] = 0.5 * (acc_before[ACC_WF] + acc[ACC_WF])
     hist[h_row, H_CONTACTS] = n_contacts
     hist[h_row, H_STORED] = acc[ACC_STORED]
+    hist[h_row, H_KE_LF] = ke_lf
 
 
 @njit(**_FLAGS)
@@ -445,7 +454,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
         eval_drives(scene.drives, t, dt)
         # ---- update ----
-        ke, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, coef, record, gyro)
+        ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, coef, record, gyro)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
@@ -455,7 +464,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         done = it + 1
         # ---- history and checks ----
         if record:
-            write_history(model, scene, state, work, h_row, acc_before, t, dt, ke, se, n_contacts)
+            write_history(model, scene, state, work, h_row, acc_before, t, dt, (ke, ke_lf, se), n_contacts)
             h_row += 1
             status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, ctl)
             if bad_x >= 0:

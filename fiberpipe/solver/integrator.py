@@ -25,15 +25,15 @@ from ._kernels_beam import EB_SIZE, beam_forces
 from ._kernels_boundary import PLANE_ONSET_M, plane_onset
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
-from .layout import (H_FD, H_KE, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (H_FD, H_KE, H_KE_LF, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
 from .step_data import DriveArrays, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
 from .timestep import TimeStepReport, stable_time_step
 
-ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored", "total",
-                "residual")
+ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
+                "kinetic_leapfrog", "total", "residual")
 
 
 def m_(a, dtype=np.float64) -> np.ndarray:
@@ -110,7 +110,8 @@ class SimulationResult:
         (J; ``contact_stored`` the stored contact energy at t (plane penalties, fiber–fiber penalties
         and tangential springs), ``total`` Abaqus' ETOTAL with the booked ALLPW; ``residual`` is
         (E − E₀)/max(|ALLWK|, ALLSE + ALLKE) so far with the state functions
-        E = ALLKE + ALLSE + contact_stored + ALLVD + ALLFD − ALLWK, dimensionless).
+        E = K_lf + ALLSE + contact_stored + ALLVD + ALLFD − ALLWK, dimensionless; ``kinetic_leapfrog``
+        K_lf = ½ v_{n−½}·M v_{n+½}, the kinetic term central differences conserve).
     dt_s, steps, elements, wall_time_s, effects (names), timestep (TimeStepReport),
     final_state (State), completed (False for the partial result of a diverged run),
     wall_names (labels of the wall columns).
@@ -387,12 +388,13 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
 
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
     h = hist[:n_rows]
-    KE, SE, VD, WK, PW, FD, ST = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED))
+    KE, SE, VD, WK, PW, FD, ST, KL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF))
     # Abaqus' ETOTAL books the contact forces' work (ALLPW), so it closes whatever the contact does;
     # the residual uses the stored contact energy instead, a state function, so it shows energy
     # that no load supplied
     total = KE + SE + VD + FD - WK - PW
-    state_total = KE + SE + ST + VD + FD - WK
+    # with the leapfrog's own kinetic term, which the scheme conserves exactly for a quadratic potential
+    state_total = KL + SE + ST + VD + FD - WK
     scale = np.maximum.accumulate(np.maximum(np.abs(WK), SE + KE)) if n_rows else np.zeros(0)
     scale = np.maximum(scale, 1e-300)
     out = {
@@ -405,7 +407,7 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
         "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
         # the friction forces' work on the fibers (part of ALLPW): ALLPW − ALLFD − this is the normal forces'
         "energy/friction_work": h[:, H_WF].copy(),
-        "energy/contact_stored": ST.copy(),
+        "energy/contact_stored": ST.copy(), "energy/kinetic_leapfrog": KL.copy(),
         "energy/total": total, "energy/residual": (state_total - e0) / scale,
     }
     return out
