@@ -82,3 +82,18 @@ def first_bad_chunk(shape, chunks, read_block) -> tuple[tuple[int, ...], Excepti
 def why(exc: Exception) -> str:
     """``Type: message`` of an exception on one line (library messages may span several)."""
     return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+
+
+def read_whole(arr, label: str, where: str):
+    """All of a chunked array (h5py dataset, Zarr array); a read that fails names the first
+    unreadable chunk by its grid index, in one line (``label``: "dataset 'x'", "Zarr array '/'")."""
+    try:
+        return arr[...]
+    except Exception as exc:  # noqa: BLE001 — h5py and the Zarr codecs raise many types for damaged data
+        chunks = getattr(arr, "chunks", None)
+        if chunks is not None:
+            bad = first_bad_chunk(arr.shape, chunks, lambda sl: arr[sl])
+            if bad is not None:
+                idx, err = bad
+                raise InputError(f"unreadable chunk {idx} of {label} ({why(err)})", where=where) from None
+        raise InputError(f"cannot read {label} ({why(exc)})", where=where) from None

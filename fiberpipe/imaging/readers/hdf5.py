@@ -10,7 +10,7 @@ import numpy as np
 from ...errors import InputError
 from .._util import voxel_size_zyx
 from . import register
-from ._common import attrs_voxel_size, first_bad_chunk, unit_to_m, why
+from ._common import attrs_voxel_size, read_whole, unit_to_m, why
 
 SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5", ".nxs", ".nx5")
 
@@ -102,16 +102,7 @@ def _voxel_size(ds) -> np.ndarray | None:
 
 
 def _read_data(ds, dataset: str, where: str) -> np.ndarray:
-    try:
-        return ds[()]
-    except Exception as exc:  # noqa: BLE001 — h5py raises OSError/RuntimeError for damaged data
-        if ds.chunks is not None:
-            bad = first_bad_chunk(ds.shape, ds.chunks, lambda sl: ds[sl])
-            if bad is not None:
-                idx, err = bad
-                raise InputError(f"unreadable chunk {idx} of dataset {dataset!r} ({why(err)})",
-                                 where=where) from None
-        raise InputError(f"cannot read dataset {dataset!r} ({why(exc)})", where=where) from None
+    return read_whole(ds, f"dataset {dataset!r}", where)
 
 
 def read(path: Path, *, dataset: str | None = None, **_):

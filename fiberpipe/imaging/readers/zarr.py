@@ -12,7 +12,7 @@ import numpy as np
 from ...errors import InputError
 from .._util import voxel_size_zyx
 from . import register
-from ._common import attrs_voxel_size, first_bad_chunk, need, unit_to_m, why
+from ._common import attrs_voxel_size, need, read_whole, unit_to_m, why
 
 
 def is_zarr_folder(p: Path) -> bool:
@@ -84,15 +84,7 @@ def read(path: Path, *, dataset: str | None = None, **_):
             vs = attrs_voxel_size(dict(arr.attrs))
         except (ValueError, TypeError):
             vs = None
-    try:
-        vol = arr[...]
-    except Exception as exc:  # noqa: BLE001 — codecs raise many types for a damaged chunk
-        bad = first_bad_chunk(arr.shape, arr.chunks, lambda sl: arr[sl])
-        if bad is not None:
-            idx, err = bad
-            raise InputError(f"unreadable chunk {idx} of Zarr array {name or '/'!r} ({why(err)})",
-                             where=where) from None
-        raise InputError(f"cannot read Zarr array {name or '/'!r} ({why(exc)})", where=where) from None
+    vol = read_whole(arr, f"Zarr array {name or '/'!r}", where)
     return np.asarray(vol), vs, f"zarr:{path}" + (f":{name}" if name else "")
 
 
