@@ -40,7 +40,7 @@ from ._kernels_boundary import ramp_fraction
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
-from .contact_state import (ContactData, ContactParams, FrictionWork, PairList, PairRecords, PlaneFriction, Segments,
+from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments,
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
 from .geometry import pair_gap
@@ -57,17 +57,6 @@ _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
 
 
 @njit(cache=True, error_model="numpy")
-def _grown_list(cap):
-    return PairList(np.zeros((cap, 2), np.int64), np.zeros(cap, np.int64), np.zeros((cap, 5)), np.zeros((cap, 1)))
-
-
-@njit(cache=True, error_model="numpy")
-def _grown_records(cap):
-    return PairRecords(np.zeros(cap), np.zeros((cap, 3)), np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap),
-                       np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap, np.int64))
-
-
-@njit(cache=True, error_model="numpy")
 def _rebuild(x, data):
     """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
     history and the initial-overlap offsets, swap."""
@@ -78,10 +67,10 @@ def _rebuild(x, data):
                         spare.pairs, spare.keys)
         if n >= 0:
             break
-        data.lists[1] = _grown_list(int(1.5 * (-n)) + 64)
+        data.lists[1] = new_pair_list(int(1.5 * (-n)) + 64)
         st.n_grow[0] += 1
     if data.records[0].fn.shape[0] < n:
-        data.records[0] = _grown_records(spare.pairs.shape[0])
+        data.records[0] = new_records(spare.pairs.shape[0])
     cur = data.lists[0]
     if prm.friction_on:
         remap_history(cur.keys, st.n_pairs[0], cur.friction, spare.keys, n, spare.friction)

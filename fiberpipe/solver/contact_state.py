@@ -23,6 +23,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 
 class ContactParams(NamedTuple):
@@ -135,18 +136,16 @@ def new_stats() -> ContactStats:
     return ContactStats(*i, *f)
 
 
-def new_pair_list(capacity: int) -> PairList:
+@njit(cache=True)
+def new_pair_list(capacity):
+    """An empty :class:`PairList` of ``capacity`` pairs (the setup's and the kernel's when it grows)."""
     return PairList(np.zeros((capacity, 2), np.int64), np.zeros(capacity, np.int64), np.zeros((capacity, 5)),
                     np.zeros((capacity, 1)))
 
 
-def new_records(capacity: int) -> PairRecords:
-    z = [np.zeros(capacity) for _ in range(9)]
-    return PairRecords(z[0], np.zeros((capacity, 3)), z[1], z[2], z[3], z[4], z[5], z[6], z[7],
-                       np.zeros(capacity, np.int64))
-
-
-def bare_records(fn, normal, s, t, phi, delta) -> PairRecords:
-    """Records without shares, force sums, gaps or an active list (the plain array API)."""
-    e = np.zeros(0)
-    return PairRecords(fn, normal, s, t, phi, delta, e, e, e, np.zeros(0, np.int64))
+@njit(cache=True)
+def new_records(capacity):
+    """Empty :class:`PairRecords` of ``capacity`` pairs."""
+    return PairRecords(np.zeros(capacity), np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity),
+                       np.zeros(capacity), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
+                       np.zeros(capacity), np.zeros(capacity, np.int64))

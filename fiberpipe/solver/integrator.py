@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import FiberpipeError, SimulationDiverged
 from ._kernels_integrate import step_loop_for
 from ._kernels_beam import EB_SIZE, beam_forces
-from ._kernels_boundary import PLANE_ONSET_M, plane_onset
+from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
 from .layout import (H_FD, H_KE, H_KE_LF, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
@@ -149,17 +149,16 @@ def choose_time_step(model: Model, effects: Sequence[Effect], settings: Simulati
 
 
 def _plane_energy(sc: SceneArrays, x: np.ndarray) -> float:
-    """The plane penalties' stored energy Σ ½ k g(δ)² at positions ``x`` (planes at their start)."""
-    if sc.pl_axis.size == 0:
+    """The plane penalties' stored energy at positions ``x`` (planes at their start), from the
+    step loop's own plane kernel on scratch arrays."""
+    P = sc.pl_axis.size
+    if P == 0:
         return 0.0
-    k = sc.k_pen()
-    e = 0.0
-    for p in range(sc.pl_axis.size):
-        d = sc.model.radius_node - sc.pl_sign[p] * (x[:, sc.pl_axis[p]] - sc.pl_pos0[p])
-        for i in np.flatnonzero(d > 0.0):
-            g, _ = plane_onset(float(d[i]), PLANE_ONSET_M)
-            e += 0.5 * float(k[i]) * g * g
-    return e
+    n = x.shape[0]
+    _, energy = plane_contacts(np.ascontiguousarray(x, dtype=np.float64), m_(sc.model.radius_node), sc.k_pen(),
+                               sc.pl_axis, sc.pl_sign, sc.pl_pos0, np.zeros((n, 3)), np.zeros(P),
+                               np.zeros(n * P, np.int64), np.zeros(n * P))
+    return float(energy)
 
 
 def _initial_energies(model: Model, state: State) -> tuple[float, float]:
