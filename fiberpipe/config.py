@@ -301,6 +301,19 @@ class ContactConfig(Section):
         "element length keeps crossings spanning several elements off the point law, docs/contact.md)"
     )
 
+    formulation: Literal["legacy", "potential"] = Field(
+        "legacy", description="normal contact kernel: 'potential' makes every force minus the gradient of one "
+        "stored potential (Gauss points fixed on each segment, the angle blend with its derivatives; "
+        "docs/contact.md); 'legacy' integrates the overlap exactly but is not conservative"
+    )
+    onset: Length = Field(
+        0.0, description="formulation 'potential': penetration over which force and stiffness rise from zero "
+        "(0: the laws as they are)"
+    )
+    gauss_points: int = Field(
+        2, description="Gauss points per segment of the line (parallel) part, 1…6"
+    )
+
     @field_validator("law")
     @classmethod
     def _registered(cls, v):
@@ -323,6 +336,12 @@ class ContactConfig(Section):
             raise ValueError("contact.angle must be between 0 and 90 deg")
         _positive("contact.overlap_release", self.overlap_release)
         _positive("contact.blend_length", self.blend_length)
+        if not (self.onset >= 0 and math.isfinite(self.onset)):
+            raise ValueError(f"contact.onset must be >= 0, got {self.onset}")
+        if "onset" in self.model_fields_set and self.formulation != "potential":
+            raise ValueError("contact.onset applies to formulation 'potential' only")
+        if not 1 <= self.gauss_points <= 6:
+            raise ValueError(f"contact.gauss_points must be 1…6, got {self.gauss_points}")
         if "blend_length" in self.model_fields_set and self.law != "hertz_oriented":
             raise ValueError(f"contact.blend_length applies to law 'hertz_oriented' only (the law is {self.law!r})")
         return self

@@ -38,6 +38,7 @@ from numba.typed import List
 from ..errors import FiberpipeError
 from ._kernels_boundary import ramp_fraction
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
+from .contact_potential import contact_forces_pot, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments,
@@ -128,6 +129,26 @@ def _update_neighbours(x, v, dt, data):
     return rebuild
 
 
+@njit(inline="always", **_FLAGS)
+def _normal_forces(x, data, off, reach):
+    """The normal contact pass, formulation ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`):
+    forces into ``data.fc``, per-pair records into ``data.records[0]``; returns (energy, n_active)."""
+    prm, st, segs = data.params, data.stats, data.segs
+    return contact_forces_ex(x, segs.nodes, segs.radius, data.lists[0].pairs, st.n_pairs[0], prm.law_id,
+                             prm.law_params, prm.gauss_xi, prm.gauss_w, data.fc, data.records[0], off, reach)
+
+
+@njit(inline="always", **_FLAGS)
+def _normal_forces_potential(x, data, off, reach):
+    """The normal contact pass, formulation ``potential``
+    (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every force minus the gradient of
+    the stored potential); same outputs as :func:`_normal_forces`."""
+    prm, st, segs = data.params, data.stats, data.segs
+    return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, data.lists[0].pairs, st.n_pairs[0], prm.law_id,
+                              prm.law_params, prm.gauss_xi, prm.gauss_w, prm.onset_m, data.fc, data.records[0], off,
+                              reach)
+
+
 @njit(**_FLAGS)
 def _record_initial_overlaps(x, data, reach):
     """First call: each pair's penetration at t = 0 becomes its offset (released over
@@ -135,8 +156,7 @@ def _record_initial_overlaps(x, data, reach):
     prm, st, segs = data.params, data.stats, data.segs
     plist, rec = data.lists[0], data.records[0]
     n_pairs = st.n_pairs[0]
-    contact_forces_ex(x, segs.nodes, segs.radius, plist.pairs, n_pairs, prm.law_id, prm.law_params, prm.gauss_xi,
-                      prm.gauss_w, data.fc, rec, np.zeros(0), reach)
+    _normal_forces(x, data, np.zeros(0), reach)
     omax = 0.0
     for k in range(n_pairs):
         i = plist.pairs[k, 0]
@@ -302,8 +322,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     off, rel, rel_prev = _overlap_offsets(data, t, dt)
     plist, rec = data.lists[0], data.records[0]
     # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
-    energy, n_active = contact_forces_ex(x, segs.nodes, segs.radius, plist.pairs, st.n_pairs[0], prm.law_id,
-                                         prm.law_params, prm.gauss_xi, prm.gauss_w, data.fc, rec, off, reach)
+    energy, n_active = _normal_forces(x, data, off, reach)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
     # grows by Σ|f|·Δoff); a prescribed "motion", booked as external work (ALLWK)
     if off.shape[0] > 0 and rel_prev > rel:
@@ -406,29 +425,53 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
 
 _CUSTOM_KERNELS: dict = {}
 
+# the formulation's normal pass, bound into contact_step and _record_initial_overlaps by name
+FORMULATIONS = {"legacy": _normal_forces, "potential": _normal_forces_potential}
 
-def contact_kernel_for(law):
-    """``(contact_step kernel, cache name)`` for ``law``: the built-in kernels (cached on disk) for a
-    law without ``kernels``; else copies of the contact kernels specialised on the law's own jitted
-    ``(line, point, weight_point)`` functions (compiled once per process and law class)."""
+# the built-in laws with the potential formulation: a second cached copy of the hook kernel
+_record_initial_overlaps_potential = specialise(
+    _record_initial_overlaps, "_record_initial_overlaps_potential", {"_normal_forces": _normal_forces_potential},
+    cache=True, fastmath=True, error_model="numpy")
+contact_step_potential = specialise(
+    contact_step, "contact_step_potential",
+    {"_normal_forces": _normal_forces_potential, "_record_initial_overlaps": _record_initial_overlaps_potential},
+    cache=True, fastmath=True, error_model="numpy")
+
+
+def contact_kernel_for(law, formulation: str = "legacy"):
+    """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
+    (``legacy`` or ``potential``): the built-in kernels (cached on disk) for a law without
+    ``kernels``; else copies of the contact kernels specialised on the law's own jitted
+    ``(line, point, weight_point)`` functions (compiled once per process, law class and formulation)."""
+    if formulation not in FORMULATIONS:
+        raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
     if law.kernels is None:
+        if formulation == "potential":
+            return contact_step_potential, "advance_contact_potential"
         return contact_step, "advance_contact"
-    key = type(law)
+    key = (type(law), formulation)
     if key not in _CUSTOM_KERNELS:
-        tag = type(law).__name__
+        tag = f"{type(law).__name__}_{formulation}"
         flags = dict(fastmath=True, error_model="numpy")
-        cf, _ = contact_kernels_for(law)
-        ro = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"contact_forces_ex": cf},
+        if formulation == "potential":
+            cf = potential_kernels_for(law)
+            nf = specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": cf},
+                            cache=False, inline="always", **flags)
+        else:
+            cf, _ = contact_kernels_for(law)
+            nf = specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_ex": cf}, cache=False,
+                            inline="always", **flags)
+        ro = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
                         cache=False, **flags)
         _CUSTOM_KERNELS[key] = specialise(contact_step, f"contact_step_{tag}",
-                                          {"contact_forces_ex": cf, "_record_initial_overlaps": ro}, cache=False,
+                                          {"_normal_forces": nf, "_record_initial_overlaps": ro}, cache=False,
                                           **flags)
     return _CUSTOM_KERNELS[key], None
 
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
-                      plane_friction_on: bool = True):
+                      plane_friction_on: bool = True, formulation: str = "legacy", onset_m: float = 0.0):
     """A :class:`ContactHook` for ``model`` (Python API; ``build.build_simulation`` maps a config onto it).
 
     law : ContactLaw. contact : fiber–fiber normal contact on. friction : Coulomb friction on
@@ -437,7 +480,11 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin (default 0.2 r_max).
     n_gauss : Gauss points per segment in the line part. overlap_release_s : s, the initial overlap
     of each segment pair (its penetration at the first step) is subtracted from its penetration and
-    released linearly to 0 over this time (0: no offset, the overlap acts at once).
+    released linearly to 0 over this time (0: no offset, the overlap acts at once). formulation :
+    the normal contact kernel, ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`) or
+    ``potential`` (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`, every force minus
+    the gradient of the stored potential). onset_m : m, formulation ``potential``: the penetration over
+    which force and stiffness rise from zero (0: the laws as they are).
     """
     segs = _segments(model)
     E = model.n_elements
@@ -449,6 +496,9 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         raise FiberpipeError(f"friction.mu must be >= 0, got {mu}")
     if not (overlap_release_s >= 0 and math.isfinite(overlap_release_s)):
         raise FiberpipeError(f"contact.overlap_release must be >= 0, got {overlap_release_s}")
+    if not (onset_m >= 0 and math.isfinite(onset_m)):
+        raise FiberpipeError(f"contact.onset must be >= 0, got {onset_m}")
+    kernel, cache_name = contact_kernel_for(law, formulation)
     info = ContactSetup(law, contact, friction, mu, k_t, skin, n_gauss)
 
     def prepare(model_, scene):
@@ -461,7 +511,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         P = scene.pl_axis.size
         params = ContactParams(int(law.law_id), law.params(), bool(friction and contact),
                                bool(friction and plane_friction_on and P > 0), skin, 2.0 * rmax, float(mu), kt,
-                               float(overlap_release_s), gxi, gw)
+                               float(overlap_release_s), gxi, gw, float(onset_m))
         used = segs if contact else Segments(*(a[:0] for a in segs))
         data = ContactData(params, new_stats(), used, np.array(model_.nodes_m, dtype=np.float64),
                            List([new_pair_list(cap), new_pair_list(cap)]), List([new_records(cap)]), np.zeros((N, 3)),
@@ -470,7 +520,6 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         info.data = data
         return data
 
-    kernel, cache_name = contact_kernel_for(law)
     hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name)
     hook.setup_info = info
     if not contact:
@@ -494,4 +543,6 @@ class ContactEffect:
                                  friction="friction" in effects, mu=float(fcfg.mu),
                                  overlap_release_s=float(ccfg.overlap_release),
                                  k_t=None if fcfg.stiffness is None else float(fcfg.stiffness),
-                                 skin_m=None if ccfg.skin is None else float(ccfg.skin))
+                                 skin_m=None if ccfg.skin is None else float(ccfg.skin),
+                                 n_gauss=int(ccfg.gauss_points), formulation=ccfg.formulation,
+                                 onset_m=float(ccfg.onset))

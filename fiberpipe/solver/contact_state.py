@@ -38,6 +38,7 @@ class ContactParams(NamedTuple):
     release_s: float        # initial overlaps released linearly over this time (0: at once)
     gauss_xi: np.ndarray    # Gauss nodes on (0, 1) of the line part
     gauss_w: np.ndarray     # their weights (sum 1)
+    onset_m: float          # formulation potential: penetration over which force and stiffness rise from zero
 
 
 class ContactStats(NamedTuple):

@@ -1,0 +1,416 @@
+"""Fiber–fiber normal contact in which every force is minus the gradient of one stored potential.
+
+Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.contact_forces_ex`
+(the hook picks one of the two). The potential of a candidate segment pair (A = segment i, B = j) is
+
+    Π_AB = (1 − w(Φ)) Π_line + w(Φ) s_joint Π_point
+
+* **Onset.** Every law acts on the mapped penetration ``g(δ)``: ``g' = smoothstep(δ/δ_s)`` on
+  ``[0, δ_s]`` (``g = δ_s(u³ − u⁴/2)``, ``u = δ/δ_s``) and ``g = δ − δ_s/2`` beyond, so the force
+  ``F(g)·g'`` and its slope vanish at first touch and the potential is C² there (a stiffness that
+  switches on with a jump makes central differences create or destroy ``~½ k (vΔt)²`` per touch,
+  whatever the step: the penalty is chosen against Δt).
+* **Line part** (Meier, Popp & Wall, CMAME 308, 2016, Gauss-point-to-segment): Gauss points at
+  fixed parameters ξ_g of A (whole segment, weight ``w_g L0_A``, the reference length), each
+  projected on B (clamped); the point belongs to the segment of B nearer to it than B's neighbour
+  at the nearer end (ties: the later one; a free end keeps its clamped point, the hemispherical
+  end cap), so the integrand is ``e_line`` of the distance to fibre B's polyline: a function of the
+  node positions only, continuous across straight and kinked joints.
+  ``Π_line = ½ Σ_g w_g L0_A e_line(g(δ_g))`` both ways (A on B and B on A). The closest point is
+  stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
+* **Point part**: clamped segment–segment closest points, ``Π_point = e_point(g(δ_c), Φ)``, with
+  the joint share of :func:`fiberpipe.solver.contact._joint_share`.
+* **Blend**: ``w = smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))`` on the crossing angle; hertz_oriented:
+  that times ``w_ξ(δ_c, Φ)`` from the Hertz ellipse against ℓ_blend (:func:`_oriented_weight`), δ_c
+  the pair's clamped penetration. The blend's derivatives and the law's own ``∂e_point/∂Φ`` (hertz_oriented:
+  K(Φ)) enter the force: ``∂w/∂δ_c (s_joint Π_point − Π_line)`` along the closest points' normal, and
+  ``G = ∂Π/∂Φ = ∂w/∂Φ (s_joint Π_point − Π_line) + w s_joint ∂Π_point/∂Φ`` through
+  ``∂Φ/∂t_A = −σ (t̂_B − c t̂_A)/(|t_A| sin Φ)`` (``c = t̂_A·t̂_B``, ``σ = sign c``): a couple on
+  each segment (no net force), the consistent variant of the all-angle blend (4C's
+  ``CONSISTENTTRANSITION``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._specialise import specialise
+from .contact import _joint_share
+from .geometry import crossing_angle, segment_distance2_s
+from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
+                   hertz_crossed_point, law_line, law_point)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def onset(delta, ds):
+    """(g, dg/dδ) of the onset map: C¹ with g(0) = g'(0) = 0, g' = 1 and g'' = 0 from δ_s on
+    (δ_s = 0: the identity)."""
+    if delta >= ds:
+        return delta - 0.5 * ds, 1.0
+    u = delta / ds
+    u2 = u * u
+    return ds * u2 * u * (1.0 - 0.5 * u), u2 * (3.0 - 2.0 * u)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _seg_has_prev(seg_nodes, e):
+    return e > 0 and seg_nodes[e - 1, 1] == seg_nodes[e, 0]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _seg_has_next(seg_nodes, e):
+    return e + 1 < seg_nodes.shape[0] and seg_nodes[e + 1, 0] == seg_nodes[e, 1]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _point_segment_distance2(p0, p1, p2, x, n0, n1):
+    """Squared distance [m²] of point p to the segment of nodes n0, n1 (clamped projection)."""
+    t0 = x[n1, 0] - x[n0, 0]
+    t1 = x[n1, 1] - x[n0, 1]
+    t2 = x[n1, 2] - x[n0, 2]
+    r0 = p0 - x[n0, 0]
+    r1 = p1 - x[n0, 1]
+    r2 = p2 - x[n0, 2]
+    t = (r0 * t0 + r1 * t1 + r2 * t2) / (t0 * t0 + t1 * t1 + t2 * t2)
+    t = min(max(t, 0.0), 1.0)
+    r0 -= t * t0
+    r1 -= t * t1
+    r2 -= t * t2
+    return r0 * r0 + r1 * r1 + r2 * r2
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, la0, b_prev, b_next, law_id, law_params, gxi, gw, scale, ds,
+                   f_out, rec, sign, off):
+    """Gauss points fixed on A, projected on segment B; weight ``scale``·w_g·L0_A. Returns the energy
+    (with the weight). Forces are minus its gradient."""
+    tb0 = x[nb1, 0] - x[nb0, 0]
+    tb1 = x[nb1, 1] - x[nb0, 1]
+    tb2 = x[nb1, 2] - x[nb0, 2]
+    lb2 = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
+    rr = ra + rb
+    energy = 0.0
+    for g in range(gxi.shape[0]):
+        xi = gxi[g]
+        p0 = x[na0, 0] + xi * (x[na1, 0] - x[na0, 0])
+        p1 = x[na0, 1] + xi * (x[na1, 1] - x[na0, 1])
+        p2 = x[na0, 2] + xi * (x[na1, 2] - x[na0, 2])
+        r0 = p0 - x[nb0, 0]
+        r1 = p1 - x[nb0, 1]
+        r2 = p2 - x[nb0, 2]
+        t_raw = (r0 * tb0 + r1 * tb1 + r2 * tb2) / lb2
+        t = min(max(t_raw, 0.0), 1.0)
+        d0 = r0 - t * tb0
+        d1 = r1 - t * tb1
+        d2 = r2 - t * tb2
+        dd2 = d0 * d0 + d1 * d1 + d2 * d2
+        # ownership: the Gauss point belongs to the segment of B nearest to it, against B's neighbour
+        # at the nearer end (ties to the later segment), so Π_line integrates e(min over B's segments
+        # of the distance): continuous on kinked fibres too; at a free end the clamped point (end cap)
+        if t_raw > 0.5:
+            if b_next and _point_segment_distance2(p0, p1, p2, x, nb1, nb1 + 1) <= dd2:
+                continue
+        elif b_prev and _point_segment_distance2(p0, p1, p2, x, nb0 - 1, nb0) < dd2:
+            continue
+        d = math.sqrt(dd2)
+        delta = rr - d - off
+        if delta <= 0.0 or d <= 0.0:
+            continue
+        gg, gp = onset(delta, ds)
+        pl, el = law_line(law_id, law_params, gg, ra, rb)
+        wl = scale * gw[g] * la0
+        rec[7] += scale * gw[g]
+        fm = pl * gp * wl
+        energy += el * wl
+        inv = fm / d
+        f0 = d0 * inv
+        f1 = d1 * inv
+        f2 = d2 * inv
+        f_out[na0, 0] += (1.0 - xi) * f0
+        f_out[na0, 1] += (1.0 - xi) * f1
+        f_out[na0, 2] += (1.0 - xi) * f2
+        f_out[na1, 0] += xi * f0
+        f_out[na1, 1] += xi * f1
+        f_out[na1, 2] += xi * f2
+        f_out[nb0, 0] -= (1.0 - t) * f0
+        f_out[nb0, 1] -= (1.0 - t) * f1
+        f_out[nb0, 2] -= (1.0 - t) * f2
+        f_out[nb1, 0] -= t * f0
+        f_out[nb1, 1] -= t * f1
+        f_out[nb1, 2] -= t * f2
+        rec[0] += fm
+        rec[1] += sign * f0
+        rec[2] += sign * f1
+        rec[3] += sign * f2
+        if sign > 0.0:
+            rec[4] += fm * xi
+            rec[5] += fm * t
+        else:
+            rec[4] += fm * t
+            rec[5] += fm * xi
+        if delta > rec[6]:
+            rec[6] = delta
+    return energy
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _point_energy_dphi(law_id, law_params, g, ra, rb, phi):
+    """∂e_point/∂Φ [J/rad] at fixed mapped penetration g: non-zero only for the law whose point
+    stiffness follows each contact's own angle (hertz_oriented, K(Φ) from the crossed-Hertz table)."""
+    if law_id != LAW_HERTZ_ORIENTED:
+        return 0.0
+    h = 1e-6 * phi + 1e-12
+    fa, ea = law_point(law_id, law_params, g, ra, rb, phi + h)
+    fb, eb = law_point(law_id, law_params, g, ra, rb, phi - h)
+    return (ea - eb) / (2.0 * h)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _oriented_weight(law_params, delta, ds, ra, rb, phi):
+    """hertz_oriented's point share and its partial derivatives: ``(w, ∂w/∂Φ, ∂w/∂δ)``.
+
+    ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``, ``ξ = a(g(δ), Φ)/ℓ_blend``, ``a = â(Φ)√(R_e g)``
+    the Hertz semi-major axis: the point law while the contact ellipse fits in ℓ_blend, the line law
+    once it outgrows it. ``∂a/∂δ = a g'/(2g)``; ``∂a/∂Φ`` by central differences of the table."""
+    if delta <= 0.0:
+        return 1.0, 0.0, 0.0
+    g, gp = onset(delta, ds)
+    f, e, a = hertz_crossed_point(law_params, g, ra, rb, phi)
+    inv_l = 1.0 / law_params[P_LBLEND]
+    xlo = law_params[P_XI_LO]
+    span = law_params[P_XI_HI] - xlo
+    u = (a * inv_l - xlo) / span
+    if u <= 0.0:
+        return 1.0, 0.0, 0.0
+    if u >= 1.0:
+        return 0.0, 0.0, 0.0
+    w = 1.0 - u * u * (3.0 - 2.0 * u)
+    dw_dxi = -6.0 * u * (1.0 - u) / span
+    h = 1e-6 * phi + 1e-12
+    fa, ea, aa = hertz_crossed_point(law_params, g, ra, rb, phi + h)
+    fb, eb, ab = hertz_crossed_point(law_params, g, ra, rb, phi - h)
+    da_dphi = (aa - ab) / (2.0 * h)
+    da_ddelta = 0.5 * a * gp / g
+    return w, dw_dxi * da_dphi * inv_l, dw_dxi * da_ddelta * inv_l
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
+                       out, c_off, reach):
+    """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
+    ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
+    [m], the arc length of each segment's ends along its fibre (their difference, the reference
+    length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
+    ``(energy, n_active)``; ``energy`` is the potential itself."""
+    c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, c_gap, c_active = out
+    use_gap = c_gap.shape[0] > 0
+    use_list = c_active.shape[0] > 0
+    use_off = c_off.shape[0] > 0
+    use_share = c_share.shape[0] > 0
+    phi_lo = law_params[P_PHI_LO]
+    phi_hi = law_params[P_PHI_HI]
+    inv_span = 1.0 / (phi_hi - phi_lo)
+    energy = 0.0
+    n_active = 0
+    rec = np.zeros(8)
+    a0 = np.empty(3)
+    b0 = np.empty(3)
+    ta = np.empty(3)
+    tb = np.empty(3)
+    for k in range(n_pairs):
+        c_fn[k] = 0.0
+        if use_gap and c_gap[k] > reach:
+            continue
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        na0 = seg_nodes[i, 0]
+        na1 = seg_nodes[i, 1]
+        nb0 = seg_nodes[j, 0]
+        nb1 = seg_nodes[j, 1]
+        ra = seg_radius[i]
+        rb = seg_radius[j]
+        rr = ra + rb
+        off = c_off[k] if use_off else 0.0
+        for c in range(3):
+            a0[c] = x[na0, c]
+            b0[c] = x[nb0, c]
+            ta[c] = x[na1, c] - a0[c]
+            tb[c] = x[nb1, c] - b0[c]
+        dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
+                                             ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
+        if dist2 >= rr * rr:
+            if use_gap:
+                c_gap[k] = reach + math.sqrt(dist2) - rr
+            continue
+        for c in range(8):
+            rec[c] = 0.0
+        aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+        bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+        ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+        phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
+        dw_dd = 0.0  # ∂w/∂δ_c (hertz_oriented: the ellipse grows with the penetration)
+        if law_id == LAW_HERTZ_PARALLEL:
+            w = 0.0
+            dw = 0.0
+        elif law_id == LAW_HERTZ_ORIENTED:
+            # ellipse blend × angle blend: below Φ_lo no point law at all (at Φ → 0 the crossed-Hertz
+            # stiffness diverges and ∂w/∂δ would carry it; the ellipse blend alone did that: +28 %)
+            u = (phi - phi_lo) * inv_span
+            if u <= 0.0:
+                w = 0.0
+                dw = 0.0
+            else:
+                wx, dwx, dw_dd = _oriented_weight(law_params, rr - math.sqrt(dist2) - off, ds, ra, rb, phi)
+                if u >= 1.0:
+                    w = wx
+                    dw = dwx
+                else:
+                    wp = u * u * (3.0 - 2.0 * u)
+                    w = wx * wp
+                    dw = dwx * wp + wx * 6.0 * u * (1.0 - u) * inv_span
+                    dw_dd *= wp
+        else:
+            u = (phi - phi_lo) * inv_span
+            if u <= 0.0:
+                w = 0.0
+                dw = 0.0
+            elif u >= 1.0:
+                w = 1.0
+                dw = 0.0
+            else:
+                w = u * u * (3.0 - 2.0 * u)
+                dw = 6.0 * u * (1.0 - u) * inv_span
+        e_point = 0.0   # s_joint Π_point (unweighted by w)
+        de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
+        if w > 0.0:
+            d_own = math.sqrt(dist2)
+            wst = 1.0
+            den = aa * bb - ab * ab
+            if den > 1e-10 * aa * bb:
+                r0 = a0[0] - b0[0]
+                r1 = a0[1] - b0[1]
+                r2 = a0[2] - b0[2]
+                ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+                br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+                s_l = (ab * br - ar * bb) / den
+                t_l = (aa * br - ab * ar) / den
+                wst = _joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr) * _joint_share(x, seg_nodes, j, t_l,
+                                                                                           d_own, a0, ta, rr)
+            delta = rr - d_own - off
+            if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
+                gg, gp = onset(delta, ds)
+                fp, ep = law_point(law_id, law_params, gg, ra, rb, phi)
+                e_point = wst * ep
+                de_point = wst * _point_energy_dphi(law_id, law_params, gg, ra, rb, phi)
+                rec[7] += w * wst
+                fm = w * wst * fp * gp
+                inv = 1.0 / d_own
+                d0 = (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv
+                d1 = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
+                d2 = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
+                f0 = fm * d0
+                f1 = fm * d1
+                f2 = fm * d2
+                f_out[na0, 0] += (1.0 - sc) * f0
+                f_out[na0, 1] += (1.0 - sc) * f1
+                f_out[na0, 2] += (1.0 - sc) * f2
+                f_out[na1, 0] += sc * f0
+                f_out[na1, 1] += sc * f1
+                f_out[na1, 2] += sc * f2
+                f_out[nb0, 0] -= (1.0 - tc) * f0
+                f_out[nb0, 1] -= (1.0 - tc) * f1
+                f_out[nb0, 2] -= (1.0 - tc) * f2
+                f_out[nb1, 0] -= tc * f0
+                f_out[nb1, 1] -= tc * f1
+                f_out[nb1, 2] -= tc * f2
+                rec[0] += fm
+                rec[1] += f0
+                rec[2] += f1
+                rec[3] += f2
+                rec[4] += fm * sc
+                rec[5] += fm * tc
+                rec[6] = max(rec[6], delta)
+        e_line = 0.0  # Π_line (unweighted by 1 − w)
+        if w < 1.0:
+            half = 0.5 * (1.0 - w)
+            el = _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, seg_arc[i, 1] - seg_arc[i, 0], _seg_has_prev(seg_nodes, j),
+                                _seg_has_next(seg_nodes, j), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+                                1.0, off)
+            el += _line_half_pot(x, nb0, nb1, na0, na1, rb, ra, seg_arc[j, 1] - seg_arc[j, 0], _seg_has_prev(seg_nodes, i),
+                                 _seg_has_next(seg_nodes, i), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+                                 -1.0, off)
+            e_line = el / (1.0 - w)
+        energy += (1.0 - w) * e_line + w * e_point
+        # ∂Π/∂δ_c through w (hertz_oriented): along the clamped closest points' normal, like the point force
+        gd = dw_dd * (e_point - e_line)
+        if gd != 0.0:
+            d_own = math.sqrt(dist2)
+            if d_own > 1e-14 * rr:
+                inv = gd / d_own
+                for c in range(3):
+                    fc_ = (a0[c] + sc * ta[c] - b0[c] - tc * tb[c]) * inv
+                    f_out[na0, c] += (1.0 - sc) * fc_
+                    f_out[na1, c] += sc * fc_
+                    f_out[nb0, c] -= (1.0 - tc) * fc_
+                    f_out[nb1, c] -= tc * fc_
+        # ∂Π/∂Φ: the blend's derivative and the point law's own angle dependence
+        G = dw * (e_point - e_line) + w * de_point
+        if G != 0.0:
+            la = math.sqrt(aa)
+            lb = math.sqrt(bb)
+            cc = ab / (la * lb)
+            sg = 1.0 if cc >= 0.0 else -1.0
+            sphi = math.sqrt(max(aa * bb - ab * ab, 0.0)) / (la * lb)
+            if sphi > 1e-12:
+                fa = G * sg / (sphi * la * lb)   # −G ∂Φ/∂t_A = fa (t_B − (ab/aa) t_A)
+                ca = ab / aa
+                cb = ab / bb
+                for c in range(3):
+                    ga = fa * (tb[c] - ca * ta[c])  # force on a1 (−∂Π/∂t_A), −ga on a0
+                    gb = fa * (ta[c] - cb * tb[c])
+                    f_out[na1, c] += ga
+                    f_out[na0, c] -= ga
+                    f_out[nb1, c] += gb
+                    f_out[nb0, c] -= gb
+        fsum = rec[0]
+        if fsum > 0.0:
+            if use_list:
+                c_active[n_active] = k
+            n_active += 1
+            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+            c_fn[k] = fv
+            if fv > 0.0:
+                c_n[k, 0] = rec[1] / fv
+                c_n[k, 1] = rec[2] / fv
+                c_n[k, 2] = rec[3] / fv
+            c_s[k] = rec[4] / fsum
+            c_t[k] = rec[5] / fsum
+            c_phi[k] = phi
+            c_delta[k] = rec[6]
+            if use_share:
+                c_share[k] = rec[7]
+                c_fsum[k] = fsum
+    return energy, n_active
+
+
+_LAW_KERNELS: dict = {}
+
+
+def potential_kernels_for(law):
+    """:func:`contact_forces_pot` for ``law``: the built-in kernel for a law without ``kernels``; else a
+    copy specialised on the law's own jitted ``line`` and ``point`` functions (its point share is the
+    generic blend in Φ; compiled once per process and law class, see ``_specialise``)."""
+    if law.kernels is None:
+        return contact_forces_pot
+    key = type(law)
+    if key not in _LAW_KERNELS:
+        line, point, _weight_point = law.kernels
+        tag = type(law).__name__
+        flags = dict(fastmath=True, error_model="numpy")
+        lh = specialise(_line_half_pot, f"_line_half_pot_{tag}", {"law_line": line}, cache=False, **flags)
+        _LAW_KERNELS[key] = specialise(contact_forces_pot, f"contact_forces_pot_{tag}",
+                                       {"_line_half_pot": lh, "law_point": point}, cache=False, **flags)
+    return _LAW_KERNELS[key]

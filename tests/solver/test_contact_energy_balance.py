@@ -1,0 +1,75 @@
+"""Fibre–fibre contact conserves energy: six fibres pressed together, undamped and frictionless, gain
+no energy their loads did not supply (state functions only: the leapfrog kinetic term
+½ v_{n−½}·M v_{n+½} + ALLSE + the stored contact potential of planes and fibres against the loads'
+work f·(x_n − x0)).
+
+Scene: four parallel fibres on a fixed plate between walls, two on top crossing them at ±3°, a line
+load on the top two. With the potential formulation every law stays at or below the loads' work
+(measured ≤ +0.001 of max|W| at 3 N/m); the legacy kernel of hertz_oriented creates +22 % here
+(blend and K(Φ) without their derivatives, see docs/contact.md)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fiberpipe.solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, simulate
+from fiberpipe.solver.effects import LineLoad
+from fiberpipe.solver.laws import make_law
+from fiberpipe.verification.case_config import contact_hook
+
+R = 0.25e-3
+MAT = Material(15e9, 1380.0, 0.3)
+GAP = 0.5e-6
+
+
+def _six_fibres(L=6e-3, n_el=20, phi_deg=3.0):
+    pitch = 2 * R + GAP
+    s = np.linspace(-0.5, 0.5, n_el + 1)
+    fibres = [np.c_[L / 2 + s * L, np.full_like(s, GAP + R + k * pitch), np.full_like(s, R + GAP)] for k in range(4)]
+    ph = math.radians(phi_deg)
+    for yc, sg in ((GAP + R + 0.5 * pitch, 1.0), (GAP + R + 2.5 * pitch, -1.0)):
+        f = np.c_[L / 2 + s * L * math.cos(ph), yc + sg * s * L * math.sin(ph), np.zeros_like(s)]
+        # lift until the smallest surface gap to the lower fibres is GAP
+        tt = np.linspace(0, 1, 400)[:, None]
+        pts = f[0] + tt * (f[-1] - f[0])
+        dy = np.abs(pts[:, 1][:, None] - np.array([g[0, 1] for g in fibres])[None, :]).min(axis=1)
+        dz = np.sqrt(np.maximum((2 * R + GAP) ** 2 - dy**2, 0.0))
+        f[:, 2] = R + GAP + float(dz.max())
+        fibres.append(f)
+    off = np.cumsum([0] + [len(f) for f in fibres])
+    return build_model(np.vstack(fibres), off, R, MAT), pitch
+
+
+def _excess(law, q, formulation, t_end=2e-3):
+    """max over the rows of (state energy − loads' work)/max|W|, and the kinetic energy per row."""
+    m, pitch = _six_fibres()
+    eff = [Loads([LineLoad(4, (0, 0, -q)), LineLoad(5, (0, 0, -q))]),
+           Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
+           Walls({"y": (0.0, 4 * pitch + GAP)}),
+           contact_hook(m, law=law, formulation=formulation)]
+    res = simulate(m, eff, SimulationSettings(end_time_s=t_end, output_frames=3, history_every=100))
+    h = res.history
+    ke, se, st, wk = (h[f"energy/{k}"] for k in ("kinetic_leapfrog", "strain", "contact_stored", "external"))
+    assert st.max() > 0 and res.history["contacts"].max() > 0, "no contact: the case tests nothing"
+    return float(np.max((ke + se + st - wk) / np.max(np.abs(wk)))), ke
+
+
+LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness": 1e9}),
+        ("hertz_crossed", {"phi_deg": 90.0})]
+
+
+@pytest.mark.parametrize("law_name,kw", LAWS)
+def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw):
+    law = make_law(law_name, E_pa=15e9, nu=0.3, **kw)
+    excess, ke = _excess(law, 3.0, "potential")
+    assert excess < 0.01, excess
+    n = len(ke) // 4
+    assert np.max(ke[-n:]) < 2.0 * np.max(ke[:n]) + 1e-12  # no secular growth
+
+
+@pytest.mark.xfail(strict=True, reason="known defect of the legacy kernel: hertz_oriented's blend and K(Φ) enter "
+                   "without their derivatives (measured +22 % of the loads' work)")
+def test_six_fibres_create_no_energy_with_the_legacy_hertz_oriented():
+    excess, _ = _excess(make_law("hertz_oriented", E_pa=15e9, nu=0.3), 3.0, "legacy")
+    assert excess < 0.01, excess

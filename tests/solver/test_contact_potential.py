@@ -1,0 +1,132 @@
+"""The potential formulation of the normal contact (fiberpipe.solver.contact_potential): every force
+is minus the gradient of the energy the kernel returns, for every law, at every crossing angle
+(line part, angle blend, point part), across element joints and at free ends; and the onset map."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fiberpipe.solver.contact import gauss_points
+from fiberpipe.solver.contact_potential import contact_forces_pot, onset
+from fiberpipe.solver.contact_state import new_records
+from fiberpipe.solver.laws import make_law
+
+R = 0.25e-3
+
+
+def _two_fibres(phi_deg, depth, n=3, L=0.9e-3, shift=0.0, bend=0.0, seed=0):
+    """Fibre 0 along x (n segments), fibre 1 crossing it at phi_deg in the x–y plane, above it by
+    2R − depth at the crossing, offset by ``shift`` along fibre 0; small random kinks (``bend``, m)."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(-0.5, 0.5, n + 1)
+    a = np.c_[s * L, np.zeros_like(s), np.zeros_like(s)]
+    ph = math.radians(phi_deg)
+    b = np.c_[shift + s * L * math.cos(ph), s * L * math.sin(ph), np.full_like(s, 2 * R - depth)]
+    x = np.vstack([a, b]) + bend * rng.standard_normal((2 * (n + 1), 3))
+    seg = np.array([[k, k + 1] for k in range(n)] + [[n + 1 + k, n + 2 + k] for k in range(n)], np.int64)
+    pairs = np.array([[i, n + j] for i in range(n) for j in range(n)], np.int64)
+    arc = np.zeros((2 * n, 2))
+    for f in range(2):
+        arc[f * n:(f + 1) * n, 0] = np.arange(n) * L / n
+        arc[f * n:(f + 1) * n, 1] = (np.arange(n) + 1) * L / n
+    return x, seg, pairs, arc
+
+
+def _energy_forces(x, seg, pairs, arc, law, ds, n_gauss=2):
+    P = pairs.shape[0]
+    gxi, gw = gauss_points(n_gauss)
+    f = np.zeros_like(x)
+    rec = new_records(P)
+    e, n_act = contact_forces_pot(x, seg, np.full(seg.shape[0], R), arc, pairs, P, law.law_id, law.params(), gxi, gw,
+                                  ds, f, rec, np.zeros(0), 0.0)
+    return e, f, n_act
+
+
+LAWS = {
+    "hertz_oriented": dict(),
+    "hertz_parallel": dict(),
+    "linear": dict(stiffness=1e9),
+    "hertz_crossed": dict(phi_deg=90.0),
+    "scaled_stiffness": dict(preset="table1_phi6"),
+}
+
+
+@pytest.mark.parametrize("law_name", sorted(LAWS))
+@pytest.mark.parametrize("phi_deg,depth,shift", [
+    (0.0, 0.3e-6, 0.0),      # parallel: line part only, Gauss points across the joints
+    (0.2, 1e-6, 0.11e-3),    # nearly parallel, line part
+    (1.0, 1e-6, 0.05e-3),    # inside the blend (0.5°–1.5°): w' and (Π_point − Π_line) enter
+    (3.0, 2e-6, 0.0),        # crossing on a joint: point part, joint share
+    (30.0, 1e-6, 0.07e-3),   # point part, K(Φ) and dK/dΦ (hertz_oriented)
+])
+def test_force_is_minus_the_gradient_of_the_energy(law_name, phi_deg, depth, shift):
+    law = make_law(law_name, E_pa=15e9, nu=0.3, **LAWS[law_name])
+    x, seg, pairs, L0 = _two_fibres(phi_deg, depth, shift=shift, bend=0.2e-6, seed=int(10 * phi_deg))
+    ds = 1e-7
+    e, f, n_act = _energy_forces(x, seg, pairs, L0, law, ds)
+    assert n_act > 0 and e > 0, "not in contact: the case tests nothing"
+    h = 1e-9  # below the onset length, above the width of the joint-share ramp (1e-9 (r_i + r_j))
+    g = np.zeros_like(x)
+    for i in range(x.shape[0]):
+        for c in range(3):
+            xp = x.copy()
+            xp[i, c] += h
+            xm = x.copy()
+            xm[i, c] -= h
+            g[i, c] = (_energy_forces(xp, seg, pairs, L0, law, ds)[0] - _energy_forces(xm, seg, pairs, L0, law, ds)[0]) / (2 * h)
+    scale = np.abs(f).max()
+    assert scale > 0
+    err = np.abs(f + g).max() / scale
+    assert err < 1e-4, (err, f, -g)
+    # linear momentum: the forces sum to zero
+    assert np.abs(f.sum(axis=0)).max() < 1e-9 * scale
+
+
+_POINT_ON_KINK = pytest.mark.xfail(strict=True, reason=(
+    "the point law's K(Φ) uses the crossing angle of the owning segment pair: where the crossing "
+    "passes a joint kinked towards the other fibre the owner changes and Φ with it (0.4° here), a "
+    "jump of 0.3 % of the contact energy"))
+
+
+@pytest.mark.parametrize("law_name,phi_deg,kink", [
+    ("hertz_oriented", 3.0, 0.0), pytest.param("hertz_oriented", 3.0, 2e-6, marks=_POINT_ON_KINK),
+    ("hertz_oriented", 3.0, -2e-6),
+    ("hertz_parallel", 0.0, 0.0), ("hertz_parallel", 0.0, 2e-6), ("hertz_parallel", 0.0, -2e-6),
+    ("hertz_parallel", 0.3, 0.0), ("hertz_parallel", 0.3, 2e-6), ("hertz_parallel", 0.3, -2e-6),
+])
+def test_energy_is_continuous_as_a_contact_slides_over_joints(law_name, phi_deg, kink):
+    """The pair potentials add up to one continuous function while a contact moves along fibre 0
+    across its element joints, straight or kinked (convex, concave) by ``kink`` at its inner nodes:
+    ownership is handed over where the distances are equal, nothing is counted twice or lost."""
+    law = make_law(law_name, E_pa=15e9, nu=0.3)
+
+    def largest_step(n):
+        es = []
+        for sh in np.linspace(-0.2e-3, 0.2e-3, n):
+            x, seg, pairs, L0 = _two_fibres(phi_deg, 1e-6, shift=sh)
+            x[1:3, 2] += kink
+            es.append(_energy_forces(x, seg, pairs, L0, law, 1e-7)[0])
+        es = np.array(es)
+        assert es.max() > 0
+        return np.abs(np.diff(es)).max() / es.max()
+
+    # continuous: the largest change between neighbouring shifts halves with the shift step (a lost
+    # or doubled Gauss point would leave a jump of O(1/n_gauss) of the energy at every resolution)
+    coarse, fine = largest_step(201), largest_step(401)
+    assert fine <= 0.6 * coarse + 1e-12, (coarse, fine)
+
+
+def test_onset_map_starts_with_zero_force_and_slope():
+    ds = 1e-7
+    g0, gp0 = onset(0.0, ds)
+    assert g0 == 0.0 and gp0 == 0.0
+    # C¹ at δ_s: value δ_s/2 and slope 1 from both sides
+    ga, gpa = onset(ds * (1 - 1e-9), ds)
+    gb, gpb = onset(ds * (1 + 1e-9), ds)
+    assert abs(ga - gb) < 1e-15 and abs(gpa - gpb) < 1e-8
+    # g' is the derivative of g
+    for d in (0.1 * ds, 0.5 * ds, 0.9 * ds, 2 * ds):
+        hh = 1e-6 * ds
+        num = (onset(d + hh, ds)[0] - onset(d - hh, ds)[0]) / (2 * hh)
+        assert abs(num - onset(d, ds)[1]) < 1e-6
