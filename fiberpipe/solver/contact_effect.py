@@ -469,6 +469,40 @@ def contact_kernel_for(law, formulation: str = "legacy"):
     return _CUSTOM_KERNELS[key], None
 
 
+def check_penalty_stiffness(model, dt: float, law, k_t: float | None) -> None:
+    """Refuse a contact law or tangential penalty too stiff for the time step ``dt`` [s].
+
+    A penalty k [N/m] on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two
+    bodies of that mass); central differences stay stable while the transverse modes of the beam
+    (shear, bending: :func:`fiberpipe.solver.timestep.stable_time_step`) plus this stay below
+    (ωΔt)² = 4. Checked for laws whose stiffness is bounded a priori (``linear``) and for ``k_t``.
+    """
+    from .timestep import stable_time_step
+
+    rep = stable_time_step(model)
+    beam = max((2.0 * dt / rep.per_mode_s[k]) ** 2 for k in ("shear", "bending"))
+    budget = 4.0 - beam
+    m_min = float(np.min(model.mass))
+    L_max = float(np.max(model.el_L0)) if model.n_elements else 0.0
+
+    def limit(k):  # the stiffness that uses the whole budget, and the step it would allow
+        return budget * m_min / (2.0 * dt * dt), dt * math.sqrt(max(budget, 0.0) * m_min / (2.0 * k * dt * dt))
+
+    if law is not None:
+        k = law.node_stiffness_n_per_m(L_max)
+        if k is not None and 2.0 * k * dt * dt / m_min > budget:
+            k_lim, dt_ok = limit(k)
+            raise FiberpipeError(
+                f"contact law {law.name!r} is too stiff for the time step: {k:.3g} N/m per node needs dt ≤ "
+                f"{dt_ok:.3g} s, the run uses {dt:.3g} s; lower contact.stiffness (≤ {k_lim / (L_max if law.per_length else 1.0):.3g} "
+                f"{'N/m²' if law.per_length else 'N/m'}) or solver.dt_safety")
+    if k_t is not None and 2.0 * k_t * dt * dt / m_min > budget:
+        k_lim, dt_ok = limit(k_t)
+        raise FiberpipeError(
+            f"friction.stiffness {k_t:.3g} N/m is too stiff for the time step: it needs dt ≤ {dt_ok:.3g} s, the run "
+            f"uses {dt:.3g} s; use friction.stiffness ≤ {k_lim:.3g} N/m or a smaller solver.dt_safety")
+
+
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
                       plane_friction_on: bool = True, formulation: str = "legacy", onset_m: float = 0.0):
@@ -505,6 +539,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         dt = float(scene.dt)
         kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / dt) ** 2
         info.k_t = kt
+        check_penalty_stiffness(model_, dt, law if contact else None, kt if friction else None)
         N = model_.n_nodes
         cap = max(DEFAULT_PAIRS_PER_SEGMENT * E, 64) if contact else 1
         gxi, gw = gauss_points(n_gauss)

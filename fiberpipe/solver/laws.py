@@ -617,6 +617,11 @@ class ContactLaw:
         """float64 parameter array for the kernels (with the crossed-Hertz table appended)."""
         return self._header()
 
+    def node_stiffness_n_per_m(self, element_length_m: float) -> float | None:
+        """The largest stiffness [N/m] one contact puts on a node of an element of that length, for a
+        law whose stiffness is bounded a priori (None: it grows with the penetration, as Hertz's)."""
+        return None
+
     # vectorised helpers (Python loops over the kernels; for tests and plots)
     def line_force(self, delta_m, r1_m=0.25e-3, r2_m=0.25e-3):
         """Line load p(δ) [N/m] (array in, array out)."""
@@ -670,6 +675,10 @@ class LinearLaw(ContactLaw):
         p = self._header()
         p[P_K] = self.stiffness
         return p
+
+    def node_stiffness_n_per_m(self, element_length_m):
+        # a parallel contact along a whole element gives each node k·L (half from each element)
+        return self.stiffness * element_length_m if self.per_length else self.stiffness
 
 
 # The study's Table 1 and Table 3 (d given in mm there). K_def, Abaqus' default penalty

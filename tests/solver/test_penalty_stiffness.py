@@ -1,0 +1,38 @@
+"""A contact law or tangential penalty too stiff for the time step is refused before the run, with
+the step it would need (central differences: (ω_beam² + 2k/m) Δt² ≤ 4)."""
+
+import numpy as np
+import pytest
+
+from fiberpipe.errors import FiberpipeError
+from fiberpipe.solver import Material, SimulationSettings, build_model, simulate
+from fiberpipe.solver.laws import make_law
+from fiberpipe.verification.case_config import contact_hook
+
+R = 0.25e-3
+MAT = Material(15e9, 1380.0, 0.3)
+
+
+def _two_fibres():
+    s = np.linspace(0.0, 3e-3, 11)
+    x = np.vstack([np.c_[s, 0 * s, 0 * s], np.c_[s, 0 * s + 2 * R + 1e-6, 0 * s]])
+    return build_model(x, np.array([0, 11, 22]), R, MAT)
+
+
+def _run(m, **kw):
+    simulate(m, [contact_hook(m, **kw)], SimulationSettings(end_time_s=1e-7, output_frames=2))
+
+
+def test_linear_law_above_the_stable_stiffness_is_refused():
+    m = _two_fibres()
+    # (ωΔt)² = 2 k L Δt²/m: 1e9 N/m² uses ≈ 1 % of the budget, 1e12 N/m² ≈ 10 times all of it
+    _run(m, law=make_law("linear", stiffness=1e9, E_pa=15e9, nu=0.3))
+    with pytest.raises(FiberpipeError, match=r"too stiff for the time step.*contact.stiffness"):
+        _run(m, law=make_law("linear", stiffness=1e12, E_pa=15e9, nu=0.3))
+
+
+def test_friction_stiffness_above_the_stable_stiffness_is_refused():
+    m = _two_fibres()
+    k_limit = 0.5 * float(np.min(m.mass)) * (2.0 / 8.6e-8) ** 2  # (ωΔt)² = 8 at dt_safety 0.95
+    with pytest.raises(FiberpipeError, match=r"friction.stiffness .* too stiff"):
+        _run(m, friction=True, k_t=k_limit)
