@@ -296,15 +296,15 @@ class ContactConfig(Section):
         1e-4, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time"
     )
     blend_length: Length = Field(
-        1e-3, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
-        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (half the "
-        "element length keeps crossings spanning several elements off the point law, docs/contact.md)"
+        5e-5, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
+        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (a sixth of a "
+        "0.3 mm element: a crossing whose ellipse spans elements hops across joints and, as a point force, creates "
+        "energy; docs/contact.md)"
     )
-
     formulation: Literal["legacy", "potential"] = Field(
-        "legacy", description="normal contact kernel: 'potential' makes every force minus the gradient of one "
-        "stored potential (Gauss points fixed on each segment, the angle blend with its derivatives; "
-        "docs/contact.md); 'legacy' integrates the overlap exactly but is not conservative"
+        "potential", description="normal contact kernel: 'potential' makes every force minus the gradient of one "
+        "stored potential (Gauss points fixed on each segment, the angle blend with its derivatives); 'legacy' "
+        "integrates each overlap exactly, without the derivatives of its interval and blend (docs/contact.md)"
     )
     onset: Length = Field(
         0.0, description="formulation 'potential': penetration over which force and stiffness rise from zero "

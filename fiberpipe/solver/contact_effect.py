@@ -438,7 +438,7 @@ contact_step_potential = specialise(
     cache=True, fastmath=True, error_model="numpy")
 
 
-def contact_kernel_for(law, formulation: str = "legacy"):
+def contact_kernel_for(law, formulation: str = "potential"):
     """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
     (``legacy`` or ``potential``): the built-in kernels (cached on disk) for a law without
     ``kernels``; else copies of the contact kernels specialised on the law's own jitted
@@ -505,7 +505,7 @@ def check_penalty_stiffness(model, dt: float, law, k_t: float | None) -> None:
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
-                      plane_friction_on: bool = True, formulation: str = "legacy", onset_m: float = 0.0):
+                      plane_friction_on: bool = True, formulation: str = "potential", onset_m: float = 0.0):
     """A :class:`ContactHook` for ``model`` (Python API; ``build.build_simulation`` maps a config onto it).
 
     law : ContactLaw. contact : fiber–fiber normal contact on. friction : Coulomb friction on

@@ -823,7 +823,7 @@ class HertzOrientedLaw(ContactLaw):
     law_id = LAW_HERTZ_ORIENTED
     name = "hertz_oriented"
 
-    def __init__(self, blend_length_m: float = 1.0e-3, xi_lo: float = 1.0, xi_hi: float = 2.0, **kw):
+    def __init__(self, blend_length_m: float = 5.0e-5, xi_lo: float = 1.0, xi_hi: float = 2.0, **kw):
         super().__init__(**kw)
         if not blend_length_m > 0:
             raise ConfigError(f"blend_length_m must be > 0, got {blend_length_m}")

@@ -245,6 +245,10 @@ def contact_hook(model, **overrides):
     if "law" not in overrides:
         mat = SimpleNamespace(youngs_modulus=model.material.youngs_modulus_pa, poisson_ratio_value=model.material.nu)
         overrides["law"] = law_from_config(ContactConfig(), mat)
+    cc = ContactConfig()
     overrides.setdefault("mu", FrictionConfig().mu)
-    overrides.setdefault("overlap_release_s", ContactConfig().overlap_release)
+    overrides.setdefault("overlap_release_s", cc.overlap_release)
+    overrides.setdefault("formulation", cc.formulation)
+    overrides.setdefault("onset_m", float(cc.onset))
+    overrides.setdefault("n_gauss", int(cc.gauss_points))
     return make_contact_hook(model, **overrides)
