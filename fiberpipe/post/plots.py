@@ -95,7 +95,10 @@ def plot_loops(path: Path, U_m: np.ndarray, F_N: np.ndarray, segment: np.ndarray
     for k in np.unique(seg):
         sel = np.flatnonzero(seg == k)
         sel = np.concatenate([[sel[0] - 1], sel]) if sel[0] > 0 else sel  # join the segments
-        ax.plot(U[sel], F[sel], color=f"C{k % 10}", label=f"segment {k}")
+        # later segments drawn thinner and every other one dashed: a move that retraces an earlier
+        # one leaves it visible beneath
+        ax.plot(U[sel], F[sel], color=f"C{k % 10}", ls="--" if k % 2 else "-", lw=max(3.0 - 0.8 * k, 0.8),
+                label=f"segment {k}")
     ax.set_xlabel("plate displacement U [mm]")
     ax.set_ylabel("compaction load F [N]")
     ax.grid(alpha=0.3)
