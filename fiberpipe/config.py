@@ -412,7 +412,8 @@ class LoadingConfig(Section):
         far = max(self.path)
         if "displacement" in self.model_fields_set and self.displacement != far:
             raise ValueError(f"scene.loading.displacement ({self.displacement * 1e3:.4g} mm) and scene.loading.path "
-                             "are both given: the path replaces the displacement, remove it")
+                             "are both given: the path replaces the displacement; remove it or make it the path's "
+                             f"largest entry ({far * 1e3:.4g} mm)")
         object.__setattr__(self, "displacement", far)
 
 
