@@ -227,7 +227,7 @@ def _step_time_s(cfg) -> float:
         ld = sc.loading
         T = float(ld.displacement) / float(ld.velocity)
         t = max(t, T / (1 - float(ld.ramp_fraction)) if ld.ramp == "smooth" else T)
-        if getattr(ld, "path", None) is not None:  # a loading path: its moves and holds
+        if ld.path is not None:  # a loading path: its moves and holds
             t = max(t, _path_plates(ld).loading_time_s)
     if "drives" in sc.effects:
         for d in sc.drives:
@@ -379,7 +379,7 @@ def abaqus_deck(cfg, mesh) -> tuple[str, dict]:
             pts = [(0.0, 0.0), (ta, 1.0), (Tl - ta, 1.0), (Tl, 0.0)]
         else:  # constant velocity from t = 0; stopped (within 1e-6 of Tl) once the travel is done
             pts = [(0.0, 1.0), (Tl, 1.0)] + ([(Tl * (1 + 1e-6), 0.0)] if T > Tl * (1 + 1e-6) else [])
-        if getattr(ld, "path", None) is not None:
+        if ld.path is not None:
             pts = _path_velocity_points(ld)
         if T > pts[-1][0]:
             pts.append((T, 0.0))

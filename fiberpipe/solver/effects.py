@@ -76,26 +76,22 @@ def _node_of(model: Model, key: str, fiber, at) -> int:
     return model.fiber_node_index(i, k)
 
 
+def _widen(a: np.ndarray, n: int, keep_last: bool) -> np.ndarray:
+    """``a`` padded along its last axis to ``n`` entries: repeating its last one, or with zeros."""
+    extra = n - a.shape[-1]
+    if extra <= 0:
+        return a
+    tail = np.repeat(a[..., -1:], extra, axis=-1) if keep_last else np.zeros(a.shape[:-1] + (extra,))
+    return np.concatenate([a, tail], axis=-1)
+
+
 def _append_rows(tables, rows):
-    """The travel tables (P, S) with one plane's rows appended; the narrower side is padded with
-    entries of zero duration that keep the last travel (path_travel never enters them)."""
+    """The travel tables ``(move, T, ta)``, each (P, S), with one plane's rows appended; the narrower
+    side is padded with entries of zero duration that keep the last travel (path_travel skips them)."""
     rows = [np.atleast_1d(np.asarray(r, dtype=np.float64)) for r in rows]
-    width = max(tables[0].shape[1] if tables[0].shape[0] else 1, rows[0].size)
-
-    def pad(a, n, keep_last):
-        extra = n - a.shape[-1]
-        if extra <= 0:
-            return a
-        if keep_last:
-            return np.concatenate([a, np.repeat(a[..., -1:], extra, axis=-1)], axis=-1)
-        return np.concatenate([a, np.zeros(a.shape[:-1] + (extra,))], axis=-1)
-
-    out = []
-    for k, (tab, row) in enumerate(zip(tables, rows)):
-        keep = k == 0  # the travel keeps its last value, durations and ramps are 0
-        tab = pad(tab.reshape(tab.shape[0], -1) if tab.shape[0] else np.zeros((0, width)), width, keep)
-        out.append(np.vstack([tab, pad(row, width, keep)[None, :]]))
-    return tuple(out)
+    width = max(tables[0].shape[1], rows[0].size)
+    return tuple(np.vstack([_widen(tab, width, k == 0), _widen(row, width, k == 0)[None, :]])
+                 for k, (tab, row) in enumerate(zip(tables, rows)))
 
 
 class SceneArrays:
@@ -491,23 +487,20 @@ class Plates(Effect):
 
     @property
     def loading_time_s(self) -> float:
-        if "moving" not in (self.lower, self.upper):
-            return 0.0
-        _, T, _ = self.travel_table()
+        if self.path_m is None or "moving" not in (self.lower, self.upper):
+            return self._move_time(self.displacement_m)
         total = 0.0
-        for Tk in T:  # summed in the order path_travel sums them
-            total += Tk
-        return total if self.path_m is not None else self._move_time(self.displacement_m)
+        for T in self.travel_table()[1]:  # summed in the order path_travel sums them
+            total += T
+        return total
 
     @classmethod
     def from_config(cls, sc, model, cfg):
         p, ld = sc.plates, sc.loading
-        path = getattr(ld, "path", None)
         return cls(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=float(ld.displacement),
                    velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
                    lower_position_m=p.lower_position, upper_position_m=p.upper_position,
-                   path_m=None if path is None else [float(u) for u in path],
-                   hold_s=float(getattr(ld, "hold", 0.0) or 0.0))
+                   path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold))
 
     def setup(self, model, scene):
         ax = _AXES[self.axis]
@@ -525,7 +518,6 @@ class Plates(Effect):
             scene.add_plane(ax, sign, pos, move, T, ta, mode, H_PLATE_FORCE + k, self.penalty_factor)
         scene.plate_axis = ax
         scene.end_time_hint = max(scene.end_time_hint, self.loading_time_s)
-
 
     def _check_gap(self, lo: float, hi: float) -> None:
         """A path whose plates would meet or cross (travel summed over the moving plates ≥ their
