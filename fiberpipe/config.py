@@ -392,6 +392,11 @@ class LoadingConfig(Section):
         0.1, gt=0, lt=0.5,
         description="smooth ramp: share of the loading time spent accelerating (and again decelerating); "
                     "the plateau speed is `velocity`, so the loading lasts U/v/(1 − ramp_fraction)")
+    path: Optional[list[Length]] = Field(
+        None, description="plate displacements reached in turn at `velocity` (a loading cycle, e.g. "
+        "['1.0 mm', '0.4 mm', '1.15 mm']), each move with its own ramp; replaces `displacement`, "
+        "which becomes the path's largest entry")
+    hold: Time = Field(0.0, description="with `path`: the time the plates stand still at each turning point")
 
     @model_validator(mode="after")
     def _check(self):
@@ -399,7 +404,36 @@ class LoadingConfig(Section):
         if self.ramp == "linear" and "ramp_fraction" in self.model_fields_set:
             raise ValueError("loading.ramp_fraction applies to ramp: smooth only (a linear ramp starts "
                              "at full speed)")
+        if self.path is not None:
+            self._check_path()
+        elif "hold" in self.model_fields_set and self.hold:
+            raise ValueError("scene.loading.hold applies to a scene.loading.path (the holds at its turning "
+                             "points); a single displacement has none")
         return self
+
+    def _check_path(self) -> None:
+        """The path's entries (≥ 0, the first > 0, no two in a row equal, a hold ≥ 0); ``displacement``
+        becomes its largest entry."""
+        if not self.path:
+            raise ValueError("scene.loading.path is empty: give the plate displacements in turn, e.g. "
+                             "['1 mm', '0.4 mm', '1.15 mm']")
+        prev = 0.0
+        for k, u in enumerate(self.path):
+            if not (math.isfinite(u) and u >= 0):
+                raise ValueError(f"scene.loading.path[{k}] = {u * 1e3:.4g} mm is below 0: the travel is "
+                                 "measured from the plate's start towards the bundle")
+            if u == prev:
+                raise ValueError(f"scene.loading.path[{k}] = {u * 1e3:.4g} mm equals the entry before it "
+                                 "(the start is 0): each entry moves the plate; use scene.loading.hold for a stop")
+            prev = u
+        if not (math.isfinite(self.hold) and self.hold >= 0):
+            raise ValueError(f"scene.loading.hold must be ≥ 0, got {self.hold} s")
+        far = max(self.path)
+        if "displacement" in self.model_fields_set and self.displacement != far:
+            raise ValueError(f"scene.loading.displacement ({self.displacement * 1e3:.4g} mm) and scene.loading.path "
+                             "are both given: the path replaces the displacement; remove it or make it the path's "
+                             f"largest entry ({far * 1e3:.4g} mm)")
+        object.__setattr__(self, "displacement", far)
 
 
 Anchor = Union[Literal["start", "end"], int]

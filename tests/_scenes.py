@@ -61,3 +61,33 @@ def run_small(d: Path, cfg: dict, to: str = "simulate") -> tuple[Path, Path]:
     r = cli("run", path, "--out", d / "run", "--to", to)
     assert r.exit_code == 0, r.output
     return path, d / "run"
+
+
+def _bow(y0_mm: float, sagitta_mm: float, angle_deg: float, length_mm: float = 3.0) -> list:
+    """A fiber bowed in the xz plane (z = s sin(πx/L)), along x turned by ``angle_deg`` about z."""
+    import numpy as np
+
+    x = np.linspace(0.0, length_mm, 11)
+    y = y0_mm + (x - length_mm / 2) * np.tan(np.deg2rad(angle_deg))
+    z = sagitta_mm * np.sin(np.pi * x / length_mm)
+    return [[f"{a:.6f} mm", f"{b:.6f} mm", f"{c:.6f} mm"] for a, b, c in zip(x, y, z)]
+
+
+# three bowed fibers 3 mm long (sagittas 0.08–0.12 mm, the middle one turned by 4°, so it touches its
+# neighbours) flattened between plates with friction on a load–unload–reload path; ~10 s to run
+CYCLE_SCENE = {
+    "name": "cycle",
+    "input": {"polylines": [_bow(0.0, 0.10, 0.0), _bow(0.52, 0.08, 4.0), _bow(1.04, 0.12, 0.0)]},
+    "fiber": {"radius": "0.25 mm"},
+    "mesh": {"element_length": "0.3 mm"},
+    "material": {"youngs_modulus": "15 GPa", "poisson_ratio": 0.3, "density": "1380 kg/m^3"},
+    "scene": {
+        "effects": ["damping", "contact", "friction", "plates", "walls"],
+        "damping": {"alpha": "1e4 1/s"},
+        "friction": {"mu": 0.3},
+        "plates": {"axis": "z", "lower": "moving", "upper": "fixed"},
+        "walls": {"y": ["-0.4 mm", "1.45 mm"]},
+        "loading": {"path": ["0.06 mm", "0.02 mm", "0.08 mm"], "hold": "0.2 ms", "velocity": "1200 mm/min"},
+    },
+    "solver": {"output_frames": 4},
+}

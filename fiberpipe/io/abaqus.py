@@ -227,6 +227,8 @@ def _step_time_s(cfg) -> float:
         ld = sc.loading
         T = float(ld.displacement) / float(ld.velocity)
         t = max(t, T / (1 - float(ld.ramp_fraction)) if ld.ramp == "smooth" else T)
+        if ld.path is not None:  # a loading path: its moves and holds
+            t = max(t, _path_plates(ld).loading_time_s)
     if "drives" in sc.effects:
         for d in sc.drives:
             t = max(t, float(np.linalg.norm(d.displacement)) / float(d.velocity) / (1 - 0.1))  # smooth, 10 % ramps
@@ -234,6 +236,33 @@ def _step_time_s(cfg) -> float:
         raise ConfigError("the scene has no moving plate or drive to set the step's time period: give "
                           "solver.end_time", where="solver.end_time")
     return t
+
+
+def _path_plates(ld):
+    """The solver's plates effect for a ``scene.loading.path`` (its travel table and times)."""
+    from fiberpipe.solver.effects import Plates
+
+    return Plates(displacement_m=float(ld.displacement), velocity_m_s=float(ld.velocity), ramp=ld.ramp,
+                  ramp_fraction=float(ld.ramp_fraction), path_m=[float(u) for u in ld.path], hold_s=float(ld.hold))
+
+
+def _path_velocity_points(ld) -> list[tuple[float, float]]:
+    """The plate-velocity amplitude (× ``loading.velocity``) of a loading path, on the solver's own
+    entry times: per move ±1 with smooth-step rises and falls over its acceleration time (``smooth``),
+    or ±1 from its start to its end (``linear``, switched over 1e-6 of the time); 0 in the holds."""
+    u_end, dur, t_acc = _path_plates(ld).travel_table()
+    pts, t0, u0 = [(0.0, 0.0)], 0.0, 0.0
+    for u, T, ta in zip(u_end, dur, t_acc):
+        t1, d = t0 + T, float(np.sign(u - u0))
+        if d != 0.0 and pts[-1][0] < t0:  # after a hold: at rest until the move starts
+            pts.append((t0, 0.0))
+        if d != 0.0 and ld.ramp == "smooth":
+            pts += [(t0 + ta, d), (t1 - ta, d), (t1, 0.0)]
+        elif d != 0.0:
+            eps = 1e-6 * T
+            pts += [(t0 + eps, d), (t1 - eps, d), (t1, 0.0)]
+        t0, u0 = t1, u
+    return pts
 
 
 def _pairs(points) -> list[str]:
@@ -350,6 +379,8 @@ def abaqus_deck(cfg, mesh) -> tuple[str, dict]:
             pts = [(0.0, 0.0), (ta, 1.0), (Tl - ta, 1.0), (Tl, 0.0)]
         else:  # constant velocity from t = 0; stopped (within 1e-6 of Tl) once the travel is done
             pts = [(0.0, 1.0), (Tl, 1.0)] + ([(Tl * (1 + 1e-6), 0.0)] if T > Tl * (1 + 1e-6) else [])
+        if ld.path is not None:
+            pts = _path_velocity_points(ld)
         if T > pts[-1][0]:
             pts.append((T, 0.0))
         lines += ["*AMPLITUDE, NAME=PLATE_VELOCITY, DEFINITION=SMOOTH STEP", *_pairs(pts)]

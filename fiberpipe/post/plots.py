@@ -86,3 +86,21 @@ def plot_series(path: Path, x: np.ndarray, ys: dict[str, np.ndarray], *, xlabel:
     if len(ys) > 1:
         ax.legend(fontsize=8)
     return _save(fig, path)
+
+
+def plot_loops(path: Path, U_m: np.ndarray, F_N: np.ndarray, segment: np.ndarray) -> Path:
+    """Load against plate displacement on a loading path, one colour per path segment."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    U, F, seg = np.asarray(U_m) * 1e3, np.asarray(F_N), np.asarray(segment).astype(int)
+    for k in np.unique(seg):
+        sel = np.flatnonzero(seg == k)
+        sel = np.concatenate([[sel[0] - 1], sel]) if sel[0] > 0 else sel  # join the segments
+        # later segments drawn thinner and every other one dashed: a move that retraces an earlier
+        # one leaves it visible beneath
+        ax.plot(U[sel], F[sel], color=f"C{k % 10}", ls="--" if k % 2 else "-", lw=max(3.0 - 0.8 * k, 0.8),
+                label=f"segment {k}")
+    ax.set_xlabel("plate displacement U [mm]")
+    ax.set_ylabel("compaction load F [N]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)

@@ -64,7 +64,9 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
             out_dir / "force_displacement.csv",
             {"time_s": t_hist, "U_m": U, "load_N": F, "lower_plate_force_N": force[:, 0], "upper_plate_force_N": force[:, -1]},
         )
-        phases = compaction_phases(U, F)
+        seg = np.asarray(h.get("segment", np.zeros(len(U))))
+        first = seg == 0  # a loading path: the phases and the law fit of its first loading
+        phases = compaction_phases(U[first], F[first])
         plots.plot_force_displacement(out_dir / "force_displacement.png", {cfg.name: (U, F)}, title="compaction load",
                                       phases=phases)
         made += ["force_displacement.csv", "force_displacement.png"]
@@ -72,6 +74,12 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
         summary["final_load_N"] = float(F[-1])
         summary["max_load_N"] = float(np.max(F))
         summary["phases"] = phases
+        if np.unique(seg).size > 1:  # a loading path: its cycles, loops and residual strains
+            from fiberpipe.post.loops import write_loops
+
+            files, entries = write_loops(out_dir, cfg, sim, U, F)
+            made += files
+            summary.update(entries)
 
     # -- energies -------------------------------------------------------------------------------
     if energy:
@@ -186,7 +194,7 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
         ]
         area = float(np.prod(sizes))
         pressure = F / area
-        loaded = pressure > 0.01 * max(float(np.max(pressure)), 1e-300)
+        loaded = (pressure > 0.01 * max(float(np.max(pressure)), 1e-300)) & first
         fit = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus) if loaded.sum() >= 5 else {}
         fit3 = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus, n=3.0) if loaded.sum() >= 5 else {}
         summary["van_wyk_fit"] = {"free_n": fit, "n3": fit3, "plate_area_m2": area}
@@ -254,6 +262,9 @@ def _report(cfg: Config, s: dict, made: list[str]) -> str:
         for label, f in (("n free", fit.get("free_n", {})), ("n = 3 (van Wyk)", fit.get("n3", {}))):
             if f:
                 lines.append(f"| {label} | {_fmt(f.get('k'))} | {_fmt(f.get('n'))} | {_fmt(f.get('vf0'))} | {_fmt(f.get('r2'))} |")
+    from fiberpipe.post.loops import report_lines
+
+    lines += report_lines(s, _fmt)
     walls = s.get("wall_time_s_per_stage")
     if walls:
         lines += ["", "## Wall time per stage", "", "| stage | s |", "| --- | --- |"]

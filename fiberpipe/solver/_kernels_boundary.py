@@ -85,6 +85,59 @@ def ramp_fraction(t, duration, t_accel, mode):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def path_entry(t, u_end, duration):
+    """``(k, t_start, u_start)``: the entry of a travel table (:func:`path_travel`) that time ``t``
+    falls in, with its start time (s) and start travel (m); the last entry from its start on."""
+    t0 = 0.0
+    u0 = 0.0
+    last = u_end.shape[0] - 1
+    for k in range(last):
+        if t < t0 + duration[k]:
+            return k, t0, u0
+        t0 += duration[k]
+        u0 = u_end[k]
+    return last, t0, u0
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def path_travel(t, u_end, duration, t_accel, mode):
+    """Travel (m) at time ``t`` (s) of a prescribed path, and the entry of the path it is in.
+
+    The path is a table of entries run in turn from t = 0 and u = 0: entry ``k`` lasts
+    ``duration[k]`` and takes the travel from the previous entry's end value (0 for the first) to
+    ``u_end[k]`` with :func:`ramp_fraction` (``t_accel[k]``, ``mode``); a hold is an entry that keeps
+    its travel. After the last entry the travel stays at ``u_end[-1]``. With one entry this is
+    ``u_end[0] · ramp_fraction(t, duration[0], t_accel[0], mode)``.
+
+    Returns ``(travel, k)``; before t = 0, ``(0, 0)``.
+    """
+    k, t0, u0 = path_entry(t, u_end, duration)
+    return u0 + (u_end[k] - u0) * ramp_fraction(t - t0, duration[k], t_accel[k], mode), k
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def plane_position(t, pos0, sign, u_end, duration, t_accel, mode):
+    """A plane's position (m) at time ``t`` on its travel table (:func:`path_travel`), ``pos0 + sign·u``,
+    evaluated as ``(pos0 + sign·u_start) + sign·Δu_k·r`` (for one entry ``pos0 + sign·U·r``)."""
+    k, t0, u0 = path_entry(t, u_end, duration)
+    return (pos0 + sign * u0) + sign * (u_end[k] - u0) * ramp_fraction(t - t0, duration[k], t_accel[k], mode)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def path_delta(t1, t0, u_end, duration, t_accel, mode):
+    """The travel from time ``t0`` to ``t1`` (m) of a path (:func:`path_travel`): within one entry
+    ``Δu_k (r(t1) − r(t0))`` with r its ramp fraction (for one entry ``U (r(t1) − r(t0))``, the
+    one-segment ramp's increment); across entries u(t1) − u(t0)."""
+    k1, s1, v1 = path_entry(t1, u_end, duration)
+    k0, _, _ = path_entry(t0, u_end, duration)
+    if k1 == k0:
+        return (u_end[k1] - v1) * (ramp_fraction(t1 - s1, duration[k1], t_accel[k1], mode)
+                                   - ramp_fraction(t0 - s1, duration[k1], t_accel[k1], mode))
+    return (path_travel(t1, u_end, duration, t_accel, mode)[0]
+            - path_travel(t0, u_end, duration, t_accel, mode)[0])
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
     """Penalty forces of rigid planes on the nodes.
 

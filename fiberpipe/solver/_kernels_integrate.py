@@ -34,9 +34,9 @@ from numba import njit
 
 from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
-from ._kernels_boundary import plane_contacts, penalty_power, ramp_fraction
+from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
-                     H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_STORED, H_TIME, H_VD, H_WF, H_WK,
+                     H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
 _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
@@ -78,16 +78,15 @@ def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
     ALLPW. Returns the number of touching nodes."""
     P = planes.axis.shape[0]
     for p in range(P):
-        planes.pos[p] = planes.pos0[p] + planes.sign[p] * planes.move[p] * ramp_fraction(
-            t, planes.T[p], planes.ta[p], planes.mode[p])
+        planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
+                                       planes.mode[p])
     n_pen, stored = plane_contacts(x, radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos, f,
                                    planes.force, planes.pen_idx, planes.pen_f)
     acc[ACC_STORED] += stored
     wk = 0.0
     for p in range(P):
-        if planes.move[p] != 0.0:
-            du = planes.move[p] * 0.5 * (ramp_fraction(t + dt, planes.T[p], planes.ta[p], planes.mode[p])
-                                         - ramp_fraction(t - dt, planes.T[p], planes.ta[p], planes.mode[p]))
+        if planes.move[p, 0] != 0.0:
+            du = 0.5 * path_delta(t + dt, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p])
             wk += planes.force[p] * du
     acc[ACC_WK] += wk
     acc[ACC_PW] += 0.5 * dt * penalty_power(v, planes.pen_idx, planes.pen_f, n_pen) - wk
@@ -355,13 +354,15 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
             wext += (f_ext[i, 0] * (xi0 - x0[i, 0]) + f_ext[i, 1] * (xi1 - x0[i, 1])
                      + f_ext[i, 2] * (xi2 - x0[i, 2]))
     hist[h_row, H_TIME] = t
+    segment = 0
     for p in range(planes.axis.shape[0]):
         c = planes.hist_col[p]
         if c >= 0:
             hist[h_row, c] = planes.force[p]
-            if H_PLATE_FORCE <= c < H_PLATE_FORCE + 2:  # a plate: its travel too
-                hist[h_row, H_PLATE_DISP + c - H_PLATE_FORCE] = planes.move[p] * ramp_fraction(
-                    t, planes.T[p], planes.ta[p], planes.mode[p])
+            if H_PLATE_FORCE <= c < H_PLATE_FORCE + 2:  # a plate: its travel and path segment too
+                u, k = path_travel(t, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p])
+                hist[h_row, H_PLATE_DISP + c - H_PLATE_FORCE] = u
+                segment = max(segment, k // 2)  # the path's entries: moves, each but the last followed by a hold
     hist[h_row, H_KE] = ke
     hist[h_row, H_SE] = se
     hist[h_row, H_VD] = 0.5 * (acc_before[ACC_VD] + acc[ACC_VD])
@@ -372,6 +373,7 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
     hist[h_row, H_CONTACTS] = n_contacts
     hist[h_row, H_STORED] = acc[ACC_STORED]
     hist[h_row, H_KE_LF] = ke_lf
+    hist[h_row, H_SEGMENT] = segment
 
 
 @njit(**_FLAGS)

@@ -36,7 +36,7 @@ from numba import njit
 from numba.typed import List
 
 from ..errors import FiberpipeError
-from ._kernels_boundary import ramp_fraction
+from ._kernels_boundary import path_delta, plane_position
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .contact_potential import contact_forces_pot, potential_kernels_for
 from .effects import ContactHook, register_effect
@@ -97,10 +97,9 @@ def _move_planes(planes, t, dt):
     moved since its candidate nodes were listed."""
     moved = 0.0
     for p in range(planes.axis.shape[0]):
-        r0 = ramp_fraction(t, planes.T[p], planes.ta[p], planes.mode[p])
-        planes.pos[p] = planes.pos0[p] + planes.sign[p] * planes.move[p] * r0
-        vel = planes.sign[p] * planes.move[p] * (r0 - ramp_fraction(t - dt, planes.T[p], planes.ta[p],
-                                                                    planes.mode[p])) / dt
+        planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
+                                       planes.mode[p])
+        vel = planes.sign[p] * path_delta(t, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p]) / dt
         planes.vel[p, 0] = 0.0
         planes.vel[p, 1] = 0.0
         planes.vel[p, 2] = 0.0

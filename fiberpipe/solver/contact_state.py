@@ -98,9 +98,9 @@ class PlaneFriction(NamedTuple):
     axis: np.ndarray         # (P,) int64
     sign: np.ndarray         # (P,)
     pos0: np.ndarray         # (P,) m
-    move: np.ndarray         # (P,) m
-    T: np.ndarray            # (P,) s
-    ta: np.ndarray           # (P,) s
+    move: np.ndarray         # (P, S) m, the travel table (step_data.PlaneArrays)
+    T: np.ndarray            # (P, S) s
+    ta: np.ndarray           # (P, S) s
     mode: np.ndarray         # (P,) int64
     pos: np.ndarray          # (P,) m, position at this step
     vel: np.ndarray          # (P, 3) m/s, velocity at this step

@@ -76,6 +76,24 @@ def _node_of(model: Model, key: str, fiber, at) -> int:
     return model.fiber_node_index(i, k)
 
 
+def _widen(a: np.ndarray, n: int, keep_last: bool) -> np.ndarray:
+    """``a`` padded along its last axis to ``n`` entries: repeating its last one, or with zeros."""
+    extra = n - a.shape[-1]
+    if extra <= 0:
+        return a
+    tail = np.repeat(a[..., -1:], extra, axis=-1) if keep_last else np.zeros(a.shape[:-1] + (extra,))
+    return np.concatenate([a, tail], axis=-1)
+
+
+def _append_rows(tables, rows):
+    """The travel tables ``(move, T, ta)``, each (P, S), with one plane's rows appended; the narrower
+    side is padded with entries of zero duration that keep the last travel (path_travel skips them)."""
+    rows = [np.atleast_1d(np.asarray(r, dtype=np.float64)) for r in rows]
+    width = max(tables[0].shape[1], rows[0].size)
+    return tuple(np.vstack([_widen(tab, width, k == 0), _widen(row, width, k == 0)[None, :]])
+                 for k, (tab, row) in enumerate(zip(tables, rows)))
+
+
 class SceneArrays:
     """The arrays the step kernel reads for the effects (sizes 0 when an effect is absent)."""
 
@@ -95,9 +113,10 @@ class SceneArrays:
         self.pl_axis = np.zeros(0, np.int64)
         self.pl_sign = np.zeros(0)
         self.pl_pos0 = np.zeros(0)
-        self.pl_move = np.zeros(0)
-        self.pl_T = np.ones(0)
-        self.pl_ta = np.zeros(0)
+        # the planes' travel tables (P, S): see step_data.PlaneArrays and _kernels_boundary.path_travel
+        self.pl_move = np.zeros((0, 1))
+        self.pl_T = np.ones((0, 1))
+        self.pl_ta = np.zeros((0, 1))
         self.pl_mode = np.zeros(0, np.int64)
         self.pl_hist_col = np.zeros(0, np.int64)
         self.penalty_factor = 0.0
@@ -126,12 +145,12 @@ class SceneArrays:
         return self.fix_mask
 
     def add_plane(self, axis, sign, pos, move, T, ta, mode, hist_col, penalty_factor):
+        """Add a plane; ``move``, ``T``, ``ta``: its travel table (scalars for one entry, or
+        equal-length sequences, :func:`_kernels_boundary.path_travel`)."""
         self.pl_axis = np.append(self.pl_axis, axis).astype(np.int64)
         self.pl_sign = np.append(self.pl_sign, sign)
         self.pl_pos0 = np.append(self.pl_pos0, pos)
-        self.pl_move = np.append(self.pl_move, move)
-        self.pl_T = np.append(self.pl_T, T)
-        self.pl_ta = np.append(self.pl_ta, ta)
+        self.pl_move, self.pl_T, self.pl_ta = _append_rows((self.pl_move, self.pl_T, self.pl_ta), (move, T, ta))
         self.pl_mode = np.append(self.pl_mode, mode).astype(np.int64)
         self.pl_hist_col = np.append(self.pl_hist_col, hist_col).astype(np.int64)
         self.penalty_factor = max(self.penalty_factor, penalty_factor)
@@ -395,6 +414,11 @@ class Plates(Effect):
         "smoothstep" (3τ² − 2τ³ in displacement) | "linear" (constant velocity from t = 0).
     lower_position_m, upper_position_m : optional, m — plane positions; by default each plate
         touches the bundle (min/max over nodes of the coordinate ∓ radius).
+    path_m : optional sequence of travels, m — a loading path: each moving plate travels to these
+        displacements in turn at ``velocity_m_s``, each move with its own ramp (``smooth``: zero
+        velocity at every turning point), holding ``hold_s`` after each move but the last; replaces
+        ``displacement_m`` (which is then the path's largest travel).
+    hold_s : float, s — the hold at each turning point of ``path_m``.
     penalty_factor : float — plane penalty per node ``k_i = factor · m_i (2/Δt)²`` (default 0.1:
         raises the touching node's ω² by 10 % of the stability bound).
 
@@ -412,9 +436,15 @@ class Plates(Effect):
     lower_position_m: float | None = None
     upper_position_m: float | None = None
     penalty_factor: float = DEFAULT_PENALTY_FACTOR
+    path_m: Sequence[float] | None = None
+    hold_s: float = 0.0
     name = "plates"
 
     def __post_init__(self):
+        if self.path_m is not None:
+            self.path_m = [float(u) for u in self.path_m]
+            _check_path(self.path_m, float(self.hold_s))
+            self.displacement_m = max(self.path_m)
         if self.axis not in _AXES:
             raise FiberpipeError(f"plates.axis must be x, y or z, got {self.axis!r}")
         for k in ("lower", "upper"):
@@ -429,38 +459,96 @@ class Plates(Effect):
         if not 0 < self.penalty_factor <= 0.25:
             raise FiberpipeError(f"plates penalty_factor must be in (0, 0.25], got {self.penalty_factor}")
 
-    @property
-    def loading_time_s(self) -> float:
+    def _move_time(self, du_m: float) -> float:
         if "moving" not in (self.lower, self.upper):
             return 0.0
-        T = self.displacement_m / self.velocity_m_s
+        T = abs(du_m) / self.velocity_m_s
         if self.ramp == "smooth":
             T = T / (1.0 - self.ramp_fraction)  # so that the plateau speed is the given one
         return T
+
+    def travel_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The moving plates' travel table ``(u_end, duration, t_accel)`` (m, s, s) for
+        :func:`_kernels_boundary.path_travel`: one entry for ``displacement_m``; for ``path_m`` its
+        moves, each but the last followed by a hold of ``hold_s`` (an entry that keeps the travel)."""
+        path = [self.displacement_m] if self.path_m is None else list(self.path_m)
+        u, T, ta, prev = [], [], [], 0.0
+        for k, target in enumerate(path):
+            if k > 0:
+                u.append(prev)
+                T.append(self.hold_s)
+                ta.append(0.0)
+            Tk = max(self._move_time(target - prev), 1e-30)
+            u.append(target)
+            T.append(Tk)
+            ta.append(self.ramp_fraction * Tk)
+            prev = target
+        return np.array(u), np.array(T), np.array(ta)
+
+    @property
+    def loading_time_s(self) -> float:
+        if self.path_m is None or "moving" not in (self.lower, self.upper):
+            return self._move_time(self.displacement_m)
+        total = 0.0
+        for T in self.travel_table()[1]:  # summed in the order path_travel sums them
+            total += T
+        return total
 
     @classmethod
     def from_config(cls, sc, model, cfg):
         p, ld = sc.plates, sc.loading
         return cls(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=float(ld.displacement),
                    velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
-                   lower_position_m=p.lower_position, upper_position_m=p.upper_position)
+                   lower_position_m=p.lower_position, upper_position_m=p.upper_position,
+                   path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold))
 
     def setup(self, model, scene):
         ax = _AXES[self.axis]
         c = model.nodes_m[:, ax]
         lo = float(np.min(c - model.radius_node)) if self.lower_position_m is None else float(self.lower_position_m)
         hi = float(np.max(c + model.radius_node)) if self.upper_position_m is None else float(self.upper_position_m)
-        T = max(self.loading_time_s, 1e-30)
-        ta = self.ramp_fraction * T
+        self._check_gap(lo, hi)
+        u_end, T, ta = self.travel_table()
         mode = _ramp_code(self.ramp, "loading")
         for k, (kind, sign, pos) in enumerate((("lower", 1.0, lo), ("upper", -1.0, hi))):
             state = getattr(self, kind)
             if state == "none":
                 continue
-            move = self.displacement_m if state == "moving" else 0.0
+            move = u_end if state == "moving" else np.zeros_like(u_end)
             scene.add_plane(ax, sign, pos, move, T, ta, mode, H_PLATE_FORCE + k, self.penalty_factor)
         scene.plate_axis = ax
         scene.end_time_hint = max(scene.end_time_hint, self.loading_time_s)
+
+    def _check_gap(self, lo: float, hi: float) -> None:
+        """A path whose plates would meet or cross (travel summed over the moving plates ≥ their
+        gap) is refused, naming the key."""
+        n_moving = sum(getattr(self, k) == "moving" for k in ("lower", "upper"))
+        if self.path_m is None or n_moving == 0 or "none" in (self.lower, self.upper):
+            return
+        gap, far = hi - lo, max(self.path_m)
+        if n_moving * far >= gap:
+            movers = "both plates move" if n_moving == 2 else "one plate moves"
+            raise FiberpipeError(
+                f"reverses at {far * 1e3:.4g} mm but the plates are {gap * 1e3:.4g} mm apart and {movers}: "
+                f"keep every entry below {gap / n_moving * 1e3:.4g} mm", where="scene.loading.path")
+
+
+def _check_path(path_m: Sequence[float], hold_s: float) -> None:
+    """The loading path's entries: finite, ≥ 0, the first > 0, no two in a row equal; hold ≥ 0."""
+    if not path_m:
+        raise FiberpipeError("is empty: give the plate displacements in turn, e.g. ['1 mm', '0.4 mm']",
+                             where="scene.loading.path")
+    prev = 0.0
+    for k, u in enumerate(path_m):
+        if not math.isfinite(u) or u < 0.0:
+            raise FiberpipeError(f"entry {k} is {u * 1e3:.4g} mm: the travel is measured from the start "
+                                 "position towards the bundle, so every entry is ≥ 0", where="scene.loading.path")
+        if u == prev:
+            raise FiberpipeError(f"entry {k} ({u * 1e3:.4g} mm) equals the travel before it: each entry moves "
+                                 "the plate (use scene.loading.hold for a stop)", where="scene.loading.path")
+        prev = u
+    if not (math.isfinite(hold_s) and hold_s >= 0.0):
+        raise FiberpipeError(f"must be ≥ 0, got {hold_s} s", where="scene.loading.hold")
 
 
 @register_effect()

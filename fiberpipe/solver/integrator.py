@@ -25,7 +25,7 @@ from ._kernels_beam import EB_SIZE, beam_forces
 from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import Effect, SceneArrays
-from .layout import (H_FD, H_KE, H_KE_LF, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
@@ -402,6 +402,7 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
         "plate_force": h[:, H_PLATE_FORCE:H_PLATE_FORCE + 2].copy(),
         "wall_force": h[:, H_WALL:H_WALL + n_walls].copy(),
         "contacts": h[:, H_CONTACTS].copy(),
+        "segment": h[:, H_SEGMENT].copy(),
         "energy/kinetic": KE.copy(), "energy/strain": SE.copy(), "energy/damping": VD.copy(),
         "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
         # the friction forces' work on the fibers (part of ALLPW): ALLPW − ALLFD − this is the normal forces'

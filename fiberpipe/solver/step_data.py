@@ -39,9 +39,11 @@ class PlaneArrays(NamedTuple):
     axis: np.ndarray       # (P,) int64, axis normal to the plane
     sign: np.ndarray       # (P,) +1 pushes towards +axis (lower plate, low wall), −1 otherwise
     pos0: np.ndarray       # (P,) m, initial position
-    move: np.ndarray       # (P,) m, travel towards the bundle (0: fixed)
-    T: np.ndarray          # (P,) s, loading time of the ramp
-    ta: np.ndarray         # (P,) s, acceleration time of the ramp
+    # the prescribed travel, a table of S entries per plane (_kernels_boundary.path_travel): the
+    # one-segment loading is S = 1; a loading path is its moves with a hold after each but the last
+    move: np.ndarray       # (P, S) m, travel towards the bundle at the end of each entry (0: fixed)
+    T: np.ndarray          # (P, S) s, duration of each entry
+    ta: np.ndarray         # (P, S) s, acceleration time of each entry's ramp
     mode: np.ndarray       # (P,) int64, ramp code (_kernels_boundary.RAMP_*)
     hist_col: np.ndarray   # (P,) int64, history column of the reaction (-1: none)
     k_pen: np.ndarray      # (N,) N/m, penalty stiffness per node (size 0 without planes)
@@ -109,5 +111,6 @@ class StepControl(NamedTuple):
 
 def empty_planes(n_nodes: int) -> PlaneArrays:
     """A :class:`PlaneArrays` with no plane."""
-    z, zi = np.zeros(0), np.zeros(0, np.int64)
-    return PlaneArrays(zi, z, z, z, z, z, zi, zi, np.zeros(0), z.copy(), z.copy(), zi.copy(), z.copy())
+    z, zi, z2 = np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 1))
+    return PlaneArrays(zi, z, z, z2, z2.copy(), z2.copy(), zi, zi, np.zeros(0), z.copy(), z.copy(), zi.copy(),
+                       z.copy())

@@ -42,6 +42,7 @@ HISTORY_UNITS = {
     "wall_force": "N",
     "plate_position": "m",
     "contacts": "1",
+    "segment": "index",
 }
 
 #: Units of ``/history/energy/<name>``: joules, except the relative balance residual

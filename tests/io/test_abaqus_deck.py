@@ -257,3 +257,29 @@ def test_simulate_rewrites_the_deck_with_the_scene_it_ran(write_yaml, tmp_path):
         assert r.exit_code == 0, r.output
     (dmp,) = _kw(parse((out / "model.inp").read_text()), "DAMPING")
     assert float(dmp.params["ALPHA"]) == pytest.approx(7000)
+
+
+@pytest.mark.parametrize("ramp", ["smooth", "linear"])
+def test_a_loading_path_is_the_plate_velocity_amplitude(write_yaml, ramp):
+    """scene.loading.path: the deck's plate velocity reaches each entry in turn at the solver's times."""
+    from fiberpipe.config import load_config
+    from fiberpipe.solver.effects import Plates
+
+    cfg, mesh = _scene(write_yaml)
+    path = ["0.1 mm", "0.04 mm", "0.115 mm"]
+    cfg = load_config(cfg.source_path, {"scene.loading": {"path": path, "hold": "2 ms", "velocity": "1000 mm/min",
+                                                          "ramp": ramp}})
+    text, _ = abaqus_deck(cfg, mesh)
+    problems, model = check(text)
+    assert not problems, problems
+    pts = model.amplitudes["PLATE_VELOCITY"]
+    times = [t for t, _ in pts]
+    assert all(b > a for a, b in zip(times, times[1:]))
+    p = Plates(path_m=[1e-4, 0.4e-4, 1.15e-4], hold_s=2e-3, velocity_m_s=1 / 60, ramp=ramp)
+    _, dur, _ = p.travel_table()
+    ends = np.cumsum(dur)
+    T = float(_kw(model.keywords, "DYNAMIC")[0].data[0][1][1])
+    assert T == pytest.approx(p.loading_time_s, rel=1e-9)
+    for k, target in enumerate([1e-4, 0.4e-4, 1.15e-4]):  # the travel at the end of each move and hold
+        for t_end in ends[2 * k:2 * k + 2]:
+            assert (1 / 60) * _smooth_step_integral(pts, t_end) == pytest.approx(target, rel=2e-4)
