@@ -19,7 +19,7 @@ def test_blend_length_reaches_the_law():
     law = law_from_config(_scene({"law": "hertz_oriented", "blend_length": "0.15 mm"}).contact, mat)
     assert law.params()[P_LBLEND] == pytest.approx(0.15e-3)
     default = law_from_config(_scene({"law": "hertz_oriented"}).contact, mat)
-    assert default.params()[P_LBLEND] == pytest.approx(1e-3)
+    assert default.params()[P_LBLEND] == pytest.approx(5e-5)  # the config schema's default
 
 
 @pytest.mark.parametrize("contact, msg", [
