@@ -725,6 +725,12 @@ class ScaledStiffnessLaw(ContactLaw):
         self.target_phi_deg = None
         self.fit_range_m = None
 
+    def node_stiffness_n_per_m(self, element_length_m):
+        # the first slope S0·K_def: the law only stiffens from there (S ≥ 1), so a first slope the step
+        # cannot carry is refused; deeper slopes are the run's to reach
+        k1 = self.S0 * self.K_def
+        return k1 * element_length_m if self.per_length else k1
+
     @classmethod
     def preset(cls, name: str, **kw) -> "ScaledStiffnessLaw":
         """One of ``table1_parallel``, ``table1_phi2``, ``table1_phi6``, ``table1_phi10``, ``table3_identified``."""

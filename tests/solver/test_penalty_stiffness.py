@@ -36,3 +36,10 @@ def test_friction_stiffness_above_the_stable_stiffness_is_refused():
     k_limit = 0.5 * float(np.min(m.mass)) * (2.0 / 8.6e-8) ** 2  # (ωΔt)² = 8 at dt_safety 0.95
     with pytest.raises(FiberpipeError, match=r"friction.stiffness .* too stiff"):
         _run(m, friction=True, k_t=k_limit)
+
+
+def test_scaled_stiffness_law_whose_first_slope_is_too_stiff_is_refused():
+    m = _two_fibres()
+    too_stiff = make_law("scaled_stiffness", d_m=1e-7, S=1.1, S0=1.0, K_def=1e9, per="contact", E_pa=15e9, nu=0.3)
+    with pytest.raises(FiberpipeError, match=r"'scaled_stiffness' is too stiff for the time step"):
+        _run(m, law=too_stiff)
