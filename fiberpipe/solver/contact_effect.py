@@ -468,38 +468,44 @@ def contact_kernel_for(law, formulation: str = "potential"):
     return _CUSTOM_KERNELS[key], None
 
 
-def check_penalty_stiffness(model, dt: float, law, k_t: float | None) -> None:
+def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: float = 0.0) -> None:
     """Refuse a contact law or tangential penalty too stiff for the time step ``dt`` [s].
 
     A penalty k [N/m] on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two
-    bodies of that mass); central differences stay stable while the transverse modes of the beam
-    (shear, bending: :func:`fiberpipe.solver.timestep.stable_time_step`) plus this stay below
-    (ωΔt)² = 4. Checked for laws whose stiffness is bounded a priori (``linear``) and for ``k_t``.
+    bodies of that mass); central differences stay stable while the beam's element modes it couples
+    with (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal
+    contact, and axial too for the tangential spring, which acts along the fibre) plus this stay
+    below (ωΔt)² = 4, i.e. while Δt ≤ 2/√(ω_beam² + 2k/m). Checked for laws whose stiffness is
+    bounded a priori (``node_stiffness_n_per_m``; ×1.17, the onset map's largest slope, with an
+    onset) and for ``k_t``. Several contacts on one node add up; that is not counted here.
     """
     from .timestep import stable_time_step
 
     rep = stable_time_step(model)
-    beam = max((2.0 * dt / rep.per_mode_s[k]) ** 2 for k in ("shear", "bending"))
-    budget = 4.0 - beam
     m_min = float(np.min(model.mass))
     L_max = float(np.max(model.el_L0)) if model.n_elements else 0.0
 
-    def limit(k):  # the stiffness that uses the whole budget, and the step it would allow
-        return budget * m_min / (2.0 * dt * dt), dt * math.sqrt(max(budget, 0.0) * m_min / (2.0 * k * dt * dt))
+    def check(k, modes, what, fix):
+        beam = max((2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes)
+        if beam >= 4.0:
+            raise FiberpipeError(f"the time step {dt:.3g} s leaves no margin for {what}: the beam's own "
+                                 f"{'/'.join(modes)} modes use the whole stable step; lower solver.dt_safety")
+        total = beam + 2.0 * k * dt * dt / m_min
+        if total > 4.0:
+            dt_ok = 2.0 * dt / math.sqrt(total)
+            k_lim = (4.0 - beam) * m_min / (2.0 * dt * dt)
+            raise FiberpipeError(f"{what} is too stiff for the time step: {k:.3g} N/m per node needs dt ≤ "
+                                 f"{dt_ok:.3g} s, the run uses {dt:.3g} s; {fix(k_lim)} or a smaller solver.dt_safety")
 
     if law is not None:
         k = law.node_stiffness_n_per_m(L_max)
-        if k is not None and 2.0 * k * dt * dt / m_min > budget:
-            k_lim, dt_ok = limit(k)
-            raise FiberpipeError(
-                f"contact law {law.name!r} is too stiff for the time step: {k:.3g} N/m per node needs dt ≤ "
-                f"{dt_ok:.3g} s, the run uses {dt:.3g} s; lower contact.stiffness (≤ {k_lim / (L_max if law.per_length else 1.0):.3g} "
-                f"{'N/m²' if law.per_length else 'N/m'}) or solver.dt_safety")
-    if k_t is not None and 2.0 * k_t * dt * dt / m_min > budget:
-        k_lim, dt_ok = limit(k_t)
-        raise FiberpipeError(
-            f"friction.stiffness {k_t:.3g} N/m is too stiff for the time step: it needs dt ≤ {dt_ok:.3g} s, the run "
-            f"uses {dt:.3g} s; use friction.stiffness ≤ {k_lim:.3g} N/m or a smaller solver.dt_safety")
+        if k is not None:
+            k *= 1.17 if onset_m > 0 else 1.0
+            check(k, ("shear", "bending"), f"contact law {law.name!r}",
+                  lambda k_lim: f"make its stiffness {k / k_lim:.3g}× smaller (contact.stiffness or k_def)")
+    if k_t is not None:
+        check(k_t, ("axial", "shear", "bending"), f"friction.stiffness {k_t:.3g} N/m",
+              lambda k_lim: f"use friction.stiffness ≤ {k_lim:.3g} N/m")
 
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
@@ -538,7 +544,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         dt = float(scene.dt)
         kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / dt) ** 2
         info.k_t = kt
-        check_penalty_stiffness(model_, dt, law if contact else None, kt if friction else None)
+        check_penalty_stiffness(model_, dt, law if contact else None, kt if friction else None, float(onset_m))
         N = model_.n_nodes
         cap = max(DEFAULT_PAIRS_PER_SEGMENT * E, 64) if contact else 1
         gxi, gw = gauss_points(n_gauss)

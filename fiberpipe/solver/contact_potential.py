@@ -41,13 +41,13 @@ from ._specialise import specialise
 from .contact import _joint_share
 from .geometry import crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
-                   hertz_crossed_point, law_line, law_point)
+                   hertz_crossed_point, law_line, law_point, law_weight_point)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def onset(delta, ds):
-    """(g, dg/dδ) of the onset map: C¹ with g(0) = g'(0) = 0, g' = 1 and g'' = 0 from δ_s on
-    (δ_s = 0: the identity)."""
+    """(g, dg/dδ) of the onset map: g(0) = g'(0) = g''(0) = 0, g' = 1 and g'' = 0 from δ_s on, so a law's
+    potential e(g(δ)) is C² at touch (δ_s = 0: the identity)."""
     if delta >= ds:
         return delta - 0.5 * ds, 1.0
     u = delta / ds
@@ -56,13 +56,15 @@ def onset(delta, ds):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _seg_has_prev(seg_nodes, e):
-    return e > 0 and seg_nodes[e - 1, 1] == seg_nodes[e, 0]
+def _prev_node(seg_nodes, e):
+    """The far node of the segment before ``e`` on its fibre (−1: ``e`` starts the fibre)."""
+    return seg_nodes[e - 1, 0] if e > 0 and seg_nodes[e - 1, 1] == seg_nodes[e, 0] else -1
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _seg_has_next(seg_nodes, e):
-    return e + 1 < seg_nodes.shape[0] and seg_nodes[e + 1, 0] == seg_nodes[e, 1]
+def _next_node(seg_nodes, e):
+    """The far node of the segment after ``e`` on its fibre (−1: ``e`` ends the fibre)."""
+    return seg_nodes[e + 1, 1] if e + 1 < seg_nodes.shape[0] and seg_nodes[e + 1, 0] == seg_nodes[e, 1] else -1
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -86,7 +88,8 @@ def _point_segment_distance2(p0, p1, p2, x, n0, n1):
 def _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, la0, b_prev, b_next, law_id, law_params, gxi, gw, scale, ds,
                    f_out, rec, sign, off):
     """Gauss points fixed on A, projected on segment B; weight ``scale``·w_g·L0_A. Returns the energy
-    (with the weight). Forces are minus its gradient."""
+    (with the weight). Forces are minus its gradient. b_prev, b_next: the far nodes of the segments
+    before and after B on its fibre (−1: B ends there, its clamped point is the end cap)."""
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
@@ -111,9 +114,9 @@ def _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, la0, b_prev, b_next, law_id, l
         # at the nearer end (ties to the later segment), so Π_line integrates e(min over B's segments
         # of the distance): continuous on kinked fibres too; at a free end the clamped point (end cap)
         if t_raw > 0.5:
-            if b_next and _point_segment_distance2(p0, p1, p2, x, nb1, nb1 + 1) <= dd2:
+            if b_next >= 0 and _point_segment_distance2(p0, p1, p2, x, nb1, b_next) <= dd2:
                 continue
-        elif b_prev and _point_segment_distance2(p0, p1, p2, x, nb0 - 1, nb0) < dd2:
+        elif b_prev >= 0 and _point_segment_distance2(p0, p1, p2, x, b_prev, nb0) < dd2:
             continue
         d = math.sqrt(dd2)
         delta = rr - d - off
@@ -198,6 +201,53 @@ def _oriented_weight(law_params, delta, ds, ra, rb, phi):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def _pair_blend(law_id, law_params, delta_c, ds, ra, rb, phi):
+    """The point share of a pair and its partial derivatives ``(w, ∂w/∂Φ, ∂w/∂δ_c)`` (module docstring):
+    hertz_parallel 0; hertz_oriented the angle window × the ellipse blend (below Φ_lo no point law:
+    at Φ → 0 the crossed-Hertz stiffness diverges and ∂w/∂δ would carry it); the others the window."""
+    if law_id == LAW_HERTZ_PARALLEL:
+        return 0.0, 0.0, 0.0
+    inv_span = 1.0 / (law_params[P_PHI_HI] - law_params[P_PHI_LO])
+    u = (phi - law_params[P_PHI_LO]) * inv_span
+    if u <= 0.0:
+        return 0.0, 0.0, 0.0
+    wp, dwp = 1.0, 0.0
+    if u < 1.0:
+        wp = u * u * (3.0 - 2.0 * u)
+        dwp = 6.0 * u * (1.0 - u) * inv_span
+    if law_id != LAW_HERTZ_ORIENTED:
+        return wp, dwp, 0.0
+    wx, dwx, dw_dd = _oriented_weight(law_params, delta_c, ds, ra, rb, phi)
+    return wx * wp, dwx * wp + wx * dwp, dw_dd * wp
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _pair_blend_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
+    """:func:`_pair_blend` for a law with its own jitted ``weight_point`` (bound by
+    :func:`potential_kernels_for`): its weight at the mapped penetration, the derivatives by central
+    differences."""
+    g, gp = onset(delta_c, ds)
+    w, f, e = law_weight_point(law_id, law_params, g, ra, rb, phi)
+    h = 1e-6 * phi + 1e-9
+    wa, fa, ea = law_weight_point(law_id, law_params, g, ra, rb, phi + h)
+    wb, fb, eb = law_weight_point(law_id, law_params, g, ra, rb, max(phi - h, 0.0))
+    dphi = (wa - wb) / (phi + h - max(phi - h, 0.0))
+    hd = 1e-6 * g + 1e-15
+    wc, fc, ec = law_weight_point(law_id, law_params, g + hd, ra, rb, phi)
+    wd, fd, ed = law_weight_point(law_id, law_params, max(g - hd, 0.0), ra, rb, phi)
+    return w, dphi, (wc - wd) / (g + hd - max(g - hd, 0.0)) * gp
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _point_energy_dphi_of_law(law_id, law_params, g, ra, rb, phi):
+    """:func:`_point_energy_dphi` for a law with its own jitted ``point``: by central differences."""
+    h = 1e-6 * phi + 1e-9
+    fa, ea = law_point(law_id, law_params, g, ra, rb, phi + h)
+    fb, eb = law_point(law_id, law_params, g, ra, rb, max(phi - h, 0.0))
+    return (ea - eb) / (phi + h - max(phi - h, 0.0))
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
                        out, c_off, reach):
     """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
@@ -210,9 +260,6 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
     use_list = c_active.shape[0] > 0
     use_off = c_off.shape[0] > 0
     use_share = c_share.shape[0] > 0
-    phi_lo = law_params[P_PHI_LO]
-    phi_hi = law_params[P_PHI_HI]
-    inv_span = 1.0 / (phi_hi - phi_lo)
     energy = 0.0
     n_active = 0
     rec = np.zeros(8)
@@ -251,38 +298,7 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
         ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
         phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
-        dw_dd = 0.0  # ∂w/∂δ_c (hertz_oriented: the ellipse grows with the penetration)
-        if law_id == LAW_HERTZ_PARALLEL:
-            w = 0.0
-            dw = 0.0
-        elif law_id == LAW_HERTZ_ORIENTED:
-            # ellipse blend × angle blend: below Φ_lo no point law at all (at Φ → 0 the crossed-Hertz
-            # stiffness diverges and ∂w/∂δ would carry it; the ellipse blend alone did that: +28 %)
-            u = (phi - phi_lo) * inv_span
-            if u <= 0.0:
-                w = 0.0
-                dw = 0.0
-            else:
-                wx, dwx, dw_dd = _oriented_weight(law_params, rr - math.sqrt(dist2) - off, ds, ra, rb, phi)
-                if u >= 1.0:
-                    w = wx
-                    dw = dwx
-                else:
-                    wp = u * u * (3.0 - 2.0 * u)
-                    w = wx * wp
-                    dw = dwx * wp + wx * 6.0 * u * (1.0 - u) * inv_span
-                    dw_dd *= wp
-        else:
-            u = (phi - phi_lo) * inv_span
-            if u <= 0.0:
-                w = 0.0
-                dw = 0.0
-            elif u >= 1.0:
-                w = 1.0
-                dw = 0.0
-            else:
-                w = u * u * (3.0 - 2.0 * u)
-                dw = 6.0 * u * (1.0 - u) * inv_span
+        w, dw, dw_dd = _pair_blend(law_id, law_params, rr - math.sqrt(dist2) - off, ds, ra, rb, phi)
         e_point = 0.0   # s_joint Π_point (unweighted by w)
         de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
         if w > 0.0:
@@ -336,11 +352,11 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         e_line = 0.0  # Π_line (unweighted by 1 − w)
         if w < 1.0:
             half = 0.5 * (1.0 - w)
-            el = _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, seg_arc[i, 1] - seg_arc[i, 0], _seg_has_prev(seg_nodes, j),
-                                _seg_has_next(seg_nodes, j), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+            el = _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, seg_arc[i, 1] - seg_arc[i, 0], _prev_node(seg_nodes, j),
+                                _next_node(seg_nodes, j), law_id, law_params, gxi, gw, half, ds, f_out, rec,
                                 1.0, off)
-            el += _line_half_pot(x, nb0, nb1, na0, na1, rb, ra, seg_arc[j, 1] - seg_arc[j, 0], _seg_has_prev(seg_nodes, i),
-                                 _seg_has_next(seg_nodes, i), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+            el += _line_half_pot(x, nb0, nb1, na0, na1, rb, ra, seg_arc[j, 1] - seg_arc[j, 0], _prev_node(seg_nodes, i),
+                                 _next_node(seg_nodes, i), law_id, law_params, gxi, gw, half, ds, f_out, rec,
                                  -1.0, off)
             e_line = el / (1.0 - w)
         energy += (1.0 - w) * e_line + w * e_point
@@ -401,16 +417,22 @@ _LAW_KERNELS: dict = {}
 
 def potential_kernels_for(law):
     """:func:`contact_forces_pot` for ``law``: the built-in kernel for a law without ``kernels``; else a
-    copy specialised on the law's own jitted ``line`` and ``point`` functions (its point share is the
-    generic blend in Φ; compiled once per process and law class, see ``_specialise``)."""
+    copy specialised on the law's own jitted ``line``, ``point`` and ``weight_point`` functions (the
+    derivatives of its point share and of its point energy in Φ by central differences; compiled once
+    per process and law class, see ``_specialise``)."""
     if law.kernels is None:
         return contact_forces_pot
     key = type(law)
     if key not in _LAW_KERNELS:
-        line, point, _weight_point = law.kernels
+        line, point, weight_point = law.kernels
         tag = type(law).__name__
         flags = dict(fastmath=True, error_model="numpy")
         lh = specialise(_line_half_pot, f"_line_half_pot_{tag}", {"law_line": line}, cache=False, **flags)
+        blend = specialise(_pair_blend_of_law, f"_pair_blend_{tag}", {"law_weight_point": weight_point},
+                           cache=False, **flags)
+        dphi = specialise(_point_energy_dphi_of_law, f"_point_energy_dphi_{tag}", {"law_point": point},
+                          cache=False, **flags)
         _LAW_KERNELS[key] = specialise(contact_forces_pot, f"contact_forces_pot_{tag}",
-                                       {"_line_half_pot": lh, "law_point": point}, cache=False, **flags)
+                                       {"_line_half_pot": lh, "law_point": point, "_pair_blend": blend,
+                                        "_point_energy_dphi": dphi}, cache=False, **flags)
     return _LAW_KERNELS[key]

@@ -530,6 +530,14 @@ def _e_star(E_pa: float, nu: float) -> float:
 LAWS: dict = {}
 
 
+def _node_stiffness(k, per_length, element_length_m, ref_length_m):
+    """The largest stiffness [N/m] a contact of slope ``k`` (N/m² per length, N/m per contact) puts
+    on a node: its line part over a whole element or its point part, whichever is larger."""
+    if per_length:
+        return k * max(element_length_m, ref_length_m)
+    return k * max(1.0, element_length_m / ref_length_m)
+
+
 def register_law(cls):
     """Class decorator: make ``cls`` selectable as ``scene.contact.law: <cls.name>``.
 
@@ -677,8 +685,9 @@ class LinearLaw(ContactLaw):
         return p
 
     def node_stiffness_n_per_m(self, element_length_m):
-        # a parallel contact along a whole element gives each node k·L (half from each element)
-        return self.stiffness * element_length_m if self.per_length else self.stiffness
+        # per length: a parallel contact along a whole element gives each node k·L (half from each
+        # element), a point contact k·L_ref; per contact: a point k, a line part k·L/L_ref
+        return _node_stiffness(self.stiffness, self.per_length, element_length_m, self.ref_length_m)
 
 
 # The study's Table 1 and Table 3 (d given in mm there). K_def, Abaqus' default penalty
@@ -728,8 +737,7 @@ class ScaledStiffnessLaw(ContactLaw):
     def node_stiffness_n_per_m(self, element_length_m):
         # the first slope S0·K_def: the law only stiffens from there (S ≥ 1), so a first slope the step
         # cannot carry is refused; deeper slopes are the run's to reach
-        k1 = self.S0 * self.K_def
-        return k1 * element_length_m if self.per_length else k1
+        return _node_stiffness(self.S0 * self.K_def, self.per_length, element_length_m, self.ref_length_m)
 
     @classmethod
     def preset(cls, name: str, **kw) -> "ScaledStiffnessLaw":

@@ -6,7 +6,7 @@ work f·(x_n − x0)).
 Scene: four parallel fibres on a fixed plate between walls, two on top crossing them at ±3°, a line
 load on the top two. With the potential formulation every law stays at or below the loads' work
 (measured ≤ +0.001 of max|W| at 3 N/m); the legacy kernel of hertz_oriented creates +22 % here
-(blend and K(Φ) without their derivatives, see docs/contact.md)."""
+(blend and K(Φ) without their derivatives, with ℓ_blend = 1 mm; see docs/contact.md)."""
 
 import math
 
@@ -71,5 +71,5 @@ def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw
 @pytest.mark.xfail(strict=True, reason="known defect of the legacy kernel: hertz_oriented's blend and K(Φ) enter "
                    "without their derivatives (measured +22 % of the loads' work)")
 def test_six_fibres_create_no_energy_with_the_legacy_hertz_oriented():
-    excess, _ = _excess(make_law("hertz_oriented", E_pa=15e9, nu=0.3), 3.0, "legacy")
+    excess, _ = _excess(make_law("hertz_oriented", E_pa=15e9, nu=0.3, blend_length_m=1e-3), 3.0, "legacy")
     assert excess < 0.01, excess

@@ -27,13 +27,13 @@ def test_linear_law_above_the_stable_stiffness_is_refused():
     m = _two_fibres()
     # (ωΔt)² = 2 k L Δt²/m: 1e9 N/m² uses ≈ 1 % of the budget, 1e12 N/m² ≈ 10 times all of it
     _run(m, law=make_law("linear", stiffness=1e9, E_pa=15e9, nu=0.3))
-    with pytest.raises(FiberpipeError, match=r"too stiff for the time step.*contact.stiffness"):
+    with pytest.raises(FiberpipeError, match=r"too stiff for the time step.*smaller"):
         _run(m, law=make_law("linear", stiffness=1e12, E_pa=15e9, nu=0.3))
 
 
 def test_friction_stiffness_above_the_stable_stiffness_is_refused():
     m = _two_fibres()
-    k_limit = 0.5 * float(np.min(m.mass)) * (2.0 / 8.6e-8) ** 2  # (ωΔt)² = 8 at dt_safety 0.95
+    k_limit = 0.5 * float(np.min(m.mass)) * (2.0 / 8.6e-8) ** 2  # 2kΔt²/m ≈ 3.6 on top of the beam's 3.2 (axial)
     with pytest.raises(FiberpipeError, match=r"friction.stiffness .* too stiff"):
         _run(m, friction=True, k_t=k_limit)
 
@@ -43,3 +43,16 @@ def test_scaled_stiffness_law_whose_first_slope_is_too_stiff_is_refused():
     too_stiff = make_law("scaled_stiffness", d_m=1e-7, S=1.1, S0=1.0, K_def=1e9, per="contact", E_pa=15e9, nu=0.3)
     with pytest.raises(FiberpipeError, match=r"'scaled_stiffness' is too stiff for the time step"):
         _run(m, law=too_stiff)
+
+
+def test_friction_stiffness_is_refused_just_above_its_limit_and_runs_just_below():
+    from fiberpipe.solver.timestep import stable_time_step
+
+    m = _two_fibres()
+    rep = stable_time_step(m)
+    dt = SimulationSettings().dt_safety * rep.dt_stable_s
+    beam = max((2.0 * dt / rep.per_mode_s[k]) ** 2 for k in ("axial", "shear", "bending"))
+    k_lim = (4.0 - beam) * float(np.min(m.mass)) / (2.0 * dt * dt)
+    _run(m, friction=True, k_t=0.9 * k_lim)
+    with pytest.raises(FiberpipeError, match=r"needs dt ≤"):
+        _run(m, friction=True, k_t=1.1 * k_lim)
