@@ -6,8 +6,9 @@ that interpreter has installed), so the same file drives the current code and a 
     PYTHON ab_worker.py CONFIG [KEY=VALUE ...]
 
 Protocol on stdin/stdout, one line each: it prints ``ready <elements> <dt_s> <end_time_s>``; then
-for every ``to <t_s>`` it advances to the first step at or after ``t_s`` (chunks of ≤ 20 000 steps)
-and prints ``<cpu_s> <wall_s> <steps> <t_s> <load_cell_N>``; ``quit`` ends it. Only the solver
+for every ``to <t_s>`` it advances to the first step at or after ``t_s`` (chunks of ≤ 2000 steps)
+and prints ``<cpu_s> <wall_s> <steps> <t_s> <load_cell_N>``; ``curve`` prints the load cell's
+force after every chunk of ≤ 2000 steps so far as ``t,F`` pairs; ``quit`` ends it. Only the solver
 API that has not changed since the reference commit is used (``build_simulation``,
 ``choose_time_step``, ``Integrator.advance``).
 """
@@ -49,15 +50,20 @@ def main():
     st = State.at_rest(model)
     print(f"ready {model.n_elements} {dt:.9g} {end:.9g}", flush=True)
     upper = int(integ.pl_force.shape[0] > 1)
+    curve = []
     for line in sys.stdin:
         words = line.split()
         if not words or words[0] == "quit":
             break
+        if words[0] == "curve":
+            print(" ".join(f"{t:.9g},{f:.6g}" for t, f in curve), flush=True)
+            continue
         target = float(words[1])
         c0, w0, s0 = time.process_time(), time.perf_counter(), st.step
         while st.t < target * (1.0 - 1e-12):
-            n = min(20000, max(1, int(round((target - st.t) / dt + 0.5))))
+            n = min(2000, max(1, int(round((target - st.t) / dt + 0.5))))
             integ.advance(st, n)
+            curve.append((st.t, float(integ.pl_force[upper])))
         c1, w1 = time.process_time(), time.perf_counter()
         print(f"{c1 - c0:.6f} {w1 - w0:.6f} {st.step - s0} {st.t:.9g} {float(integ.pl_force[upper]):.6g}", flush=True)
 

@@ -61,6 +61,12 @@ def measure(reference: Path, config: Path, ref_config: Path, until_s: float | No
         got = {id(p): _ask(p, t) for p in order}
         rows.append((got[id(ref)], got[id(new)]))
         load.append(os.getloadavg()[0])
+    curves = {}
+    for name, p in (("ref", ref), ("new", new)):
+        p.stdin.write("curve\n")
+        p.stdin.flush()
+        pts = [tuple(map(float, w.split(","))) for w in p.stdout.readline().split()]
+        curves[name] = pts
     for p in (ref, new):
         p.stdin.write("quit\n")
         p.stdin.flush()
@@ -74,18 +80,35 @@ def measure(reference: Path, config: Path, ref_config: Path, until_s: float | No
             "wall_new_s": sum(r[1][1] for r in rows), "speedup": cpu_r / cpu_n,
             "speedup_median_span": statistics.median(per_span) if per_span else float("nan"),
             "per_span": per_span, "load_cell_ref_N": rows[-1][0][4], "load_cell_new_N": rows[-1][1][4],
-            "load_min": min(load), "load_max": max(load), "new_overrides": list(new_overrides)}
+            "load_min": min(load), "load_max": max(load), "new_overrides": list(new_overrides),
+            "curve_ref": curves["ref"], "curve_new": curves["new"],
+            "curve_window_error": curve_window_error(curves["ref"], curves["new"], until)}
+
+
+def curve_window_error(ref, new, until_s: float, windows: int = 5) -> float:
+    """Largest difference of the two load-cell curves' means over ``windows`` equal windows of
+    simulated time (the same windows of U: both sides follow the same loading), relative to the
+    largest window mean of ``ref``. Five windows of paper-40's loading are its 0.23 mm windows of U."""
+    import numpy as np
+    if not ref or not new:
+        return float("nan")
+    tr, fr = np.array(ref).T
+    tn, fn = np.array(new).T
+    edges = np.linspace(0.0, until_s * (1 + 1e-9), windows + 1)
+    mr = np.array([fr[(tr >= a) & (tr < b)].mean() for a, b in zip(edges[:-1], edges[1:])])
+    mn = np.array([fn[(tn >= a) & (tn < b)].mean() for a, b in zip(edges[:-1], edges[1:])])
+    return float(np.max(np.abs(mn - mr)) / max(np.max(np.abs(mr)), 1e-30))
 
 
 def lines(r: dict, reference: str) -> list[str]:
     return [f"| {' '.join(r['new_overrides']) or 'same settings'} | {r['until_s'] * 1e3:.3g} ms | {r['spans']} | "
             f"{r['steps_ref']} / {r['steps_new']} | {r['cpu_ref_s']:.1f} | {r['cpu_new_s']:.1f} | **{r['speedup']:.2f}×** | "
             f"{r['speedup_median_span']:.2f}× | {r['load_cell_ref_N']:.4g} / {r['load_cell_new_N']:.4g} | "
-            f"{r['load_min']:.1f}–{r['load_max']:.1f} |"]
+            f"{100 * r['curve_window_error']:.2f} % | {r['load_min']:.1f}–{r['load_max']:.1f} |"]
 
 
-HEADER = ["| current side | simulated time | spans | steps ref / new | CPU ref (s) | CPU new (s) | ref / new | median span | load cell ref / new (N) | load average |",
-          "|---|---|---|---|---|---|---|---|---|---|"]
+HEADER = ["| current side | simulated time | spans | steps ref / new | CPU ref (s) | CPU new (s) | ref / new | median span | load cell ref / new (N) | load-cell curve, 5 window means | load average |",
+          "|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def _time(s: str) -> float:
@@ -100,6 +123,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--until", default=None, help="simulated time, e.g. 12ms (default: the loading's end)")
     ap.add_argument("--spans", type=int, default=20)
     ap.add_argument("--new", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--save", type=Path, default=None, help="write the figures and curves as JSON here")
     a = ap.parse_args(argv)
     from fiberpipe.bench import default_paper40_config
     cfg = (a.config or default_paper40_config()).resolve()
@@ -107,6 +131,9 @@ def main(argv=None) -> dict:
                 _time(a.until) if a.until else None, a.spans, a.new)
     print("\n".join(HEADER + lines(r, str(a.reference))))
     print("per span ref/new:", " ".join(f"{x:.3f}" for x in r["per_span"]))
+    if a.save:
+        import json
+        a.save.write_text(json.dumps(r))
     return r
 
 
