@@ -1,0 +1,80 @@
+"""The largest stable step of paper-40, measured, against the eigenvalue estimate.
+
+From a saved state (:mod:`fiberpipe.benchmarks.paper40_states`), the scene is advanced by the same
+simulated time at time steps ``f × dt_modes`` (``dt_modes``: :func:`fiberpipe.solver.timestep.modal_time_step`
+with the scene's axial lock and plane penalty factor, no safety factor) and at the element bound's
+step; a run is unstable when it stops with a blow-up status or its largest node speed exceeds 10 ×
+that of the element-bound run. The plane penalty stiffness follows the step
+(``c m (2/Δt)²``), as in a run.
+
+    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_stable_step STATE.npz \\
+        [--span 2ms] [--factors 0.95 1.0 1.05 1.1 1.2 1.3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from fiberpipe.benchmarks.paper40_states import load_state, scene
+
+
+def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:
+    from fiberpipe.solver.integrator import Integrator
+    from fiberpipe.solver.layout import STATUS_OK
+
+    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+    st = load_state(state_path)
+    n = int(round(span_s / dt))
+    vmax = 0.0
+    status, done = STATUS_OK, 0
+    t0 = time.process_time()
+    while done < n and status == STATUS_OK:
+        k = min(500, n - done)
+        status, d, _ = integ.advance(st, k)
+        done += d
+        if np.isfinite(st.v).all():
+            vmax = max(vmax, float(np.sqrt(np.max(np.sum(st.v**2, axis=1)))))
+        else:
+            vmax = np.inf
+    return {"dt_s": dt, "steps": done, "status": int(status), "vmax_m_s": vmax,
+            "cpu_s": time.process_time() - t0, "load_cell_N": float(integ.pl_force[-1] if integ.pl_force.size else 0.0)}
+
+
+def main(argv=None) -> list[str]:
+    from fiberpipe.solver.effects import ContactHook, SceneArrays
+    from fiberpipe.solver.timestep import modal_time_step, stable_time_step
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("state")
+    ap.add_argument("--span", type=float, default=2e-3, help="simulated time per run [s]")
+    ap.add_argument("--factors", type=float, nargs="+", default=[0.95, 1.0, 1.05, 1.1, 1.2, 1.3])
+    a = ap.parse_args(argv)
+    model, effects, settings, _ = scene()
+    probe = SceneArrays(model, 1.0)
+    for e in effects:
+        if not isinstance(e, ContactHook):
+            e.setup(model, probe)
+    st = load_state(a.state)
+    mt = modal_time_step(model, probe.fix_mask, penalty_factor=probe.penalty_factor, x=st.x, q=st.q)
+    dt_el = stable_time_step(model).dt_stable_s
+    ref = run_at(model, effects, 0.95 * dt_el, a.state, a.span)
+    lines = [f"state t = {st.t * 1e3:.2f} ms; {mt.summary()}; element bound {dt_el:.4g} s", "",
+             "| dt | dt / dt_modes | steps | status | largest speed (m/s) | stable | load cell (N) | CPU (s) |",
+             "|---|---|---|---|---|---|---|---|",
+             f"| {ref['dt_s']:.4g} s (0.95 × element bound) | {ref['dt_s'] / mt.dt_stable_s:.3f} | {ref['steps']} | "
+             f"{ref['status']} | {ref['vmax_m_s']:.3g} | yes | {ref['load_cell_N']:.4g} | {ref['cpu_s']:.1f} |"]
+    print("\n".join(lines), flush=True)
+    for f in a.factors:
+        r = run_at(model, effects, f * mt.dt_stable_s, a.state, a.span)
+        ok = r["status"] == 0 and r["vmax_m_s"] < 10 * ref["vmax_m_s"]
+        lines.append(f"| {r['dt_s']:.4g} s | {f:.3f} | {r['steps']} | {r['status']} | {r['vmax_m_s']:.3g} | "
+                     f"{'yes' if ok else 'no'} | {r['load_cell_N']:.4g} | {r['cpu_s']:.1f} |")
+        print(lines[-1], flush=True)
+    return lines
+
+
+if __name__ == "__main__":
+    main()
