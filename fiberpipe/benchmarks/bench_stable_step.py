@@ -4,8 +4,10 @@ From a saved state (:mod:`fiberpipe.benchmarks.paper40_states`), the scene is ad
 simulated time at time steps ``f × dt_modes`` (``dt_modes``: :func:`fiberpipe.solver.timestep.modal_time_step`
 with the scene's axial lock and plane penalty factor, no safety factor) and at the element bound's
 step; a run is unstable when it stops with a blow-up status or its largest node speed exceeds 10 ×
-that of the element-bound run. The plane penalty stiffness follows the step
-(``c m (2/Δt)²``), as in a run.
+that of the element-bound run. By default the plane penalty and the friction springs follow the
+step (``c m (2/Δt)²``), as in a run started at that step; ``--fixed-penalties`` keeps their
+stiffness at the element-bound run's (penalty factor × (Δt/Δt₀)², ``scene.friction.stiffness``
+fixed), so that a run switched to another step at a saved state changes nothing but the step.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_stable_step STATE.npz \\
         [--span 2ms] [--factors 0.95 1.0 1.05 1.1 1.2 1.3]
@@ -43,6 +45,15 @@ def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:
             "cpu_s": time.process_time() - t0, "load_cell_N": float(integ.pl_force[-1] if integ.pl_force.size else 0.0)}
 
 
+def _with_fixed_penalties(dt: float, dt0: float, kt0: float):
+    """The scene's effects with the plane penalty and the friction springs as stiff as at ``dt0``."""
+    model, effects, _, _ = scene({"scene.friction.stiffness": f"{kt0!r} N/m"})
+    for e in effects:
+        if e.name in ("plates", "walls"):
+            e.penalty_factor = e.penalty_factor * (dt / dt0) ** 2
+    return model, effects
+
+
 def main(argv=None) -> list[str]:
     from fiberpipe.solver.effects import ContactHook, SceneArrays
     from fiberpipe.solver.timestep import modal_time_step, stable_time_step
@@ -51,6 +62,7 @@ def main(argv=None) -> list[str]:
     ap.add_argument("state")
     ap.add_argument("--span", type=float, default=2e-3, help="simulated time per run [s]")
     ap.add_argument("--factors", type=float, nargs="+", default=[0.95, 1.0, 1.05, 1.1, 1.2, 1.3])
+    ap.add_argument("--fixed-penalties", action="store_true")
     a = ap.parse_args(argv)
     model, effects, settings, _ = scene()
     probe = SceneArrays(model, 1.0)
@@ -67,8 +79,15 @@ def main(argv=None) -> list[str]:
              f"| {ref['dt_s']:.4g} s (0.95 × element bound) | {ref['dt_s'] / mt.dt_stable_s:.3f} | {ref['steps']} | "
              f"{ref['status']} | {ref['vmax_m_s']:.3g} | yes | {ref['load_cell_N']:.4g} | {ref['cpu_s']:.1f} |"]
     print("\n".join(lines), flush=True)
+    kt0 = None
+    if a.fixed_penalties:
+        from fiberpipe.solver.integrator import Integrator
+        kt0 = float(Integrator(model, effects, ref["dt_s"]).scene.contact_data.params.kt_n_per_m)
+        lines[0] += f"; penalties fixed at the 0.95 × element-bound step's (k_t = {kt0:.4g} N/m)"
     for f in a.factors:
-        r = run_at(model, effects, f * mt.dt_stable_s, a.state, a.span)
+        dt = f * mt.dt_stable_s
+        m_, e_ = _with_fixed_penalties(dt, ref["dt_s"], kt0) if a.fixed_penalties else (model, effects)
+        r = run_at(m_, e_, dt, a.state, a.span)
         ok = r["status"] == 0 and r["vmax_m_s"] < 10 * ref["vmax_m_s"]
         lines.append(f"| {r['dt_s']:.4g} s | {f:.3f} | {r['steps']} | {r['status']} | {r['vmax_m_s']:.3g} | "
                      f"{'yes' if ok else 'no'} | {r['load_cell_N']:.4g} | {r['cpu_s']:.1f} |")

@@ -49,6 +49,7 @@ def main(argv=None) -> None:
 
     argv = sys.argv[1:] if argv is None else argv
     out = Path(argv[0])
+    out.parent.mkdir(parents=True, exist_ok=True)
     targets = sorted(int(s) for s in argv[1:])
     model, effects, settings, dt = scene()
     integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=settings.threads)

@@ -131,7 +131,8 @@ def _rotate(q: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 
 def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, penalty_factor: float = 0.0,
-                    x: np.ndarray | None = None, q: np.ndarray | None = None, tol: float = 1e-6) -> ModalTimeStep:
+                    x: np.ndarray | None = None, q: np.ndarray | None = None, tol: float = 1e-6,
+                    extra_forces=None) -> ModalTimeStep:
     """Stable time step from the highest eigenvalue of the assembled, constrained beam system.
 
     Central differences are stable for ``Δt ω_max ≤ 2`` with ω_max² the largest eigenvalue of
@@ -149,6 +150,9 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     ``Δt ≤ (2/ω_max) √(1 − c)``. Fiber–fiber contact stiffness is not in the bound: it is small
     against the beams' at the study's loads (docs/benchmarks.md, "Stable step per active mode",
     measured) and ``solver.dt_safety`` keeps a margin for it.
+
+    ``extra_forces(x) -> (N, 3)`` (optional): further position-dependent forces whose tangent is
+    added to K (e.g. the fiber–fiber contact at a state, for the measurements of docs/benchmarks.md).
     """
     from scipy.sparse.linalg import LinearOperator, eigsh
 
@@ -167,6 +171,8 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
         f = np.zeros((n, 3))
         mom = np.zeros((n, 3))
         beam_forces(x0 + u[:, :3], _rotate(q0, u[:, 3:]), *args, f, mom, False, 0.0, np.zeros((0, 6)))
+        if extra_forces is not None:
+            f += extra_forces(x0 + u[:, :3])
         return np.column_stack([f, mom]).ravel()
 
     calls = [0]
