@@ -536,7 +536,8 @@ class SolverConfig(Section):
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "
         "(every element mode, the axial one included); modes = 2/ω_max of the assembled beam system with the "
         "scene's fixed degrees of freedom removed, × √(1 − plane penalty factor) (larger with "
-        "scene.constraints.lock_axial: all; docs/benchmarks.md)")
+        "scene.constraints.lock_axial: all); the fiber–fiber contact stiffness is not in it, dt_safety must "
+        "cover it (paper-40: 0.85; docs/benchmarks.md)")
 
     @model_validator(mode="after")
     def _check(self):

@@ -29,6 +29,10 @@ def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:
 
     integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
     st = load_state(state_path)
+    # the integrator's clock is step × Δt: re-base the saved step count on this Δt (a shift of
+    # < Δt/2), else the plates would jump to the time the old step count gives at the new step
+    st.step = int(round(st.t / dt))
+    st.t = st.step * dt
     n = int(round(span_s / dt))
     vmax = 0.0
     status, done = STATUS_OK, 0
