@@ -192,6 +192,10 @@ def _reference_part(reference: Path | None, quick: bool, echo) -> list[str]:
     reference = Path(reference).resolve()
     cfg = default_paper40_config().resolve()
     ref_cfg = reference / "configs" / "paper-40.yaml"
+    for need in (reference / ".venv" / "bin" / "python", ref_cfg):
+        if not need.exists():
+            raise FileNotFoundError(f"--reference {reference}: no {need.relative_to(reference)} (a checkout of the "
+                                    "reference commit after `make setup` there)")
     cases = [("12 ms", 12e-3, 4 if quick else 10, [])]
     if not quick:
         cases += [("U = 1.15 mm", None, 10, []), ("U = 1.15 mm", None, 10, [f"{k}={v}" for k, v in MODES_OVERRIDES.items()])]
