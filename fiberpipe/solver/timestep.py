@@ -201,4 +201,15 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     om = math.sqrt(max(lam, 0.0))
     xi = 0.5 * beta_s * om
     dt_b = 2.0 / om * (math.sqrt(1.0 + xi * xi) - xi) if om > 0 else math.inf
-    return ModalTimeStep(dt_b * math.sqrt(1.0 - penalty_factor), dt_b, om, float(penalty_factor), nf, calls[0])
+    # rounded down to 6 significant digits: the Lanczos result may differ in its last bits between
+    # machines or BLAS builds, and a resumed run must find the checkpoint's step again
+    dt_s = _round_down(dt_b * math.sqrt(1.0 - penalty_factor), 6)
+    return ModalTimeStep(dt_s, dt_b, om, float(penalty_factor), nf, calls[0])
+
+
+def _round_down(x: float, digits: int) -> float:
+    """``x`` > 0 rounded down to ``digits`` significant digits."""
+    if not (x > 0 and math.isfinite(x)):
+        return x
+    e = math.floor(math.log10(x)) - digits + 1
+    return math.floor(x / 10.0**e) * 10.0**e

@@ -48,7 +48,7 @@ def test_unconstrained_fiber_is_governed_by_the_axial_mode():
     c = np.sqrt(E / RHO)
     r = modal_time_step(m, np.zeros(0, np.uint8))
     assert r.dt_stable_s == pytest.approx(float(m.el_L0[0]) / c, rel=1e-3)
-    assert r.dt_stable_s >= stable_time_step(m).dt_stable_s * (1 - 1e-9)
+    assert r.dt_stable_s >= stable_time_step(m).dt_stable_s * (1 - 1e-5)  # rounded down to 6 digits
 
 
 def test_axial_lock_leaves_the_shear_bending_mode():
@@ -68,7 +68,8 @@ def test_plane_penalty_share_and_damping_reduce_the_step():
     beta = 1e-9
     r = modal_time_step(m, mask, beta_s=beta, penalty_factor=0.1)
     xi = 0.5 * beta * r0.omega_max_rad_s
-    assert r.dt_stable_s == pytest.approx(2 / r0.omega_max_rad_s * (np.sqrt(1 + xi**2) - xi) * np.sqrt(0.9), rel=1e-6)
+    assert r.dt_stable_s == pytest.approx(2 / r0.omega_max_rad_s * (np.sqrt(1 + xi**2) - xi) * np.sqrt(0.9), rel=1e-5)
+    assert r.dt_stable_s <= r.dt_beams_s * np.sqrt(0.9)
 
 
 def test_settings_choose_the_modal_step_with_the_scene_fixity():
