@@ -73,6 +73,26 @@ bench: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(FP) bench
 
+# paper-40's solver profile, against a reference checkout (REFERENCE=path with its own .venv), the
+# largest stable step and the threads (docs/benchmarks.md); minutes each, behind these targets only
+.PHONY: profile-paper40 bench-reference stable-step bench-threads
+REFERENCE ?= ../wt-base
+profile-paper40: setup
+	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
+	$(PY) -m fiberpipe.benchmarks.bench_profile runs/bench/p40_138728.npz runs/bench/p40_708000.npz
+
+bench-reference: setup
+	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --until 12ms --spans 10
+	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --spans 10
+
+stable-step: setup
+	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 0 708000
+	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_0.npz --span 2e-3
+	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_708000.npz --span 0.5e-3 --fixed-penalties --factors 0.8 0.85 0.9 0.95 1.0
+
+bench-threads: setup
+	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.bench_threads --fibers 160 640
+
 # The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
 REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/alpha-0 paper-40/alpha-1e4 \
                  paper-40/compaction paper-40/compaction-parallel paper-40/compaction-oblique-6 \

@@ -13,7 +13,15 @@ Parts (each can be skipped with ``--skip``):
 * ``paper40`` — time-to-solution of ``configs/paper-40.yaml`` at the study's settings (and the fast
   settings of ``FAST_OVERRIDES``): wall time, U reached, final load;
 * ``imaging`` — the imaging stages' wall time and peak memory on a 200×400×1000 volume
-  (:mod:`fiberpipe.benchmarks.bench_imaging`, part b; ``--quick``: a quarter of the length).
+  (:mod:`fiberpipe.benchmarks.bench_imaging`, part b; ``--quick``: a quarter of the length);
+* ``reference`` — paper-40 against a checkout of the reference commit (``--reference``, or the
+  environment variable ``FIBERPIPE_BENCH_REFERENCE``), alternating spans in one run
+  (:mod:`fiberpipe.benchmarks.bench_ab`): the first 12 ms, and the whole loading with
+  ``solver.stable_step: modes`` (time to solution);
+* ``profile`` — where a paper-40 step spends its time, early (12 ms) and compacted (U ≈ 1 mm)
+  (:mod:`fiberpipe.benchmarks.bench_profile`);
+* ``threads`` — ``solver.threads: 2`` against one thread at 160 and 640 fibers, alternating in one
+  process (:mod:`fiberpipe.benchmarks.bench_threads`).
 
 Everything it runs is in the package: outside a source checkout the paper-40 scene is the copy in
 ``fiberpipe/benchmarks/data/`` and the page defaults to ``./benchmarks.md``. Measure on an idle
@@ -34,7 +42,11 @@ CHECKOUT = (ROOT / "pyproject.toml").exists() and (ROOT / "configs" / "paper-40.
 PACKAGED_PAPER40 = Path(__file__).resolve().parent / "benchmarks" / "data" / "paper-40.yaml"
 BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
-PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging")
+PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging", "reference", "profile", "threads")
+# the time step of the paper-40 row "stable step per active mode" (docs/benchmarks.md)
+MODES_OVERRIDES = {"solver.stable_step": "modes"}
+# paper-40's first 12 ms in steps of the study settings (dt = 8.646e-8 s) and U ≈ 1 mm
+PROFILE_STEPS = (138728, 708000)
 # the fast setting of docs/benchmarks.md, "Fast settings": ≈ 28 s; its expected load-cell curve is
 # 2.15 % from the study settings' (seven runs each, 0.23 mm window means)
 FAST_OVERRIDES = {"solver.mass_scaling": 25, "scene.damping.alpha": "4e3 1/s"}
@@ -170,8 +182,63 @@ def curve_error_binned(ref: dict, other: dict, window_m: float = 0.05e-3) -> flo
     return float(np.max(np.abs(mo - mr)) / max(np.max(np.abs(mr)), 1e-30))
 
 
+def _reference_part(reference: Path | None, quick: bool, echo) -> list[str]:
+    """Paper-40 against the reference checkout, alternating spans of simulated time in one run."""
+    ba = _load("bench_ab")
+    if reference is None:
+        return ["## Against the reference commit", "",
+                "not run: no reference checkout (`fiberpipe bench --reference PATH`, a checkout of the reference "
+                "commit with its own `.venv`)", ""]
+    reference = Path(reference).resolve()
+    cfg = default_paper40_config().resolve()
+    ref_cfg = reference / "configs" / "paper-40.yaml"
+    for need in (reference / ".venv" / "bin" / "python", ref_cfg):
+        if not need.exists():
+            raise FileNotFoundError(f"--reference {reference}: no {need.relative_to(reference)} (a checkout of the "
+                                    "reference commit after `make setup` there)")
+    cases = [("12 ms", 12e-3, 4 if quick else 10, [])]
+    if not quick:
+        cases += [("U = 1.15 mm", None, 10, []), ("U = 1.15 mm", None, 10, [f"{k}={v}" for k, v in MODES_OVERRIDES.items()])]
+    rows = []
+    for name, until, spans, new in cases:
+        echo(f"bench: against {reference}: paper-40 to {name} {' '.join(new)} ...")
+        rows.append(ba.measure(reference, cfg, ref_cfg, until, spans, new))
+    cmd = f"python -m fiberpipe.benchmarks.bench_ab --reference {reference}"
+    return (["## Against the reference commit", "",
+             f"`{cmd} --until 12ms --spans 10` and `{cmd} --spans 10 [--new solver.stable_step=modes]`: "
+             f"the reference checkout `{reference}` and this code advance paper-40 alternately by equal spans "
+             "of simulated time; CPU seconds of each worker (both see the same load).", ""]
+            + ba.HEADER + [l for r in rows for l in ba.lines(r, str(reference))] + [""])
+
+
+def _profile_part(quick: bool, echo) -> list[str]:
+    ps, bp = _load("paper40_states"), _load("bench_profile")
+    steps = PROFILE_STEPS[:1] if quick else PROFILE_STEPS
+    with tempfile.TemporaryDirectory() as td:
+        base = Path(td) / "p40.npz"
+        echo(f"bench: paper-40 states at steps {steps} ...")
+        ps.main([str(base), *map(str, steps)])
+        lines = bp.main([str(base.with_name(f"p40_{k}.npz")) for k in steps] + (["--steps", "1000"] if quick else []))
+    return ["## Profile of a paper-40 step", "",
+            "`python -m fiberpipe.benchmarks.paper40_states OUT.npz 138728 708000` then "
+            "`python -m fiberpipe.benchmarks.bench_profile OUT_138728.npz OUT_708000.npz` (CPU time, best of 3 "
+            "rotations of 3000 steps).", ""] + lines + [""]
+
+
+def _threads_part(quick: bool, echo) -> list[str]:
+    import subprocess
+    import sys
+    echo("bench: threads ...")
+    args = [sys.executable, "-m", "fiberpipe.benchmarks.bench_threads"] + (["--fibers", "160", "--rounds", "4"] if quick else [])
+    env = dict(os.environ, NUMBA_NUM_THREADS="2")
+    out = subprocess.run(args, capture_output=True, text=True, env=env)
+    body = [l for l in out.stdout.splitlines() if l.startswith("|")] or [f"failed: {out.stderr.strip()[-300:]}"]
+    return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 {' '.join(args[1:])}` (wall time, alternating rounds in one "
+            "process; the ratio holds only on an idle machine).", ""] + body + [""]
+
+
 def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: int | None = None,
-              echo=print) -> str:
+              echo=print, reference: Path | None = None) -> str:
     out = Path(out) if out else default_page()
     started = _dt.datetime.now(_dt.timezone.utc)
     cmd = "fiberpipe bench" + (" --quick" if quick else "") + "".join(f" --skip {s}" for s in skip)
@@ -224,6 +291,10 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
             echo("bench: paper-40 time-to-solution (study settings) ...")
             ref = paper40_run({"solver.output_frames": 2})
             rows = [("study settings", ref, None)]
+            echo(f"bench: paper-40 {MODES_OVERRIDES} ...")
+            modes = paper40_run({**MODES_OVERRIDES, "solver.output_frames": 2})
+            rows.append(("solver.stable_step = modes", modes,
+                         curve_error_binned(load_curve(ref), load_curve(modes), FAST_WINDOW_M)))
             echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} ...")
             try:
                 fast = paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2})
@@ -251,6 +322,14 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
         loads["imaging"] = load()
         sec += [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
                 f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({loads['imaging']}). {head}", "", tab, "", acc, ""]
+    if "reference" not in skip:
+        reference = reference or os.environ.get("FIBERPIPE_BENCH_REFERENCE") or None
+        sec += _reference_part(Path(reference) if reference else None, quick, echo)
+        loads["reference"] = load()
+    if "profile" not in skip:
+        sec += _profile_part(quick, echo)
+    if "threads" not in skip:
+        sec += _threads_part(quick, echo)
     text = "\n".join([
         BEGIN, "", "## Latest `fiberpipe bench` run", "",
         f"- date: {started.strftime('%Y-%m-%d %H:%M UTC')}",

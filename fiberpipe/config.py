@@ -585,6 +585,12 @@ class SolverConfig(Section):
     threads: int = Field(1, ge=1, description="numba threads for the beam pass (one prange task per fiber); "
                          "> 1 uses a step loop that is compiled in every process (not cached), no net gain measured on 2 cores")
     settle_time: Time = 0.0
+    stable_step: Literal["element", "modes"] = Field(
+        "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "
+        "(every element mode, the axial one included); modes = 2/ω_max of the assembled beam system with the "
+        "scene's fixed degrees of freedom removed, × √(1 − plane penalty factor) (larger with "
+        "scene.constraints.lock_axial: all); the fiber–fiber contact stiffness is not in it, dt_safety must "
+        "cover it (paper-40: 0.85; docs/benchmarks.md)")
 
     @model_validator(mode="after")
     def _check(self):

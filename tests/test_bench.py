@@ -14,7 +14,8 @@ DATA = ROOT / "fiberpipe" / "benchmarks" / "data"
 
 
 def test_every_part_is_a_package_module():
-    for name in ("bench_solver", "bench_contact", "bench_pyelastica", "bench_imaging", "bench_effects"):
+    for name in ("bench_solver", "bench_contact", "bench_pyelastica", "bench_imaging", "bench_effects", "bench_ab",
+                 "bench_profile", "bench_threads", "bench_stable_step", "paper40_states"):
         mod = bench._load(name)
         assert mod.__name__ == f"fiberpipe.benchmarks.{name}"
         assert Path(mod.__file__).resolve().parent == DATA.parent
@@ -51,7 +52,19 @@ def test_a_part_runs_outside_the_checkout(monkeypatch, tmp_path):
     fake = importlib.import_module("fiberpipe.benchmarks.bench_contact")
     monkeypatch.setattr(fake, "main", lambda argv: calls.append(argv) or [])
     monkeypatch.setattr(fake, "table_lines", lambda rows: ["| gap | law |", "|---|---|"])
-    bench.run_bench(skip=("solver", "pyelastica", "paper40", "imaging"), echo=lambda *_: None)
+    monkeypatch.delenv("FIBERPIPE_BENCH_REFERENCE", raising=False)
+    bench.run_bench(skip=("solver", "pyelastica", "paper40", "imaging", "profile", "threads"), echo=lambda *_: None)
     text = (tmp_path / "benchmarks.md").read_text()
     assert bench.BEGIN in text and bench.END in text and "### Contact pass" in text
+    assert "### Against the reference commit" in text and "not run: no reference checkout" in text
     assert calls == [["--repeats", "100"]]
+
+
+def test_curve_window_error_is_the_largest_window_mean_difference():
+    """Two curves over 1 s, five windows: ``new`` is ``ref`` + 0.1 N in the third window only, the
+    largest reference window mean is 5 N: 2 %."""
+    ba = bench._load("bench_ab")
+    t = [(k + 0.5) / 100 for k in range(100)]
+    ref = [(tk, float(int(tk * 5) + 1)) for tk in t]
+    new = [(tk, f + (0.1 if 0.4 <= tk < 0.6 else 0.0)) for tk, f in ref]
+    assert abs(ba.curve_window_error(ref, new, 1.0) - 0.02) < 1e-12

@@ -139,5 +139,6 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Effect], SimulationSettings
         output_frames=int(s.output_frames), history_every=getattr(s, "history_every", None),
         checkpoint_every=getattr(s, "checkpoint_every", None),
         threads=int(getattr(s, "threads", 1) or 1),
+        stable_step=str(getattr(s, "stable_step", "element")),
     )
     return model, effects, settings

@@ -24,13 +24,13 @@ from ._kernels_integrate import step_loop_for
 from ._kernels_beam import EB_SIZE, beam_forces
 from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
-from .effects import Effect, SceneArrays
+from .effects import ContactHook, Effect, SceneArrays
 from .layout import (H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
 from .step_data import DriveArrays, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
-from .timestep import TimeStepReport, stable_time_step
+from .timestep import TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
                 "kinetic_leapfrog", "total", "residual")
@@ -65,6 +65,9 @@ class SimulationSettings:
         plane) is a fiber leaving the box.
     threads : int — ``solver.threads``: > 1 runs the beam pass with one ``prange`` task per fiber on
         up to this many numba threads (bit-identical forces; default 1, serial).
+    stable_step : str — ``solver.stable_step``: ``"element"`` (default) the element-by-element bound
+        of :func:`~fiberpipe.solver.timestep.stable_time_step`; ``"modes"`` the constrained assembled
+        system's (:func:`~fiberpipe.solver.timestep.modal_time_step`).
     """
 
     dt_safety: float = 0.9
@@ -80,8 +83,11 @@ class SimulationSettings:
     chunk_steps: int | None = None
     penetration_limit: float = 0.5
     threads: int = 1
+    stable_step: str = "element"
 
     def __post_init__(self):
+        if self.stable_step not in ("element", "modes"):
+            raise FiberpipeError(f"solver.stable_step must be element or modes, got {self.stable_step!r}")
         if not 0.0 < self.dt_safety <= 1.0:
             raise FiberpipeError(f"solver.dt_safety must be in (0, 1], got {self.dt_safety}")
         if self.output_frames < 2:
@@ -137,6 +143,8 @@ def choose_time_step(model: Model, effects: Sequence[Effect], settings: Simulati
     """The time step (s) the run will use and the stability report; refuses a user dt above the limit."""
     beta = max([getattr(e, "beta_s", 0.0) for e in effects if e.name == "damping"] or [0.0])
     rep = stable_time_step(model, beta_s=beta)
+    if getattr(settings, "stable_step", "element") == "modes":
+        rep = _modal_report(model, effects, rep, beta)
     if settings.dt_s is None:
         return settings.dt_safety * rep.dt_stable_s, rep
     if settings.dt_s > rep.dt_stable_s and not settings.force_dt:
@@ -146,6 +154,19 @@ def choose_time_step(model: Model, effects: Sequence[Effect], settings: Simulati
             f"would blow up. Use dt ≤ {rep.dt_stable_s:.4g} s, leave dt unset to use dt_safety × limit, "
             f"or set force_dt to run anyway")
     return float(settings.dt_s), rep
+
+
+def _modal_report(model: Model, effects: Sequence[Effect], rep: TimeStepReport, beta_s: float) -> TimeStepReport:
+    """``rep`` with the stable step of the constrained assembled system (``solver.stable_step: modes``):
+    the fixity and the plane penalty factor of ``effects`` (set up on a probe; the contact hook's
+    setup is not needed for them)."""
+    probe = SceneArrays(model, 1.0)
+    for e in effects:
+        if not isinstance(e, ContactHook):
+            e.setup(model, probe)
+    mt = modal_time_step(model, probe.fix_mask, beta_s=beta_s, penalty_factor=probe.penalty_factor)
+    per_mode = dict(rep.per_mode_s, modes=mt.dt_stable_s)
+    return TimeStepReport(mt.dt_stable_s, "assembled constrained", -1, per_mode, rep.rotary_inertia_scale, rep.beta_s)
 
 
 def _plane_energy(sc: SceneArrays, x: np.ndarray) -> float:

@@ -77,3 +77,139 @@ def stable_time_step(model: Model, *, beta_s: float = 0.0) -> TimeStepReport:
         if dt[k] < best[0]:
             best = (float(dt[k]), name, k)
     return TimeStepReport(best[0], best[1], best[2], per_mode, s, float(beta_s))
+
+
+@dataclass(frozen=True)
+class ModalTimeStep:
+    """The stable step of the constrained, assembled beam system (s) from its highest eigenvalue.
+
+    ``omega_max_rad_s``: √λ_max of M⁻¹K with the fixed degrees of freedom removed;
+    ``dt_beams_s = 2/ω_max`` (with the damping reduction); ``dt_stable_s`` = that × √(1 − c_pen)
+    (the plane penalty's share, c_pen = penalty factor: module docstring of :func:`modal_time_step`);
+    ``iterations``: Lanczos matrix–vector products.
+    """
+
+    dt_stable_s: float
+    dt_beams_s: float
+    omega_max_rad_s: float
+    penalty_factor: float
+    free_dofs: int
+    iterations: int
+
+    def summary(self) -> str:
+        return (f"modal stable dt {self.dt_stable_s:.4g} s (constrained beams 2/ω_max = {self.dt_beams_s:.4g} s, "
+                f"ω_max = {self.omega_max_rad_s:.4g} rad/s, {self.free_dofs} free dofs; plane penalty factor "
+                f"{self.penalty_factor:g})")
+
+
+def _free_dofs(n_nodes: int, fix_mask: np.ndarray, axis_bits) -> np.ndarray:
+    """(N, 6) bool: the translational (x, y, z) and rotational degrees of freedom left free by the
+    fixity mask of the scene (``layout`` bits: FIX_X/Y/Z, FIX_ROT, DRIVEN)."""
+    from .layout import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z
+
+    free = np.ones((n_nodes, 6), bool)
+    if fix_mask.shape[0] == n_nodes:
+        m = fix_mask.astype(np.int64)
+        driven = (m & DRIVEN) != 0
+        for c, bit in enumerate((FIX_X, FIX_Y, FIX_Z)):
+            free[:, c] = ((m & bit) == 0) & ~driven
+        free[:, 3:] = (((m & FIX_ROT) == 0) & ~driven)[:, None]
+    return free
+
+
+def _rotate(q: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """``exp(φ) ⊗ q`` for spatial spins φ (N, 3) and unit quaternions q (N, 4) (w, x, y, z)."""
+    a = np.linalg.norm(phi, axis=1)
+    half = 0.5 * a
+    s = np.where(a > 0, np.sin(half) / np.where(a > 0, a, 1.0), 0.5)
+    pw = np.cos(half)
+    px, py, pz = (s * phi[:, k] for k in range(3))
+    qw, qx, qy, qz = q.T
+    out = np.column_stack([pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
+                           pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw])
+    return out / np.linalg.norm(out, axis=1)[:, None]
+
+
+def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, penalty_factor: float = 0.0,
+                    x: np.ndarray | None = None, q: np.ndarray | None = None, tol: float = 1e-6,
+                    extra_forces=None) -> ModalTimeStep:
+    """Stable time step from the highest eigenvalue of the assembled, constrained beam system.
+
+    Central differences are stable for ``Δt ω_max ≤ 2`` with ω_max² the largest eigenvalue of
+    ``M⁻¹K`` on the free degrees of freedom (Belytschko, Liu & Moran 2000, §6.3). The element-by-
+    element bound of :func:`stable_time_step` includes every element mode, the axial one too; when
+    the scene fixes the translation along the fibers (``scene.constraints.lock_axial: all``) the axial
+    mode of an element along that axis has no free degree of freedom, and ω_max is the next mode's
+    (shear for the study's 0.3 mm elements). ``K`` is the tangent of the beam forces at ``(x, q)``
+    (default: the rest state, where it is the material stiffness), applied matrix-free by central
+    differences of :func:`fiberpipe.solver._kernels_beam.beam_forces` in positions and spatial spins;
+    the symmetric ``M^{-1/2} K M^{-1/2}`` goes to Lanczos (``scipy.sparse.linalg.eigsh``).
+
+    Penalties on top: a plane penalty ``k_i = c m_i (2/Δt)²`` adds at most ``4c/Δt²`` to ω² (a
+    diagonal, positive term: Weyl's inequality), so ``(ω_max² + 4c/Δt²) Δt² ≤ 4`` holds for
+    ``Δt ≤ (2/ω_max) √(1 − c)``. Fiber–fiber contact stiffness is not in the bound: it is small
+    against the beams' at the study's loads (docs/benchmarks.md, "Stable step per active mode",
+    measured) and ``solver.dt_safety`` keeps a margin for it.
+
+    ``extra_forces(x) -> (N, 3)`` (optional): further position-dependent forces whose tangent is
+    added to K (e.g. the fiber–fiber contact at a state, for the measurements of docs/benchmarks.md).
+    """
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    from ._kernels_beam import beam_forces
+
+    n = model.n_nodes
+    x0 = np.ascontiguousarray(model.nodes_m if x is None else x, dtype=np.float64)
+    q0 = np.ascontiguousarray(model.quats0 if q is None else q, dtype=np.float64)
+    free = _free_dofs(n, np.asarray(fix_mask), None).ravel()
+    inv_sqrt_m = np.column_stack([np.repeat(1.0 / np.sqrt(model.mass)[:, None], 3, axis=1),
+                                  1.0 / np.sqrt(model.J)]).ravel()
+    args = (model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest)
+
+    def forces(u):
+        u = u.reshape(n, 6)
+        f = np.zeros((n, 3))
+        mom = np.zeros((n, 3))
+        beam_forces(x0 + u[:, :3], _rotate(q0, u[:, 3:]), *args, f, mom, False, 0.0, np.zeros((0, 6)))
+        if extra_forces is not None:
+            f += extra_forces(x0 + u[:, :3])
+        return np.column_stack([f, mom]).ravel()
+
+    calls = [0]
+
+    def matvec(y):
+        y = np.asarray(y).ravel()
+        u = np.zeros(6 * n)
+        u[free] = y
+        u *= inv_sqrt_m
+        L = float(np.min(model.el_L0))
+        uu = u.reshape(n, 6)
+        nrm = max(float(np.max(np.abs(uu[:, :3]))) / L, float(np.max(np.abs(uu[:, 3:]))))
+        if nrm == 0.0:
+            return np.zeros_like(y)
+        # one scalar step: at most 1e-6 of an element in translation and 1e-6 rad in rotation
+        # (K u = −(F(+h u) − F(−h u)) / (2h), exact for the linear tangent up to O(h²))
+        h = 1e-6 / nrm
+        g = -(forces(h * u) - forces(-h * u)) / (2.0 * h)
+        calls[0] += 1
+        return (g * inv_sqrt_m)[free]
+
+    nf = int(free.sum())
+    op = LinearOperator((nf, nf), matvec=matvec, dtype=np.float64)
+    lam = float(eigsh(op, k=1, which="LA", tol=tol, return_eigenvectors=False, ncv=min(nf, 40),
+                      v0=np.random.default_rng(0).standard_normal(nf))[0])
+    om = math.sqrt(max(lam, 0.0))
+    xi = 0.5 * beta_s * om
+    dt_b = 2.0 / om * (math.sqrt(1.0 + xi * xi) - xi) if om > 0 else math.inf
+    # rounded down to 6 significant digits: the Lanczos result may differ in its last bits between
+    # machines or BLAS builds, and a resumed run must find the checkpoint's step again
+    dt_s = _round_down(dt_b * math.sqrt(1.0 - penalty_factor), 6)
+    return ModalTimeStep(dt_s, dt_b, om, float(penalty_factor), nf, calls[0])
+
+
+def _round_down(x: float, digits: int) -> float:
+    """``x`` > 0 rounded down to ``digits`` significant digits."""
+    if not (x > 0 and math.isfinite(x)):
+        return x
+    e = math.floor(math.log10(x)) - digits + 1
+    return math.floor(x / 10.0**e) * 10.0**e

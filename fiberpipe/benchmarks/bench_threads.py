@@ -1,0 +1,75 @@
+"""``solver.threads: 2`` against one thread, alternating in one process on the same scene.
+
+Scene: the bundle of :mod:`fiberpipe.benchmarks.bench_solver` (fibers of 50 elements, contact
+with friction, clamps, damping, gravity). Two integrators (1 thread and ``--threads``) advance
+their own copies of the state by ``--steps`` steps alternately, ``--rounds`` times; wall time per
+call (threads share the wall clock, not the CPU clock). The load average is recorded: the ratio
+means something only on an idle machine (each thread needs a core).
+
+    NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads [--fibers 160 640]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+
+def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True) -> dict:
+    from fiberpipe.benchmarks.bench_solver import bundle
+    from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, State
+    from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step
+
+    runs = {}
+    for th in (1, threads):
+        m = bundle(n_fibers)
+        eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
+        if contact:
+            from fiberpipe.verification.case_config import contact_hook
+            eff.append(contact_hook(m, friction=True))
+        dt, _ = choose_time_step(m, eff, SimulationSettings())
+        integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
+        st = State.at_rest(m)
+        integ.advance(st, 10)  # compile
+        runs[th] = (integ, st, m.n_elements)
+    t = {1: [], threads: []}
+    load = [os.getloadavg()[0]]
+    for r in range(rounds):
+        for th in ((1, threads) if r % 2 == 0 else (threads, 1)):
+            integ, st, _ = runs[th]
+            t0 = time.perf_counter()
+            integ.advance(st, steps)
+            t[th].append(time.perf_counter() - t0)
+        load.append(os.getloadavg()[0])
+    per = [a / b for a, b in zip(t[1], t[threads])]
+    return {"fibers": n_fibers, "elements": runs[1][2], "threads": threads, "steps": steps, "rounds": rounds,
+            "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
+            "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
+
+
+def table(rows) -> list[str]:
+    out = ["| fibers | elements | steps × rounds | 1 thread (s, best) | n threads (s, best) | 1 / n, best | 1 / n, median of rounds | load average |",
+           "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['fibers']} | {r['elements']} | {r['steps']} × {r['rounds']} | {r['s_1']:.3f} | "
+                   f"{r['s_n']:.3f} ({r['threads']}) | **{r['ratio_best']:.2f}×** | {r['ratio_median']:.2f}× | "
+                   f"{r['load_min']:.1f}–{r['load_max']:.1f} |")
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--fibers", type=int, nargs="+", default=[160, 640])
+    ap.add_argument("--steps", type=int, default=500)
+    ap.add_argument("--rounds", type=int, default=10)
+    ap.add_argument("--threads", type=int, default=2)
+    a = ap.parse_args(argv)
+    rows = [measure(n, a.steps, a.rounds, a.threads) for n in a.fibers]
+    print("\n".join(table(rows)))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
