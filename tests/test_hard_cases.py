@@ -75,23 +75,28 @@ def max_penetration(m, x):
     return float(np.max(2 * R - d))
 
 
-def energy_residual(res, floor_j=1e-9):
+def energy_residual(res, floor_j=1e-9, *, state=False):
     """max |ETOTAL − ETOTAL₀| over the run / the largest energy that moved (external work, KE + SE,
-    contact work), at least ``floor_j`` (a scene at rest has nothing to normalise by)."""
+    contact work), at least ``floor_j`` (a scene at rest has nothing to normalise by). ``state``: the
+    history's ``energy/residual`` instead (state functions: the stored contact energy in place of
+    the booked contact work; the booked ETOTAL counts the release of initial overlaps twice, as
+    prescribed work and as the contact forces' work)."""
     h = {k: np.asarray(v, float) for k, v in res.history.items()}
+    if state:
+        return float(np.max(np.abs(h["energy/residual"])))
     tot = h["energy/total"]
     scale = max(np.max(np.abs(h["energy/external"])), np.max(h["energy/kinetic"] + h["energy/strain"]),
                 np.max(np.abs(h["energy/contact"])), floor_j)
     return float(np.max(np.abs(tot - tot[0])) / scale)
 
 
-def assert_bounded(res, m, *, box=None, residual=0.05, pen=0.1):
+def assert_bounded(res, m, *, box=None, residual=0.05, pen=0.1, state=False):
     """No NaN; |energy residual| < ``residual``; penetration < ``pen`` radii; nodes inside ``box``."""
     X = res.frames_positions
     assert np.all(np.isfinite(X)), "NaN/inf in the positions"
     for k, v in res.history.items():
         assert np.all(np.isfinite(np.asarray(v, float))), f"NaN/inf in history {k}"
-    resid = energy_residual(res)
+    resid = energy_residual(res, state=state)
     assert resid < residual, f"energy balance residual {resid:.3g}"
     assert max_penetration(m, X[-1]) < pen * R, f"penetration {max_penetration(m, X[-1]) / R:.3g} r"
     if box is not None:
@@ -138,7 +143,7 @@ def test_half_diameter_overlap_in_the_solver_is_pushed_apart_without_explosion()
     gap = np.mean(x[m.node_fiber == 1, 2]) - np.mean(x[m.node_fiber == 0, 2])
     assert gap > 2 * R * 0.99  # apart
     assert gap < 20 * R  # not blown away
-    assert_bounded(res, m, residual=0.05, pen=0.01)
+    assert_bounded(res, m, residual=0.05, pen=0.01, state=True)  # measured 0.0054
 
 
 # ---------------------------------------------------------------------------------------------
@@ -178,7 +183,8 @@ def test_crossing_fiber_dragged_across_joints_does_not_snag(pressed):
     counterpart in the drive's reaction work (ALLWK): residual 2.8e-7.
     pressed: the upper fiber 0.02 r into the lower one, which is clamped at its ends only and bends
     under the contact: the contact stays active along the whole drag (no snag, no loss of contact);
-    residual 2.3e-3 (the ½ m v̄² kinetic-energy measure of the stiff contact, not a bookkeeping gap).
+    residual 2.3e-3 of the booked balance; from state functions 3.1 %: the point part's crossing
+    hops across the bent fibre's joints (docs/contact.md §12).
     """
     L, n = 3e-3, 10
     z1 = (2.0 - 0.02) * R if pressed else 2 * R

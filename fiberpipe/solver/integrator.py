@@ -415,8 +415,9 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
     total = KE + SE + VD + FD - WK - PW
     # with the leapfrog's own kinetic term, which the scheme conserves exactly for a quadratic potential
     state_total = KL + SE + ST + VD + FD - WK
-    scale = np.maximum.accumulate(np.maximum(np.abs(WK), SE + KE)) if n_rows else np.zeros(0)
-    scale = np.maximum(scale, 1e-300)
+    # over the run's largest external work or mechanical energy (not the running one: early rows, with
+    # almost nothing moved yet, would divide by almost nothing)
+    scale = max(float(np.max(np.maximum(np.abs(WK), SE + KE))) if n_rows else 0.0, 1e-300)
     out = {
         "time": h[:, H_TIME].copy(),
         "plate_displacement": h[:, H_PLATE_DISP:H_PLATE_DISP + 2].copy(),
