@@ -39,7 +39,7 @@ from numba import njit
 
 from ._specialise import specialise
 from .contact import _joint_share
-from .geometry import crossing_angle, segment_distance2_s
+from .geometry import apply_pair_force, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point, law_line, law_point, law_weight_point)
 
@@ -85,11 +85,12 @@ def _point_segment_distance2(p0, p1, p2, x, n0, n1):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, la0, b_prev, b_next, law_id, law_params, gxi, gw, scale, ds,
-                   f_out, rec, sign, off):
+def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds, f_out, rec, sign, off):
     """Gauss points fixed on A, projected on segment B; weight ``scale``·w_g·L0_A. Returns the energy
-    (with the weight). Forces are minus its gradient. b_prev, b_next: the far nodes of the segments
-    before and after B on its fibre (−1: B ends there, its clamped point is the end cap)."""
+    (with the weight). Forces are minus its gradient. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``:
+    the segments' nodes and the far nodes of the segments before and after B on its fibre (−1: B ends
+    there, its clamped point is the end cap)."""
+    na0, na1, nb0, nb1, b_prev, b_next = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
@@ -247,6 +248,67 @@ def _point_energy_dphi_of_law(law_id, law_params, g, ra, rb, phi):
     return (ea - eb) / (phi + h - max(phi - h, 0.0))
 
 
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _blend_forces(f_out, nodes4, a0, b0, ta, tb, geo, gd, G):
+    """The blend's forces: ``gd = ∂Π/∂δ_c`` through w (hertz_oriented's ellipse) along the clamped
+    closest points' normal, like the point force, and ``G = ∂Π/∂Φ`` (the blend's derivative and the
+    point law's own angle dependence) as a couple on each segment through
+    ``∂Φ/∂t_A = −σ(t̂_B − c t̂_A)/(|t_A| sin Φ)``. ``geo = (s_c, t_c, dist², r_i + r_j, aa, bb, ab)``."""
+    na0, na1, nb0, nb1 = nodes4
+    sc, tc, dist2, rr, aa, bb, ab = geo
+    if gd != 0.0:
+        d_own = math.sqrt(dist2)
+        if d_own > 1e-14 * rr:
+            inv = gd / d_own
+            for c in range(3):
+                fc_ = (a0[c] + sc * ta[c] - b0[c] - tc * tb[c]) * inv
+                f_out[na0, c] += (1.0 - sc) * fc_
+                f_out[na1, c] += sc * fc_
+                f_out[nb0, c] -= (1.0 - tc) * fc_
+                f_out[nb1, c] -= tc * fc_
+    if G != 0.0:
+        la = math.sqrt(aa)
+        lb = math.sqrt(bb)
+        sg = 1.0 if ab >= 0.0 else -1.0
+        sphi = math.sqrt(max(aa * bb - ab * ab, 0.0)) / (la * lb)
+        if sphi > 1e-12:
+            fa = G * sg / (sphi * la * lb)   # −G ∂Φ/∂t_A = fa (t_B − (ab/aa) t_A)
+            ca = ab / aa
+            cb = ab / bb
+            for c in range(3):
+                ga = fa * (tb[c] - ca * ta[c])  # force on a1 (−∂Π/∂t_A), −ga on a0
+                gb = fa * (ta[c] - cb * tb[c])
+                f_out[na1, c] += ga
+                f_out[na0, c] -= ga
+                f_out[nb1, c] += gb
+                f_out[nb0, c] -= gb
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _record_pair(out, k, rec, phi, n_active, use_list, use_share):
+    """The pair's records from its accumulator ``rec`` (as contact.contact_forces_ex writes them);
+    returns the count of pairs in contact."""
+    fsum = rec[0]
+    if not fsum > 0.0:
+        return n_active
+    if use_list:
+        out.active[n_active] = k
+    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+    out.fn[k] = fv
+    if fv > 0.0:
+        out.normal[k, 0] = rec[1] / fv
+        out.normal[k, 1] = rec[2] / fv
+        out.normal[k, 2] = rec[3] / fv
+    out.s[k] = rec[4] / fsum
+    out.t[k] = rec[5] / fsum
+    out.phi[k] = phi
+    out.delta[k] = rec[6]
+    if use_share:
+        out.share[k] = rec[7]
+        out.fsum[k] = fsum
+    return n_active + 1
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
                        out, c_off, reach):
@@ -255,11 +317,11 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
     [m], the arc length of each segment's ends along its fibre (their difference, the reference
     length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
     ``(energy, n_active)``; ``energy`` is the potential itself."""
-    c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, c_gap, c_active = out
+    c_fn, c_gap = out.fn, out.gap
     use_gap = c_gap.shape[0] > 0
-    use_list = c_active.shape[0] > 0
+    use_list = out.active.shape[0] > 0
     use_off = c_off.shape[0] > 0
-    use_share = c_share.shape[0] > 0
+    use_share = out.share.shape[0] > 0
     energy = 0.0
     n_active = 0
     rec = np.zeros(8)
@@ -330,18 +392,7 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
                 f0 = fm * d0
                 f1 = fm * d1
                 f2 = fm * d2
-                f_out[na0, 0] += (1.0 - sc) * f0
-                f_out[na0, 1] += (1.0 - sc) * f1
-                f_out[na0, 2] += (1.0 - sc) * f2
-                f_out[na1, 0] += sc * f0
-                f_out[na1, 1] += sc * f1
-                f_out[na1, 2] += sc * f2
-                f_out[nb0, 0] -= (1.0 - tc) * f0
-                f_out[nb0, 1] -= (1.0 - tc) * f1
-                f_out[nb0, 2] -= (1.0 - tc) * f2
-                f_out[nb1, 0] -= tc * f0
-                f_out[nb1, 1] -= tc * f1
-                f_out[nb1, 2] -= tc * f2
+                apply_pair_force(f_out, (na0, na1, nb0, nb1), sc, tc, f0, f1, f2)
                 rec[0] += fm
                 rec[1] += f0
                 rec[2] += f1
@@ -352,63 +403,17 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         e_line = 0.0  # Π_line (unweighted by 1 − w)
         if w < 1.0:
             half = 0.5 * (1.0 - w)
-            el = _line_half_pot(x, na0, na1, nb0, nb1, ra, rb, seg_arc[i, 1] - seg_arc[i, 0], _prev_node(seg_nodes, j),
-                                _next_node(seg_nodes, j), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+            el = _line_half_pot(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), ra, rb,
+                                seg_arc[i, 1] - seg_arc[i, 0], law_id, law_params, gxi, gw, half, ds, f_out, rec,
                                 1.0, off)
-            el += _line_half_pot(x, nb0, nb1, na0, na1, rb, ra, seg_arc[j, 1] - seg_arc[j, 0], _prev_node(seg_nodes, i),
-                                 _next_node(seg_nodes, i), law_id, law_params, gxi, gw, half, ds, f_out, rec,
+            el += _line_half_pot(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rb, ra,
+                                 seg_arc[j, 1] - seg_arc[j, 0], law_id, law_params, gxi, gw, half, ds, f_out, rec,
                                  -1.0, off)
             e_line = el / (1.0 - w)
         energy += (1.0 - w) * e_line + w * e_point
-        # ∂Π/∂δ_c through w (hertz_oriented): along the clamped closest points' normal, like the point force
-        gd = dw_dd * (e_point - e_line)
-        if gd != 0.0:
-            d_own = math.sqrt(dist2)
-            if d_own > 1e-14 * rr:
-                inv = gd / d_own
-                for c in range(3):
-                    fc_ = (a0[c] + sc * ta[c] - b0[c] - tc * tb[c]) * inv
-                    f_out[na0, c] += (1.0 - sc) * fc_
-                    f_out[na1, c] += sc * fc_
-                    f_out[nb0, c] -= (1.0 - tc) * fc_
-                    f_out[nb1, c] -= tc * fc_
-        # ∂Π/∂Φ: the blend's derivative and the point law's own angle dependence
-        G = dw * (e_point - e_line) + w * de_point
-        if G != 0.0:
-            la = math.sqrt(aa)
-            lb = math.sqrt(bb)
-            cc = ab / (la * lb)
-            sg = 1.0 if cc >= 0.0 else -1.0
-            sphi = math.sqrt(max(aa * bb - ab * ab, 0.0)) / (la * lb)
-            if sphi > 1e-12:
-                fa = G * sg / (sphi * la * lb)   # −G ∂Φ/∂t_A = fa (t_B − (ab/aa) t_A)
-                ca = ab / aa
-                cb = ab / bb
-                for c in range(3):
-                    ga = fa * (tb[c] - ca * ta[c])  # force on a1 (−∂Π/∂t_A), −ga on a0
-                    gb = fa * (ta[c] - cb * tb[c])
-                    f_out[na1, c] += ga
-                    f_out[na0, c] -= ga
-                    f_out[nb1, c] += gb
-                    f_out[nb0, c] -= gb
-        fsum = rec[0]
-        if fsum > 0.0:
-            if use_list:
-                c_active[n_active] = k
-            n_active += 1
-            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-            c_fn[k] = fv
-            if fv > 0.0:
-                c_n[k, 0] = rec[1] / fv
-                c_n[k, 1] = rec[2] / fv
-                c_n[k, 2] = rec[3] / fv
-            c_s[k] = rec[4] / fsum
-            c_t[k] = rec[5] / fsum
-            c_phi[k] = phi
-            c_delta[k] = rec[6]
-            if use_share:
-                c_share[k] = rec[7]
-                c_fsum[k] = fsum
+        _blend_forces(f_out, (na0, na1, nb0, nb1), a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
+                      dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
+        n_active = _record_pair(out, k, rec, phi, n_active, use_list, use_share)
     return energy, n_active
 
 
