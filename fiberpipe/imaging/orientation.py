@@ -35,12 +35,16 @@ def _summary(t_xyz: np.ndarray, w: np.ndarray) -> dict:
     # slicing axis of the slices tracer is one volume axis, the one closest to the dominant axis
     axis = int(np.argmax(np.abs(main)))
     within = np.abs(t_xyz[:, axis]) >= np.cos(np.radians(45.0))
+    # fraction within 30 deg of its own nearest volume axis, any of the three: fibers along volume
+    # axes (a cross ply, a woven tow lying in the slices) that the slices tracer takes region by region
+    along_axes = np.abs(t_xyz).max(axis=1) >= np.cos(np.radians(30.0))
     return {
         "tensor": A.round(6).tolist(),
         "eigenvalues": vals.round(6).tolist(),
         "dominant_axis_xyz": main.round(6).tolist(),
         "nearest_volume_axis": "xyz"[axis],
         "aligned_fraction_45deg": round(float(w[within].sum() / wsum), 4),
+        "axis_aligned_fraction_30deg": round(float(w[along_axes].sum() / wsum), 4),
         "median_angle_deg": round(float(_weighted_median(ang, w)), 3),
         "angle_histogram": {"bin_edges_deg": ANGLE_BINS_DEG.tolist(),
                             "fraction": (hist / wsum).round(6).tolist()},

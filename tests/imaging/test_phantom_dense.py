@@ -104,3 +104,34 @@ def test_mask_only_tracer_loses_the_dense_pack(dense):
     f = trace(mask, voxel_size_m=vs, expected_radius_m=3.0 * vs, off_axis="none")
     acc = trace_accuracy(f, truth, voxel_size_m=vs)
     assert acc["recall"] < 0.9, acc
+
+
+@pytest.mark.parametrize("off_axis", ["trace", "drop"])
+def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_path, write_yaml, caplog, dense, off_axis):
+    """The stage: auto picks slices (fibers along volume axes), trace.grey reads the volume, one warning, counts in summary.json."""
+    import json
+
+    from fiberpipe.config import load_config
+    from fiberpipe.imaging.io import save_volume_tif
+    from fiberpipe.pipeline import run_pipeline
+
+    vol, truth, _ = dense
+    vs = truth.meta["voxel_size_m"]
+    p = tmp_path / "ply.tif"
+    save_volume_tif(p, vol, vs)
+    cfg = load_config(write_yaml(
+        f"input: {{volume: {p}}}\nfiber: {{radius: {3.0 * vs * 1e6:.6g} um}}\nskeletonize: {{enabled: false}}\n"
+        f"trace: {{grey: true, off_axis: {off_axis}, min_length: 0, pictures: false}}\n"))
+    with caplog.at_level("WARNING", logger="fiberpipe"):
+        run_pipeline(cfg, tmp_path / "run", to_stage="trace")
+    tr = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]["trace"]
+    assert tr["method"] == "slices" and tr["aligned_fraction_45deg_mask"] < 0.9
+    info = tr["off_axis"]["x"]
+    msgs = [r.getMessage() for r in caplog.records if "across the slicing axis" in r.getMessage()]
+    assert len(msgs) == 1 and "\n" not in msgs[0] and "trace.off_axis" in msgs[0]
+    if off_axis == "trace":
+        assert info["fibers"] >= 0.95 * truth.meta["n_cross"]
+        assert tr["fibers"] >= 0.98 * truth.n_fibers
+    else:
+        assert info["fibers"] == 0 and info["action"] == "left out"
+        assert abs(tr["fibers"] - truth.meta["n_main"]) <= 0.02 * truth.meta["n_main"]
