@@ -306,6 +306,48 @@ class _Track:
         return self.last_p + self.v * (k - self.last_k)
 
 
+def assign_within(a: np.ndarray, b: np.ndarray, lim: np.ndarray) -> list[tuple[int, int]]:
+    """One-to-one assignment of points ``a`` to points ``b`` minimising the summed distance, a
+    pair allowed only within ``lim[i]`` of ``a[i]``: the most pairs, then the least total distance.
+
+    Strategy: the allowed pairs form a sparse bipartite graph; its connected components are
+    independent problems, each solved by the Hungarian algorithm
+    (``scipy.optimize.linear_sum_assignment``) on its own small matrix (forbidden pairs at a large
+    cost), and lone pairs directly. The dense matrix of all pairs would be n x m (17 000 fibers
+    per slice of a 2000^2 scan: 2.3 GB and O(n^3)).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n, m = len(a), len(b)
+    if n == 0 or m == 0:
+        return []
+    nbs = cKDTree(b).query_ball_point(a, np.asarray(lim, dtype=np.float64))
+    ii = np.repeat(np.arange(n), [len(x) for x in nbs])
+    if len(ii) == 0:
+        return []
+    jj = np.fromiter((j for x in nbs for j in x), dtype=np.int64, count=len(ii))
+    d = np.linalg.norm(a[ii] - b[jj], axis=1)
+    g = coo_matrix((np.ones(len(ii)), (ii, n + jj)), shape=(n + m, n + m))
+    _, lab = connected_components(g, directed=False)
+    comp = lab[ii]
+    # components of one edge are one pair
+    sizes = np.bincount(comp, minlength=lab.max() + 1)
+    out = [(int(i), int(j)) for i, j in zip(ii[sizes[comp] == 1], jj[sizes[comp] == 1])]
+    multi = np.flatnonzero(sizes[comp] > 1)
+    if len(multi):
+        order = multi[np.argsort(comp[multi], kind="stable")]
+        cuts = np.flatnonzero(np.diff(comp[order])) + 1
+        for grp in np.split(order, cuts):
+            ri, rinv = np.unique(ii[grp], return_inverse=True)
+            cj, cinv = np.unique(jj[grp], return_inverse=True)
+            C = np.full((len(ri), len(cj)), _BIG)
+            C[rinv, cinv] = d[grp]
+            rows, cols = linear_sum_assignment(C)
+            out.extend((int(ri[r]), int(cj[c])) for r, c in zip(rows, cols) if C[r, c] < _BIG)
+    return out
+
+
 def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
                  peak_threshold: float, max_jump: float, max_skip: int, momentum: float,
                  refine: bool = True, progress=None, grey_t=None):
@@ -358,14 +400,8 @@ def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_dist
         used = np.zeros(len(P), dtype=bool)
         if active and len(P):
             gap = np.array([k - t.last_k for t in active], dtype=np.float64)
-            diff = (pred[:, None, :] - P[None, :, :]) * samp
-            C = np.sqrt((diff * diff).sum(-1))
             lim = max_jump * np.sqrt(gap)
-            C[C > lim[:, None]] = _BIG
-            rows, cols = linear_sum_assignment(C)
-            for i, j in zip(rows, cols):
-                if C[i, j] >= _BIG:
-                    continue
+            for i, j in assign_within(pred * samp, P * samp, lim):
                 t = active[i]
                 g = k - t.last_k
                 step = (P[j] - t.last_p) / g
@@ -451,14 +487,19 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int):
     ends = [_end_fit(a[0], a[1], True, fit_n) for a in arr]
     starts = [_end_fit(a[0], a[1], False, fit_n) for a in arr]
     cand = []
-    order = np.argsort(k0)
+    # only starts near an end can continue it: |pe - ps| <= d1 + |se| g and d1 <= 2 c, so a ball of
+    # 2 max_dist (1 + 0.1 max_gap) + |se| max_gap around the end holds every candidate (a KD-tree
+    # query instead of all later starts: tens of thousands of tracks start at a block boundary)
+    ps_all = np.array([st[0] for st in starts]) * samp
+    tree = cKDTree(ps_all)
     for i in range(n):
-        # starts strictly after the end of i, within the gap
-        lo = np.searchsorted(k0[order], k1[i] + 1)
-        hi = np.searchsorted(k0[order], k1[i] + max_gap + 1)
         pe, se = ends[i]
-        for j in order[lo:hi]:
+        R = 2.0 * max_dist * (1.0 + 0.1 * max_gap) + float(np.linalg.norm(se * samp)) * max_gap
+        for j in tree.query_ball_point(pe * samp, R):
             g = k0[j] - k1[i]
+            # starts strictly after the end of i, within the gap
+            if g < 1 or g > max_gap:
+                continue
             ps, ss = starts[j]
             d1 = np.linalg.norm((pe + se * g - ps) * samp)
             d2 = np.linalg.norm((ps - ss * g - pe) * samp)
@@ -483,14 +524,38 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int):
     return out
 
 
-def _remove_duplicates(tracks, samp, dist: float):
-    """Drop a track that runs within ``dist`` of a longer one over most of its overlap."""
-    order = sorted(range(len(tracks)), key=lambda i: -len(tracks[i][0]))
-    kept = []
+def _remove_duplicates(tracks, samp, dist: float, n_samples: int = 16):
+    """Drop a track that runs within ``dist`` of a longer one over most of its overlap.
+
+    Only tracks passing within 2 ``dist`` of a track at one of ``n_samples`` evenly spaced slices of
+    it are compared (per-slice KD-trees); a duplicate is within ``dist`` on at least a quarter of
+    its slices, so the samples find it.
+    """
+    n = len(tracks)
+    if n == 0:
+        return []
+    K = np.concatenate([t[0] for t in tracks])
+    P = np.concatenate([t[1] for t in tracks]) * samp
+    ids = np.repeat(np.arange(n), [len(t[0]) for t in tracks])
+    order_k = np.argsort(K, kind="stable")
+    Ks = K[order_k]
+    queries: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for i, (k, p, _) in enumerate(tracks):
+        for q in np.unique(np.linspace(0, len(k) - 1, min(n_samples, len(k))).round().astype(int)):
+            queries.setdefault(int(k[q]), []).append((i, p[q] * samp))
+    near = [set() for _ in range(n)]
+    for kq, qs in queries.items():
+        a, b = np.searchsorted(Ks, kq), np.searchsorted(Ks, kq, side="right")
+        sel = order_k[a:b]
+        tree = cKDTree(P[sel])
+        for (i, pt), hits in zip(qs, tree.query_ball_point(np.array([q[1] for q in qs]), 2.0 * dist)):
+            near[i].update(int(ids[sel[h]]) for h in hits)
+    order = sorted(range(n), key=lambda i: -len(tracks[i][0]))
+    kept, is_kept = [], np.zeros(n, dtype=bool)
     for i in order:
         k, p, _ = tracks[i]
         dup = False
-        for j in kept:
+        for j in (j for j in near[i] if is_kept[j] and j != i):
             kj, pj, _ = tracks[j]
             common, ia, ib = np.intersect1d(k, kj, assume_unique=True, return_indices=True)
             if len(common) < 0.5 * len(k):
@@ -501,7 +566,33 @@ def _remove_duplicates(tracks, samp, dist: float):
                 break
         if not dup:
             kept.append(i)
+            is_kept[i] = True
     return [tracks[i] for i in sorted(kept)]
+
+
+def finish_tracks(raw, v, perm, r: float, *, merge_gap_vox: int, max_jump: float, min_length_vox: float,
+                  smooth_sigma_vox: float, spacing_vox: float) -> tuple[Polylines, int]:
+    """Raw tracks (objects with ``k``, ``p``, ``r``) -> fibers: pieces merged across gaps, short
+    and duplicate tracks dropped, skipped slices filled, smoothed along the track, back to the
+    volume's axis order (``perm``) and metres, resampled by arc length. Returns the fibers and the
+    number of merged tracks."""
+    vt = v[list(perm)]
+    samp = vt[1:] / vt[1:].min()
+    merged = merge_pieces(raw, samp, max_gap=merge_gap_vox, max_dist=max_jump, fit_n=int(max(5, 2 * r)))
+    long_ = [t for t in merged if t[0][-1] - t[0][0] + 1 >= min_length_vox]
+    long_ = _remove_duplicates(long_, samp, dist=0.5 * r)
+    fibers, radii = [], []
+    for k, p, rr in long_:
+        # fill skipped slices linearly, then smooth along the track and resample by arc length
+        kk = np.arange(k[0], k[-1] + 1)
+        pts = np.column_stack([kk, np.interp(kk, k, p[:, 0]), np.interp(kk, k, p[:, 1])])
+        pts[:, 1:] = smooth_polyline(pts[:, 1:], smooth_sigma_vox)
+        zyx = np.empty_like(pts)
+        zyx[:, list(perm)] = pts  # back to the volume's axis order
+        xyz = voxel_to_xyz_m(zyx, v)
+        fibers.append(resample_polyline(xyz, spacing_vox * v.min()))
+        radii.append(max(0.5, float(np.median(rr))) * vt[1:].min())
+    return Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0), len(merged)
 
 
 def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | None = None,
@@ -554,26 +645,12 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
                               peak_threshold=peak_threshold, max_jump=max_jump, max_skip=max_skip,
                               momentum=momentum, refine=refine, progress=progress, grey_t=grey_t)
     t_det = time.perf_counter() - t0
-    merged = merge_pieces(raw, samp, max_gap=merge_gap_vox, max_dist=max_jump,
-                          fit_n=int(max(5, 2 * r)))
-    long_ = [t for t in merged if t[0][-1] - t[0][0] + 1 >= min_length_vox]
-    long_ = _remove_duplicates(long_, samp, dist=0.5 * r)
-
-    fibers, radii = [], []
-    for k, p, rr in long_:
-        # fill skipped slices linearly, then smooth along the track and resample by arc length
-        kk = np.arange(k[0], k[-1] + 1)
-        pts = np.column_stack([kk, np.interp(kk, k, p[:, 0]), np.interp(kk, k, p[:, 1])])
-        pts[:, 1:] = smooth_polyline(pts[:, 1:], smooth_sigma_vox)
-        zyx = np.empty_like(pts)
-        zyx[:, list(perm)] = pts  # back to the volume's axis order
-        xyz = voxel_to_xyz_m(zyx, v)
-        fibers.append(resample_polyline(xyz, spacing_vox * v.min()))
-        radii.append(max(0.5, float(np.median(rr))) * vt[1:].min())
-    out = Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0)
+    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
+                                  min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
+                                  spacing_vox=spacing_vox)
     out.meta.update(method="slices", axis=ax, direction_zyx=direction, radius_vox_estimate=r,
-                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=len(merged),
-                    n_fibers=len(fibers), time_detect_s=t_det,
+                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
+                    n_fibers=out.n_fibers, time_detect_s=t_det,
                     time_total_s=time.perf_counter() - t0,
                     params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
                                 min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
