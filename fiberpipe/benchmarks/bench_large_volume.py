@@ -43,13 +43,14 @@ def child(pass_: str, raw: str, shape, slab: int, block: int, d: str, scheduler:
     from fiberpipe.imaging.trace_chunked import SliceSource
 
     mask_p, skel_p = Path(d) / "fiberpipe-large-mask.h5", Path(d) / "fiberpipe-large-skeleton.h5"
+    chunks = (min(slab, 16, shape[0]), min(256, shape[1]), min(256, shape[2]))
     t0 = time.perf_counter()
     if pass_ == "segment":
         from fiberpipe.imaging.segment_chunked import RawSlabs, segment_chunked
 
         src = RawSlabs(raw, shape, "uint16")
         with h5py.File(mask_p, "w") as f:
-            ds = f.create_dataset("mask", shape=src.shape, dtype=bool, chunks=(min(slab, 16), 256, 256),
+            ds = f.create_dataset("mask", shape=src.shape, dtype=bool, chunks=chunks,
                                   compression="lzf")
             info = segment_chunked(src, ds, slab=slab)
         out = {"volume_fraction": info["volume_fraction"], "time_s": info["time_s"]}
@@ -64,9 +65,9 @@ def child(pass_: str, raw: str, shape, slab: int, block: int, d: str, scheduler:
         from fiberpipe.imaging.skeleton_chunked import skeletonize_chunked
 
         with h5py.File(skel_p, "w") as g:
-            s = g.create_dataset("skeleton", shape=tuple(shape), dtype=bool, chunks=(min(slab, 16), 256, 256),
+            s = g.create_dataset("skeleton", shape=tuple(shape), dtype=bool, chunks=chunks,
                                  compression="lzf")
-            r = g.create_dataset("radius_vox", shape=tuple(shape), dtype=np.float32, chunks=(min(slab, 16), 256, 256),
+            r = g.create_dataset("radius_vox", shape=tuple(shape), dtype=np.float32, chunks=chunks,
                                  compression="lzf")
             out = skeletonize_chunked(SliceSource(mask_p, "mask"), s, r, slab=slab, halo=32, scheduler=scheduler)
     else:

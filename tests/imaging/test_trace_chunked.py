@@ -77,3 +77,18 @@ def test_missing_dataset_is_one_line(tmp_path, on_disk):
     p, _, _ = on_disk
     with pytest.raises(InputError, match="dataset 'nope' not found"):
         trace_chunked(SliceSource(p, "nope"), 1e-5, expected_radius_m=5e-5)
+
+
+def test_large_volume_benchmark_runs_every_pass(tmp_path, capsys):
+    """bench_large_volume on a small volume: the three passes report wall time, CPU time and peak memory; full-length fibers."""
+    from fiberpipe.benchmarks import bench_large_volume
+
+    bench_large_volume.main(["--shape", "40", "96", "96", "--slab", "16", "--block", "16", "--dir", str(tmp_path)])
+    out = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ") and "{" in line}
+    assert set(rows) == {"segment", "trace", "skeleton"}, out
+    import json
+
+    trace_row = json.loads(rows["trace"].split("|")[5])
+    assert trace_row["fibers"] == 25 and trace_row["fibers_full_length"] == 25  # the 5 x 5 grid, whole length
+    assert not list(tmp_path.iterdir())  # nothing left behind
