@@ -20,12 +20,12 @@ def mask():
     return m
 
 
-@pytest.mark.parametrize("slab", [17, 50])
-def test_slab_skeleton_matches_the_whole_one(mask, slab):
+@pytest.mark.parametrize("slab,tile", [(17, 512), (50, 30)])
+def test_slab_skeleton_matches_the_whole_one(mask, slab, tile):
     """Skeleton voxels of slabs (halo 24) lie within one voxel of the whole-volume skeleton and vice versa; radius equal there."""
     sk, rad = skeletonize(mask)
     out_s, out_r = np.zeros_like(sk), np.zeros(mask.shape, np.float32)
-    info = skeletonize_chunked(mask, out_s, out_r, slab=slab, halo=24)
+    info = skeletonize_chunked(mask, out_s, out_r, slab=slab, halo=24, tile=tile)
     assert info["slabs"] == -(-mask.shape[0] // slab)
     a, b = np.argwhere(sk), np.argwhere(out_s)
     assert abs(len(b) - len(a)) <= 0.02 * len(a)
@@ -42,13 +42,13 @@ def test_slab_skeleton_from_hdf5_on_dask(tmp_path, mask):
     with h5py.File(p, "w") as f:
         f.create_dataset("mask", data=mask, chunks=(16, 64, 64))
     ref_s, ref_r = np.zeros(mask.shape, bool), np.zeros(mask.shape, np.float32)
-    skeletonize_chunked(mask, ref_s, ref_r, slab=40, halo=16)
+    skeletonize_chunked(mask, ref_s, ref_r, slab=40, halo=16, tile=40)
     with h5py.File(tmp_path / "skel.h5", "w") as g, \
             distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as c, \
             distributed.Client(c) as client:
         s = g.create_dataset("skeleton", shape=mask.shape, dtype=bool)
         r = g.create_dataset("radius_vox", shape=mask.shape, dtype=np.float32)
-        skeletonize_chunked(SliceSource(p, "mask"), s, r, slab=40, halo=16, scheduler=client)
+        skeletonize_chunked(SliceSource(p, "mask"), s, r, slab=40, halo=16, tile=40, scheduler=client)
         assert np.array_equal(s[...], ref_s) and np.allclose(r[...], ref_r)
 
 
