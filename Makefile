@@ -59,6 +59,17 @@ bench-hard-phantoms: setup
 bench-segment-large: setup
 	$(PY) -m fiberpipe.benchmarks.bench_segment_large --shape 1000 2000 2000 --slab 32
 
+# segment, skeletonize and trace of a 1000 x 2000 x 2000 uint16 volume (8 GB) chunk by chunk, peak memory per pass
+.PHONY: bench-large-volume
+bench-large-volume: setup
+	$(PY) -m fiberpipe.benchmarks.bench_large_volume --shape 1000 2000 2000 --slab 32 --block 64
+
+# the dense-composite family (v_f 0.6, r 2.5-3.5 voxels, CNR 2-3, a cross ply), 10 seeds, fibretracker beside
+.PHONY: bench-dense-phantoms
+bench-dense-phantoms: setup
+	$(PY) -m pip install --quiet -e '.[test,bench]'
+	$(PY) -m fiberpipe.benchmarks.bench_dense_phantoms --seeds 0-9
+
 .PHONY: bench-contact bench-pyelastica fast-settings docs config-reference
 bench-contact: setup
 	$(PY) -m fiberpipe.benchmarks.bench_contact

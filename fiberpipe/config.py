@@ -200,6 +200,12 @@ class TraceConfig(Section):
     join_gap_vox: Optional[float] = Field(None, ge=0, description="largest gap bridged between two pieces of one fiber "
                                           "(collinear, in line, similar radius); default max(4, 4 r); 0: no joining")
     pictures: bool = Field(True, description="write trace_slices.png, trace_midlines.png and orientation.png into the run folder")
+    grey: bool = Field(False, description="slices: find fiber centres in the grey volume within the mask (dense packs, "
+                       "whose mask merges touching fibers); the trace stage reads the input volume again")
+    off_axis: Literal["trace", "drop"] = Field("trace", description="slices: regions (>= 2 % of the fiber volume) whose "
+                                               "fibers run along another volume axis, such as a cross ply lying in the "
+                                               "slices, are traced along their own axis, or left out (counted in "
+                                               "summary.json, one warning line)")
 
 
 class MeshConfig(Section):

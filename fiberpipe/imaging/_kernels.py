@@ -61,3 +61,67 @@ def render_segments_max(out, starts, ends, radius, shape_zyx):
                             occ = 1.0
                         if occ > out[k, j, i]:
                             out[k, j, i] = occ
+
+
+@njit(cache=True)
+def voronoi_centroids(weights, sites, nb, R, hw, sy, sx):
+    """One step of the local-Voronoi centroid refinement (``trace._refine_centroids``).
+
+    Parameters
+    ----------
+    weights : (H, W) float32 ndarray
+        Pixel weights (1/0 for a mask, grey in [0, 1]).
+    sites : (n, 2) float64 ndarray
+        Current centres, pixel indices (row, col).
+    nb : (n, k) int64 ndarray
+        Each site's k nearest sites, itself first (column 0 is skipped).
+    R : float
+        Window radius (relative pixel units); hw: half-width of the pixel window.
+    sy, sx : float
+        Relative pixel sizes along rows and columns.
+
+    Returns
+    -------
+    (n, 2) float64 ndarray: the weighted centroid of each site's pixels within R that are nearer
+    to it than to any of its neighbours (the site itself where it has none).
+    """
+    H, W = weights.shape
+    n = sites.shape[0]
+    out = sites.copy()
+    R2 = R * R
+    for i in range(n):
+        cy = int(np.rint(sites[i, 0]))
+        cx = int(np.rint(sites[i, 1]))
+        sw = 0.0
+        syy = 0.0
+        sxx = 0.0
+        for yy in range(cy - hw, cy + hw + 1):
+            if yy < 0 or yy >= H:
+                continue
+            for xx in range(cx - hw, cx + hw + 1):
+                if xx < 0 or xx >= W:
+                    continue
+                v = weights[yy, xx]
+                if v == 0.0:
+                    continue
+                fy = (yy - sites[i, 0]) * sy
+                fx = (xx - sites[i, 1]) * sx
+                d0 = fy * fy + fx * fx
+                if d0 > R2:
+                    continue
+                ok = True
+                for jj in range(1, nb.shape[1]):
+                    s = nb[i, jj]
+                    gy = (yy - sites[s, 0]) * sy
+                    gx = (xx - sites[s, 1]) * sx
+                    if gy * gy + gx * gx < d0:
+                        ok = False
+                        break
+                if ok:
+                    sw += v
+                    syy += v * yy
+                    sxx += v * xx
+        if sw > 0.0:
+            out[i, 0] = syy / sw
+            out[i, 1] = sxx / sw
+    return out

@@ -35,12 +35,16 @@ def _summary(t_xyz: np.ndarray, w: np.ndarray) -> dict:
     # slicing axis of the slices tracer is one volume axis, the one closest to the dominant axis
     axis = int(np.argmax(np.abs(main)))
     within = np.abs(t_xyz[:, axis]) >= np.cos(np.radians(45.0))
+    # fraction within 30 deg of its own nearest volume axis, any of the three: fibers along volume
+    # axes (a cross ply, a woven tow lying in the slices) that the slices tracer takes region by region
+    along_axes = np.abs(t_xyz).max(axis=1) >= np.cos(np.radians(30.0))
     return {
         "tensor": A.round(6).tolist(),
         "eigenvalues": vals.round(6).tolist(),
         "dominant_axis_xyz": main.round(6).tolist(),
         "nearest_volume_axis": "xyz"[axis],
         "aligned_fraction_45deg": round(float(w[within].sum() / wsum), 4),
+        "axis_aligned_fraction_30deg": round(float(w[along_axes].sum() / wsum), 4),
         "median_angle_deg": round(float(_weighted_median(ang, w)), 3),
         "angle_histogram": {"bin_edges_deg": ANGLE_BINS_DEG.tolist(),
                             "fraction": (hist / wsum).round(6).tolist()},
@@ -140,3 +144,57 @@ def is_quasi_parallel(orientation: dict, min_aligned_fraction: float) -> bool:
     """Whether the slice-wise tracer applies: at least ``min_aligned_fraction`` of the fibers run
     within 45 degrees of one volume axis."""
     return float(orientation.get("aligned_fraction_45deg", 0.0)) >= min_aligned_fraction
+
+
+def axis_regions(mask: np.ndarray, voxel_size_m=1.0, *, grey: np.ndarray | None = None,
+                 radius_vox: float | None = None, max_voxels: int = 2_000_000):
+    """Which volume axis the fibers run along, voxel by voxel: the regions of a cross-ply or woven
+    scan (a tow along z beside a tow lying in the slices).
+
+    Strategy: fibers along volume axis a have no gradient along a, so of the three diagonal terms
+    of the structure tensor (the smoothed mask's squared derivatives, averaged over two fiber
+    radii so a fiber's inside takes the class of its surface) the one along the fibers' axis is the
+    smallest (Bigun & Granlund 1987). Each sample of a strided subsample takes the axis of its
+    smallest term; the labels are expanded back to the full grid (nearest sample). Only the
+    diagonal is needed to tell the axis, so no eigen-decomposition per voxel.
+
+    Given the ``grey`` volume, the derivatives are those of the grey values: in a dense pack the
+    mask merges the fibers into solid regions with no gradient inside, the grey image keeps every
+    fiber's outline, and the window is one fiber radius (``radius_vox``, when given) instead of two.
+
+    Returns
+    -------
+    labels : (Z, Y, X) uint8 ndarray
+        0, 1 or 2 (the volume axis, z y x order) on the mask, 255 off it.
+    fractions : (3,) float ndarray
+        Share of the mask's voxels in each class.
+    """
+    v = voxel_size_zyx(voxel_size_m)
+    step = max(1, int(np.ceil((mask.size / float(max_voxels)) ** (1.0 / 3.0))))
+    sub, scale, r = _subsample(mask, v, step)
+    st = [max(1, min(step, (n - 1) // 2)) for n in mask.shape]
+    labels = np.full(mask.shape, 255, dtype=np.uint8)
+    n_mask = int(np.count_nonzero(mask))
+    if min(sub.shape) < 3 or n_mask == 0:
+        labels[mask] = 0
+        return labels, np.array([1.0, 0.0, 0.0])
+    rho = float(np.clip(r, 1.0, 6.0))
+    src = sub if grey is None else grey[::st[0], ::st[1], ::st[2]]
+    f = ndi.gaussian_filter(src.astype(np.float32), 1.0)
+    if grey is not None:  # scale-free: the classes compare derivatives of one field
+        f /= max(float(np.std(f)), 1e-12)
+    g = np.gradient(f, *scale)
+    del f
+    win = 2.0 * rho if grey is None or radius_vox is None else max(1.0, float(radius_vox) / step)
+    D = np.stack([ndi.gaussian_filter(g[a] * g[a], win / scale, truncate=2.0) for a in range(3)])
+    del g
+    cls = np.argmin(D, axis=0).astype(np.uint8)
+    del D
+    # expand the sample grid back to the full grid: sample i covers voxels i*st - st/2 .. i*st + st/2
+    idx = [np.clip(np.rint(np.arange(n) / s).astype(np.int64), 0, cls.shape[a] - 1)
+           for a, (n, s) in enumerate(zip(mask.shape, st))]
+    for k in range(mask.shape[0]):  # one slice at a time: no full-size index arrays
+        lab = cls[idx[0][k]][np.ix_(idx[1], idx[2])]
+        labels[k][mask[k]] = lab[mask[k]]
+    counts = np.bincount(labels[labels < 3].ravel(), minlength=3)[:3].astype(np.float64)
+    return labels, counts / max(1.0, counts.sum())

@@ -133,36 +133,20 @@ def _refine_centroids(sl: np.ndarray, peaks: np.ndarray, R: float, samp: np.ndar
     # (the blurred neck adds material there) and is quantised to whole pixels. The centroid of the
     # fiber's own pixels, cut from its neighbours by the bisector between centres, uses the whole
     # boundary (~2 pi r pixels), so it is sub-voxel and nearly unbiased for touching pairs.
-    H, W = sl.shape
+    from ._kernels import voronoi_centroids
+
     n = len(peaks)
     sites = peaks.astype(np.float64)
     hw = int(np.ceil(R / samp.min())) + 1
-    o = np.arange(-hw, hw + 1)
-    oy, ox = np.meshgrid(o, o, indexing="ij")
     k_nb = min(7, n)
+    w = np.ascontiguousarray(sl, dtype=np.float32)
     for _ in range(n_iter):
-        c = np.rint(sites).astype(np.int64)
-        yy = c[:, 0, None, None] + oy[None]
-        xx = c[:, 1, None, None] + ox[None]
-        inb = (yy >= 0) & (yy < H) & (xx >= 0) & (xx < W)
-        vals = sl[np.clip(yy, 0, H - 1), np.clip(xx, 0, W - 1)] & inb
-        fy = (yy - sites[:, 0, None, None]) * samp[0]
-        fx = (xx - sites[:, 1, None, None]) * samp[1]
-        d0 = fy * fy + fx * fx
-        w = vals & (d0 <= R * R)
         if k_nb > 1:
             _, nb = cKDTree(sites * samp).query(sites * samp, k=k_nb)
-            for j in range(1, k_nb):
-                s = sites[nb[:, j]]
-                gy = (yy - s[:, 0, None, None]) * samp[0]
-                gx = (xx - s[:, 1, None, None]) * samp[1]
-                w &= (gy * gy + gx * gx) >= d0
-        wsum = w.sum(axis=(1, 2))
-        good = wsum > 0
-        new = sites.copy()
-        new[good, 0] = (w * yy).sum(axis=(1, 2))[good] / wsum[good]
-        new[good, 1] = (w * xx).sum(axis=(1, 2))[good] / wsum[good]
-        sites = new
+        else:
+            nb = np.arange(n)[:, None]
+        sites = voronoi_centroids(w, sites, np.ascontiguousarray(nb, dtype=np.int64), float(R), hw,
+                                  float(samp[0]), float(samp[1]))
     return sites
 
 
@@ -189,10 +173,26 @@ def _nms(points: np.ndarray, radius: np.ndarray, samp: np.ndarray) -> np.ndarray
     return keep
 
 
+def _local_maxima(img: np.ndarray, min_distance: int, threshold: float, within: np.ndarray | None = None):
+    """Pixels that are the maximum of their (2 min_distance + 1)^2 window and above ``threshold``
+    (``within`` a mask if given), as (n, 2) indices.
+
+    ``skimage.feature.peak_local_max`` finds the same maxima, then enforces the spacing among them
+    with a KD-tree pass per batch that dominates the cost on a slice of 10^4 fibers; the callers
+    suppress candidates closer than a radius themselves (:func:`_nms`), so that pass is not needed.
+    """
+    mx = ndi.maximum_filter(img, size=2 * int(min_distance) + 1, mode="constant", cval=-np.inf)
+    pk = (img == mx) & (img > threshold)
+    if within is not None:
+        pk &= within
+    return np.argwhere(pk)
+
+
 def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
                  peak_threshold: float, seeds: np.ndarray | None = None, refine: bool = True,
-                 smooth_edt: bool = True, seed_nms: float = 1.2, peak_nms: float = 1.0):
-    """Fiber centres in one 2D mask slice.
+                 smooth_edt: bool = True, seed_nms: float = 1.2, peak_nms: float = 1.0,
+                 grey: np.ndarray | None = None):
+    """Fiber centres in one 2D mask slice (or, given ``grey``, in the grey slice within the mask).
 
     Parameters
     ----------
@@ -215,6 +215,12 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
         Blur the EDT (sigma 1 pixel) before looking for maxima.
     seed_nms, peak_nms : float
         Suppression radii (units of ``r_vox``) around a seed and around a higher EDT peak.
+    grey : (H, W) float ndarray, optional
+        The denoised grey slice scaled to background 0 and fiber 1. Candidates are then the maxima
+        of the grey slice blurred over half a radius (a blob filter) inside the mask, centres the
+        grey-weighted centroids, and ``peak_threshold`` is in units of the contrast. For dense
+        packs, where the binary mask merges touching fibers into one region and its EDT has no
+        maximum per fiber.
 
     Returns
     -------
@@ -235,12 +241,19 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     if not sl.any():
         return empty
     H, W = sl.shape
-    edt = ndi.distance_transform_edt(sl, sampling=samp)
-    # A light blur of the EDT breaks the ties of its discrete ridge (flat tops, a ridge along the
-    # contact of two touching fibers), which otherwise give several maxima per fiber.
-    sm = ndi.gaussian_filter(edt, 1.0, mode="constant") if smooth_edt else edt
-    pk = peak_local_max(sm, min_distance=min_distance, threshold_abs=peak_threshold * r_vox,
-                        exclude_border=False)
+    if grey is not None:
+        # blob filter: a disc of radius r blurred over r/2 peaks at its centre, and between two
+        # touching discs the grey dips where their outlines meet
+        edt = ndi.gaussian_filter(grey, 0.5 * r_vox / samp, mode="nearest")
+        sm = edt
+        thr = peak_threshold
+    else:
+        edt = ndi.distance_transform_edt(sl, sampling=samp)
+        # A light blur of the EDT breaks the ties of its discrete ridge (flat tops, a ridge along the
+        # contact of two touching fibers), which otherwise give several maxima per fiber.
+        sm = ndi.gaussian_filter(edt, 1.0, mode="constant") if smooth_edt else edt
+        thr = peak_threshold * r_vox
+    pk = _local_maxima(sm, min_distance, thr, sl if grey is not None else None)
     pk = pk[np.argsort(-sm[pk[:, 0], pk[:, 1]], kind="stable")] if len(pk) else pk.reshape(0, 2)
     if seeds is None:
         seeds = np.zeros((0, 2))
@@ -258,7 +271,8 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     keep = _nms(cand, rad, samp)
     cand, source = cand[keep], source[keep]
     if refine:
-        c = _refine_centroids(sl, cand, r_vox + 2.0, samp)
+        w = sl if grey is None else np.clip(grey, 0.0, 1.0)
+        c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
         # candidates that converged onto an earlier (higher-priority) one are duplicates
         keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
         c, source = c[keep], source[keep]
@@ -266,7 +280,9 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
         c = cand
     ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
     ridge = edt[ci[:, 0], ci[:, 1]]
-    ok = ridge >= peak_threshold * r_vox
+    ok = (ridge >= thr) & sl[ci[:, 0], ci[:, 1]]
+    if grey is not None:  # the radius of a grey detection is the expected one
+        ridge = np.full(len(ridge), float(r_vox))
     return c[ok], ridge[ok], source[ok]
 
 
@@ -288,9 +304,51 @@ class _Track:
         return self.last_p + self.v * (k - self.last_k)
 
 
+def assign_within(a: np.ndarray, b: np.ndarray, lim: np.ndarray) -> list[tuple[int, int]]:
+    """One-to-one assignment of points ``a`` to points ``b`` minimising the summed distance, a
+    pair allowed only within ``lim[i]`` of ``a[i]``: the most pairs, then the least total distance.
+
+    Strategy: the allowed pairs form a sparse bipartite graph; its connected components are
+    independent problems, each solved by the Hungarian algorithm
+    (``scipy.optimize.linear_sum_assignment``) on its own small matrix (forbidden pairs at a large
+    cost), and lone pairs directly. The dense matrix of all pairs would be n x m (17 000 fibers
+    per slice of a 2000^2 scan: 2.3 GB and O(n^3)).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n, m = len(a), len(b)
+    if n == 0 or m == 0:
+        return []
+    nbs = cKDTree(b).query_ball_point(a, np.asarray(lim, dtype=np.float64))
+    ii = np.repeat(np.arange(n), [len(x) for x in nbs])
+    if len(ii) == 0:
+        return []
+    jj = np.fromiter((j for x in nbs for j in x), dtype=np.int64, count=len(ii))
+    d = np.linalg.norm(a[ii] - b[jj], axis=1)
+    g = coo_matrix((np.ones(len(ii)), (ii, n + jj)), shape=(n + m, n + m))
+    _, lab = connected_components(g, directed=False)
+    comp = lab[ii]
+    # components of one edge are one pair
+    sizes = np.bincount(comp, minlength=lab.max() + 1)
+    out = [(int(i), int(j)) for i, j in zip(ii[sizes[comp] == 1], jj[sizes[comp] == 1])]
+    multi = np.flatnonzero(sizes[comp] > 1)
+    if len(multi):
+        order = multi[np.argsort(comp[multi], kind="stable")]
+        cuts = np.flatnonzero(np.diff(comp[order])) + 1
+        for grp in np.split(order, cuts):
+            ri, rinv = np.unique(ii[grp], return_inverse=True)
+            cj, cinv = np.unique(jj[grp], return_inverse=True)
+            C = np.full((len(ri), len(cj)), _BIG)
+            C[rinv, cinv] = d[grp]
+            rows, cols = linear_sum_assignment(C)
+            out.extend((int(ri[r]), int(cj[c])) for r, c in zip(rows, cols) if C[r, c] < _BIG)
+    return out
+
+
 def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
                  peak_threshold: float, max_jump: float, max_skip: int, momentum: float,
-                 refine: bool = True, progress=None):
+                 refine: bool = True, progress=None, grey_t=None):
     """Detect centres slice by slice and link them into tracks.
 
     Parameters
@@ -311,6 +369,8 @@ def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_dist
     momentum : float in [0, 1)
         Weight of the previous velocity in the velocity update.
     progress : callable(done, total), optional
+    grey_t : _GreySlices, optional
+        The grey volume, same axis order as ``mask_t``: detection on grey (see :func:`detect_slice`).
 
     Returns
     -------
@@ -332,19 +392,14 @@ def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_dist
         active.sort(key=lambda t: -len(t.k))
         pred = np.array([t.predict(k) for t in active]).reshape(-1, 2)
         P, Rr, _src = detect_slice(mask_t[k], r_vox, samp, min_distance=min_distance,
-                                   peak_threshold=peak_threshold, seeds=pred, refine=refine)
+                                   peak_threshold=peak_threshold, seeds=pred, refine=refine,
+                                   grey=None if grey_t is None else grey_t[k])
         n_det += len(P)
         used = np.zeros(len(P), dtype=bool)
         if active and len(P):
             gap = np.array([k - t.last_k for t in active], dtype=np.float64)
-            diff = (pred[:, None, :] - P[None, :, :]) * samp
-            C = np.sqrt((diff * diff).sum(-1))
             lim = max_jump * np.sqrt(gap)
-            C[C > lim[:, None]] = _BIG
-            rows, cols = linear_sum_assignment(C)
-            for i, j in zip(rows, cols):
-                if C[i, j] >= _BIG:
-                    continue
+            for i, j in assign_within(pred * samp, P * samp, lim):
                 t = active[i]
                 g = k - t.last_k
                 step = (P[j] - t.last_p) / g
@@ -361,6 +416,42 @@ def track_slices(mask_t: np.ndarray, r_vox: float, samp: np.ndarray, *, min_dist
         if progress is not None:
             progress(k + 1, n)
     return tracks, n_det
+
+
+class _GreySlices:
+    """Denoised, normalised grey slices of a (transposed) volume, made one at a time: a Gaussian
+    over the neighbouring slices (sigma ``sigma_along``) and in the slice (``sigma_in``), then
+    scaled so the background is 0 and the fibers 1 (their medians outside and inside the mask,
+    from a strided sample)."""
+
+    def __init__(self, grey_t, mask_t, samp, *, sigma_along: float = 1.0, sigma_in: float = 0.7):
+        self.g, self.samp = grey_t, samp
+        n = grey_t.shape[0]
+        step = max(1, n // 16)
+        ks = range(0, n, step)
+        fg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[np.asarray(mask_t[k])] for k in ks])
+        bg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[~np.asarray(mask_t[k])] for k in ks])
+        self.lo = float(np.median(bg)) if len(bg) else 0.0
+        self.hi = float(np.median(fg)) if len(fg) else 1.0
+        if not self.hi > self.lo:
+            raise InputError("trace: the grey volume has no contrast between the mask and the rest")
+        h = int(np.ceil(3 * sigma_along))
+        self.offsets = np.arange(-h, h + 1)
+        w = np.exp(-0.5 * (self.offsets / sigma_along) ** 2) if sigma_along > 0 else (self.offsets == 0) * 1.0
+        self.w = w / w.sum()
+        self.sigma_in = sigma_in
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        n = self.g.shape[0]
+        ks = np.clip(k + self.offsets, 0, n - 1)
+        acc = np.zeros(self.g.shape[1:], dtype=np.float32)
+        for kk, w in zip(ks, self.w):
+            acc += np.float32(w) * np.asarray(self.g[kk], dtype=np.float32)
+        if self.sigma_in > 0:
+            acc = ndi.gaussian_filter(acc, self.sigma_in / self.samp, mode="nearest")
+        acc -= self.lo
+        acc /= self.hi - self.lo
+        return acc
 
 
 def _end_fit(k: np.ndarray, p: np.ndarray, at_end: bool, n: int):
@@ -394,14 +485,19 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int):
     ends = [_end_fit(a[0], a[1], True, fit_n) for a in arr]
     starts = [_end_fit(a[0], a[1], False, fit_n) for a in arr]
     cand = []
-    order = np.argsort(k0)
+    # only starts near an end can continue it: |pe - ps| <= d1 + |se| g and d1 <= 2 c, so a ball of
+    # 2 max_dist (1 + 0.1 max_gap) + |se| max_gap around the end holds every candidate (a KD-tree
+    # query instead of all later starts: tens of thousands of tracks start at a block boundary)
+    ps_all = np.array([st[0] for st in starts]) * samp
+    tree = cKDTree(ps_all)
     for i in range(n):
-        # starts strictly after the end of i, within the gap
-        lo = np.searchsorted(k0[order], k1[i] + 1)
-        hi = np.searchsorted(k0[order], k1[i] + max_gap + 1)
         pe, se = ends[i]
-        for j in order[lo:hi]:
+        R = 2.0 * max_dist * (1.0 + 0.1 * max_gap) + float(np.linalg.norm(se * samp)) * max_gap
+        for j in tree.query_ball_point(pe * samp, R):
             g = k0[j] - k1[i]
+            # starts strictly after the end of i, within the gap
+            if g < 1 or g > max_gap:
+                continue
             ps, ss = starts[j]
             d1 = np.linalg.norm((pe + se * g - ps) * samp)
             d2 = np.linalg.norm((ps - ss * g - pe) * samp)
@@ -426,14 +522,38 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int):
     return out
 
 
-def _remove_duplicates(tracks, samp, dist: float):
-    """Drop a track that runs within ``dist`` of a longer one over most of its overlap."""
-    order = sorted(range(len(tracks)), key=lambda i: -len(tracks[i][0]))
-    kept = []
+def _remove_duplicates(tracks, samp, dist: float, n_samples: int = 16):
+    """Drop a track that runs within ``dist`` of a longer one over most of its overlap.
+
+    Only tracks passing within 2 ``dist`` of a track at one of ``n_samples`` evenly spaced slices of
+    it are compared (per-slice KD-trees); a duplicate is within ``dist`` on at least a quarter of
+    its slices, so the samples find it.
+    """
+    n = len(tracks)
+    if n == 0:
+        return []
+    K = np.concatenate([t[0] for t in tracks])
+    P = np.concatenate([t[1] for t in tracks]) * samp
+    ids = np.repeat(np.arange(n), [len(t[0]) for t in tracks])
+    order_k = np.argsort(K, kind="stable")
+    Ks = K[order_k]
+    queries: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for i, (k, p, _) in enumerate(tracks):
+        for q in np.unique(np.linspace(0, len(k) - 1, min(n_samples, len(k))).round().astype(int)):
+            queries.setdefault(int(k[q]), []).append((i, p[q] * samp))
+    near = [set() for _ in range(n)]
+    for kq, qs in queries.items():
+        a, b = np.searchsorted(Ks, kq), np.searchsorted(Ks, kq, side="right")
+        sel = order_k[a:b]
+        tree = cKDTree(P[sel])
+        for (i, pt), hits in zip(qs, tree.query_ball_point(np.array([q[1] for q in qs]), 2.0 * dist)):
+            near[i].update(int(ids[sel[h]]) for h in hits)
+    order = sorted(range(n), key=lambda i: -len(tracks[i][0]))
+    kept, is_kept = [], np.zeros(n, dtype=bool)
     for i in order:
         k, p, _ = tracks[i]
         dup = False
-        for j in kept:
+        for j in (j for j in near[i] if is_kept[j] and j != i):
             kj, pj, _ = tracks[j]
             common, ia, ib = np.intersect1d(k, kj, assume_unique=True, return_indices=True)
             if len(common) < 0.5 * len(k):
@@ -444,7 +564,33 @@ def _remove_duplicates(tracks, samp, dist: float):
                 break
         if not dup:
             kept.append(i)
+            is_kept[i] = True
     return [tracks[i] for i in sorted(kept)]
+
+
+def finish_tracks(raw, v, perm, r: float, *, merge_gap_vox: int, max_jump: float, min_length_vox: float,
+                  smooth_sigma_vox: float, spacing_vox: float) -> tuple[Polylines, int]:
+    """Raw tracks (objects with ``k``, ``p``, ``r``) -> fibers: pieces merged across gaps, short
+    and duplicate tracks dropped, skipped slices filled, smoothed along the track, back to the
+    volume's axis order (``perm``) and metres, resampled by arc length. Returns the fibers and the
+    number of merged tracks."""
+    vt = v[list(perm)]
+    samp = vt[1:] / vt[1:].min()
+    merged = merge_pieces(raw, samp, max_gap=merge_gap_vox, max_dist=max_jump, fit_n=int(max(5, 2 * r)))
+    long_ = [t for t in merged if t[0][-1] - t[0][0] + 1 >= min_length_vox]
+    long_ = _remove_duplicates(long_, samp, dist=0.5 * r)
+    fibers, radii = [], []
+    for k, p, rr in long_:
+        # fill skipped slices linearly, then smooth along the track and resample by arc length
+        kk = np.arange(k[0], k[-1] + 1)
+        pts = np.column_stack([kk, np.interp(kk, k, p[:, 0]), np.interp(kk, k, p[:, 1])])
+        pts[:, 1:] = smooth_polyline(pts[:, 1:], smooth_sigma_vox)
+        zyx = np.empty_like(pts)
+        zyx[:, list(perm)] = pts  # back to the volume's axis order
+        xyz = voxel_to_xyz_m(zyx, v)
+        fibers.append(resample_polyline(xyz, spacing_vox * v.min()))
+        radii.append(max(0.5, float(np.median(rr))) * vt[1:].min())
+    return Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0), len(merged)
 
 
 def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | None = None,
@@ -452,7 +598,8 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
                  momentum: float = 0.5, min_length_vox: float | None = None,
                  merge_gap_vox: int | None = None, smooth_sigma_vox: float | None = None,
                  spacing_vox: float = 1.0, peak_threshold: float = 0.5, refine: bool = True,
-                 progress=None) -> Polylines:
+                 off_axis: str = "trace", off_axis_min_fraction: float = 0.02,
+                 grey: np.ndarray | None = None, progress=None) -> Polylines:
     """Slice-wise tracer; see :func:`trace` (``method="slices"``) for the parameters."""
     t0 = time.perf_counter()
     v = voxel_size_zyx(voxel_size_m)
@@ -460,6 +607,15 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
         ax, direction = dominant_axis(mask, v)
     else:
         ax, direction = int(axis), None
+    if off_axis != "none":
+        opts = dict(expected_radius_m=expected_radius_m, max_jump_vox=max_jump_vox, max_skip=max_skip,
+                    momentum=momentum, min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
+                    smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox, peak_threshold=peak_threshold,
+                    refine=refine, progress=progress, grey=grey)
+        split = _trace_axis_regions(mask, voxel_size_m, ax, direction, off_axis, off_axis_min_fraction, opts)
+        if split is not None:
+            split.meta["time_total_s"] = time.perf_counter() - t0
+            return split
     perm = (ax,) + tuple(i for i in range(3) if i != ax)
     mask_t = mask.transpose(perm)  # a view: slices across the fibers
     vt = v[list(perm)]
@@ -477,35 +633,71 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
     if smooth_sigma_vox is None:
         smooth_sigma_vox = max(1.0, 0.5 * r)
 
+    grey_t = None
+    if grey is not None:
+        if grey.shape != mask.shape:
+            raise InputError(f"trace: the grey volume's shape {grey.shape} differs from the mask's {mask.shape}")
+        grey_t = _GreySlices(grey.transpose(perm), mask_t, samp)
+        min_distance = max(1, int(round(0.75 * r)))
     raw, n_det = track_slices(mask_t, r, samp, min_distance=min_distance,
                               peak_threshold=peak_threshold, max_jump=max_jump, max_skip=max_skip,
-                              momentum=momentum, refine=refine, progress=progress)
+                              momentum=momentum, refine=refine, progress=progress, grey_t=grey_t)
     t_det = time.perf_counter() - t0
-    merged = merge_pieces(raw, samp, max_gap=merge_gap_vox, max_dist=max_jump,
-                          fit_n=int(max(5, 2 * r)))
-    long_ = [t for t in merged if t[0][-1] - t[0][0] + 1 >= min_length_vox]
-    long_ = _remove_duplicates(long_, samp, dist=0.5 * r)
-
-    fibers, radii = [], []
-    for k, p, rr in long_:
-        # fill skipped slices linearly, then smooth along the track and resample by arc length
-        kk = np.arange(k[0], k[-1] + 1)
-        pts = np.column_stack([kk, np.interp(kk, k, p[:, 0]), np.interp(kk, k, p[:, 1])])
-        pts[:, 1:] = smooth_polyline(pts[:, 1:], smooth_sigma_vox)
-        zyx = np.empty_like(pts)
-        zyx[:, list(perm)] = pts  # back to the volume's axis order
-        xyz = voxel_to_xyz_m(zyx, v)
-        fibers.append(resample_polyline(xyz, spacing_vox * v.min()))
-        radii.append(max(0.5, float(np.median(rr))) * vt[1:].min())
-    out = Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0)
+    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
+                                  min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
+                                  spacing_vox=spacing_vox)
     out.meta.update(method="slices", axis=ax, direction_zyx=direction, radius_vox_estimate=r,
-                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=len(merged),
-                    n_fibers=len(fibers), time_detect_s=t_det,
+                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
+                    n_fibers=out.n_fibers, time_detect_s=t_det,
                     time_total_s=time.perf_counter() - t0,
                     params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
                                 min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
                                 smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
                                 peak_threshold=peak_threshold, min_distance_vox=min_distance))
+    return out
+
+
+def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, min_fraction: float,
+                        opts: dict) -> Polylines | None:
+    """The slices tracer on a scan whose fibers run along more than one volume axis (a cross ply,
+    a woven tow lying in the slices): the mask is split by the local fiber axis
+    (:func:`fiberpipe.imaging.orientation.axis_regions`) and each region of at least
+    ``min_fraction`` of the fiber volume is traced along its own axis (``off_axis="trace"``) or
+    left out (``"drop"``). ``None`` when the fibers run along one axis only.
+
+    Why: fibers lying in the slice plane cut every slice in long stripes; read as cross-sections
+    they give tracks along the slicing axis that are no fibers.
+    """
+    from .orientation import axis_regions
+
+    if off_axis not in ("trace", "drop"):
+        raise InputError(f"trace: unknown off_axis {off_axis!r} (use 'trace' or 'drop')")
+    r = opts.get("expected_radius_m")
+    r_vox = None if r is None else float(r) / float(voxel_size_zyx(voxel_size_m).min())
+    labels, fr = axis_regions(mask, voxel_size_m, grey=opts.get("grey"), radius_vox=r_vox)
+    others = [b for b in range(3) if b != ax and fr[b] >= min_fraction]
+    if not others:
+        return None
+    main = mask & ~np.isin(labels, others)
+    parts = [trace_slices(main, voxel_size_m, axis=ax, off_axis="none", **opts)]
+    del main
+    info = {}
+    for b in others:
+        n = 0
+        if off_axis == "trace":
+            sub = mask & (labels == b)
+            pb = trace_slices(sub, voxel_size_m, axis=b, off_axis="none", **opts)
+            del sub
+            parts.append(pb)
+            n = pb.n_fibers
+        info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": int(n),
+                          "action": "traced along its own axis" if off_axis == "trace" else "left out"}
+    fibers = [f for p in parts for f in p]
+    radii = np.concatenate([np.broadcast_to(np.asarray(p.radius_m, dtype=np.float64), (p.n_fibers,)) for p in parts])
+    out = Polylines.from_list(fibers, radii if len(fibers) else 0.0)
+    out.meta.update(parts[0].meta)
+    out.meta.update(direction_zyx=direction, n_fibers=len(fibers), n_fibers_main_axis=parts[0].n_fibers,
+                    off_axis=info)
     return out
 
 
@@ -533,7 +725,10 @@ def trace(mask: np.ndarray, *, voxel_size_m, method: str = "slices", skeleton: n
         max(2, 0.6 r)), ``max_skip`` (3 slices), ``momentum`` (0.5), ``min_length_vox``
         (max(10, 3 r)), ``merge_gap_vox`` (max(6, 3 r)), ``smooth_sigma_vox`` (max(1, r/2)),
         ``spacing_vox`` (1), ``peak_threshold`` (0.5, in units of r), ``refine`` (True),
-        ``progress`` (callable(done, total)). ``skeleton``: see
+        ``progress`` (callable(done, total)), ``off_axis`` ("trace": regions of at least
+        ``off_axis_min_fraction`` (0.02) of the fiber volume whose fibers run along another volume
+        axis, such as a cross ply lying in the slices, are traced along their own axis; "drop":
+        left out, counted in ``meta["off_axis"]``; "none": one axis only). ``skeleton``: see
         :func:`fiberpipe.imaging.skeleton_trace.trace_skeleton`. Both: ``join_gap_vox`` (max(4, 4 r);
         0 turns joining off), ``join_offset_vox`` (max(1.5, r)), ``join_angle_deg`` (25), the bounds
         of :func:`fiberpipe.imaging.fragments.join_fragments`, which chains the broken pieces of

@@ -25,6 +25,7 @@ def run_trace(
     skeleton_path: Path | None = None,
     truth_path: Path | None = None,
     config_sha256: str = "",
+    volume_path: Path | None = None,
 ) -> dict:
     from fiberpipe.imaging.orientation import fiber_orientation
     from fiberpipe.imaging.trace import trace
@@ -49,7 +50,18 @@ def run_trace(
         inputs["skeleton"] = Path(skeleton_path)
     if t.join_gap_vox is not None:
         kwargs["join_gap_vox"] = t.join_gap_vox
+    if method == "slices":
+        kwargs["off_axis"] = t.off_axis
+        if t.grey and volume_path is not None:
+            kwargs["grey"] = load_grey(cfg, volume_path, mask.shape)
+            inputs["volume"] = Path(volume_path)
     fibers = trace(mask, **kwargs)
+    off_axis = fibers.meta.get("off_axis") or {}
+    for ax, info in off_axis.items():
+        log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis (a cross ply or a tow "
+                    "lying in the slices): %s (%d fibers); trace.off_axis: %s", 100 * info["volume_fraction"],
+                    ax, info["action"], info["fibers"], "drop leaves it out" if t.off_axis == "trace"
+                    else "trace follows it")
     fibers, folds = split_folds_for_mesh(cfg, fibers)
     fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
@@ -66,6 +78,7 @@ def run_trace(
         "cut_folds": folds,
         "dropped_short_fibers": dropped,
         "min_length_m": min_length_m(cfg),
+        "off_axis": off_axis,
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
         "median_radius_m": float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0,
@@ -95,6 +108,19 @@ def write_pictures(run_dir: Path, mask, fibers, voxel_size, orientation: dict, *
     return names
 
 
+def load_grey(cfg: Config, volume_path: Path, shape) -> np.ndarray:
+    """The input volume again (``trace.grey``), checked against the mask's shape."""
+    from fiberpipe.imaging.io import load_volume
+
+    inp = cfg.input
+    vol, _, _ = load_volume(volume_path, voxel_size_m=inp.voxel_size or 1.0, dataset=inp.dataset,
+                            shape=tuple(inp.shape) if inp.shape else None, dtype=inp.dtype)
+    if vol.shape != tuple(shape):
+        raise InputError(f"trace.grey: the volume {volume_path} has shape {vol.shape}, the mask {tuple(shape)}",
+                         where=str(volume_path))
+    return vol
+
+
 def min_length_m(cfg: Config) -> float:
     """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
     return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
@@ -112,7 +138,9 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     t = cfg.trace
     orient = mask_orientation(mask, voxel_size)
     # no measurable orientation (a mask too thin for the structure tensor): the slices tracer, as before auto
-    parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or not orient.get("n_samples")
+    # fibers along volume axes (a cross ply) are traced region by region along their own axis
+    along_axes = float(orient.get("axis_aligned_fraction_30deg", 0.0)) >= t.min_aligned_fraction
+    parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or along_axes or not orient.get("n_samples")
     frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
     if t.method == "auto":
         method = "slices" if parallel else "skeleton"

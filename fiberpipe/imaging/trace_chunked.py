@@ -1,0 +1,210 @@
+"""Tracing volumes larger than memory: the slices tracer in blocks of slices read from disk.
+
+The slices tracer reads one slice at a time, so a mask on disk (HDF5, Zarr, raw) sliced along the
+fibers' axis never needs to be in memory. The slices are cut into blocks; each block is tracked on
+its own (one after another, or in parallel on a Dask cluster when given a scheduler), the pieces
+of all blocks are stored compactly (int32 slice, float32 centre and radius) and joined across the
+block boundaries by the tracer's own gap merging, which chains a track ending in the last slice of
+a block to the one starting in the first slice of the next. Peak memory: one block's tracks as
+Python objects plus all tracks in compact form plus a slice's detection arrays, independent of the
+number of slices beyond the compact tracks (16 bytes per fiber and slice).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..polylines import Polylines
+from ._util import voxel_size_zyx
+from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, track_slices
+
+
+class SliceSource:
+    """A picklable handle on a 3D array on disk, read slice by slice along axis 0.
+
+    ``SliceSource(path.h5, "mask")`` (HDF5 dataset), ``SliceSource(path.zarr)`` or
+    ``SliceSource(path.zarr, "name")`` (Zarr array or an array of a group), ``SliceSource(path.raw,
+    shape=(z, y, x), dtype="uint16")`` (headerless raw, C order). The file is opened on first use
+    in each process (Dask workers get the path, not an open handle).
+    """
+
+    def __init__(self, path, dataset: str | None = None, *, shape=None, dtype=None):
+        self.path, self.dataset = str(path), dataset
+        self.shape_raw, self.dtype = (tuple(int(s) for s in shape) if shape is not None else None), dtype
+        self._arr = None
+
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["_arr"] = None
+        return d
+
+    def open(self):
+        if self._arr is not None:
+            return self._arr
+        p = Path(self.path)
+        if not p.exists():
+            raise InputError(f"no such file: {p}", where=str(p))
+        if self.shape_raw is not None:
+            from .segment_chunked import RawSlabs
+
+            self._arr = RawSlabs(p, self.shape_raw, self.dtype or "uint8")
+        elif p.suffix.lower() in (".h5", ".hdf5", ".hdf", ".nxs"):
+            import h5py
+
+            f = h5py.File(p, "r")
+            if self.dataset is None or self.dataset not in f:
+                raise InputError(f"HDF5 dataset {self.dataset!r} not found (has {sorted(f)})", where=str(p))
+            self._arr = f[self.dataset]
+        else:
+            import zarr
+
+            z = zarr.open(str(p), mode="r")
+            self._arr = z[self.dataset] if self.dataset else z
+        if len(self._arr.shape) != 3:
+            raise InputError(f"expected a 3D array, got shape {tuple(self._arr.shape)}", where=str(p))
+        return self._arr
+
+    @property
+    def shape(self):
+        return tuple(self.open().shape)
+
+    def __getitem__(self, k):
+        return self.open()[k]
+
+
+class _Block:
+    """Slices ``b0 .. b1 - 1`` of an array as the (N, H, W) input of :func:`track_slices`, read
+    ``read_ahead`` slices at a time (a chunked store decompresses each chunk once, not once per
+    slice; RawSlabs reads slabs only)."""
+
+    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int = 16):
+        self.arr, self.b0, self.b1, self.dtype, self.ahead = arr, int(b0), int(b1), dtype, int(read_ahead)
+        self.shape = (int(b1) - int(b0),) + tuple(arr.shape[1:])
+        self._lo, self._buf = -1, None
+
+    def __getitem__(self, k):
+        i = self.b0 + int(k)
+        if self._buf is None or not (self._lo <= i < self._lo + len(self._buf)):
+            # the slices tracer's grey path also reads a few slices back: keep them in the window
+            lo = max(self.b0, i - 6) if self.dtype is not bool else i
+            self._lo, self._buf = lo, np.asarray(self.arr[lo:min(self.b1, lo + self.ahead)])
+        a = self._buf[i - self._lo]
+        return a.astype(bool, copy=False) if self.dtype is bool else a
+
+
+class _Piece:
+    __slots__ = ("k", "p", "r")
+
+    def __init__(self, k, p, r):
+        self.k, self.p, self.r = k, p, r
+
+
+def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict):
+    """Track one block of slices; the pieces in compact arrays (slice indices global)."""
+    arr = src.open() if hasattr(src, "open") else src
+    block = _Block(arr, b0, b1)
+    grey_t = None
+    if grey_src is not None:
+        g = grey_src.open() if hasattr(grey_src, "open") else grey_src
+        grey_t = _GreySlices(_Block(g, b0, b1, dtype=None), block, samp)
+    tracks, n_det = track_slices(block, r, samp, grey_t=grey_t, **params)
+    return [(np.asarray(t.k, dtype=np.int32) + b0, np.asarray(t.p, dtype=np.float32),
+             np.asarray(t.r, dtype=np.float32)) for t in tracks], n_det
+
+
+def _client(scheduler):
+    if scheduler is None:
+        return None
+    if hasattr(scheduler, "submit"):
+        return scheduler
+    try:
+        from dask.distributed import Client
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise InputError("a Dask scheduler needs dask.distributed: pip install 'fiberpipe[dask]'") from exc
+    return Client(scheduler)
+
+
+def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, block: int = 128,
+                  scheduler=None, grey=None, max_jump_vox: float | None = None, max_skip: int = 3,
+                  momentum: float = 0.5, min_length_vox: float | None = None, merge_gap_vox: int | None = None,
+                  smooth_sigma_vox: float | None = None, spacing_vox: float = 1.0, peak_threshold: float = 0.5,
+                  refine: bool = True, progress=None) -> Polylines:
+    """The slices tracer (:func:`fiberpipe.imaging.trace.trace_slices`) on a mask read slice by
+    slice along axis 0, in blocks of ``block`` slices.
+
+    Parameters
+    ----------
+    src : SliceSource or array-like
+        The mask (anything whose ``[k]`` is slice k: an h5py dataset, a zarr array, a memory map);
+        a :class:`SliceSource` when a scheduler is given (workers open the file themselves).
+    voxel_size_m : float or (dz, dy, dx)
+    expected_radius_m : float, optional
+        Nominal radius; else estimated from 16 slices.
+    block : int
+        Slices per block (the unit of work and of memory).
+    scheduler : str or dask.distributed.Client, optional
+        Dask scheduler address (or client): blocks are tracked on its workers.
+    grey : SliceSource or array-like, optional
+        The grey volume, for detection on grey (see :func:`fiberpipe.imaging.trace.detect_slice`).
+    max_jump_vox, max_skip, momentum, min_length_vox, merge_gap_vox, smooth_sigma_vox, spacing_vox,
+    peak_threshold, refine
+        As :func:`fiberpipe.imaging.trace.trace`; fibers must run within ~45 degrees of axis 0
+        (the slicing axis is the storage's slab axis; no reorientation, no region split).
+    progress : callable(done_blocks, total_blocks), optional
+
+    Returns
+    -------
+    Polylines, as :func:`fiberpipe.imaging.trace.trace` (broken pieces joined); ``meta`` adds
+    ``blocks``, ``block_slices`` and ``time_track_s``.
+    """
+    t0 = time.perf_counter()
+    arr = src.open() if hasattr(src, "open") else src
+    shape = tuple(arr.shape)
+    if len(shape) != 3:
+        raise InputError(f"trace: expected a 3D mask, got shape {shape}")
+    if int(block) < 1:
+        raise InputError(f"trace: block must be at least 1 slice, got {block!r}")
+    v = voxel_size_zyx(voxel_size_m)
+    samp = v[1:] / v[1:].min()
+    if expected_radius_m is not None:
+        r = float(expected_radius_m) / v[1:].min()
+    else:
+        r = estimate_radius_vox(_Block(arr, 0, shape[0]), samp)
+    min_distance = max(1, int(round((0.75 if grey is not None else 0.5) * r)))
+    max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
+    min_length_vox = max(10.0, 3.0 * r) if min_length_vox is None else min_length_vox
+    merge_gap_vox = int(max(6, 3 * r)) if merge_gap_vox is None else merge_gap_vox
+    smooth_sigma_vox = max(1.0, 0.5 * r) if smooth_sigma_vox is None else smooth_sigma_vox
+    params = dict(min_distance=min_distance, peak_threshold=peak_threshold, max_jump=max_jump,
+                  max_skip=max_skip, momentum=momentum, refine=refine)
+    edges = list(range(0, shape[0], int(block))) + [shape[0]]
+    jobs = list(zip(edges[:-1], edges[1:]))
+    client = _client(scheduler)
+    results = []
+    if client is None:
+        for i, (b0, b1) in enumerate(jobs):
+            results.append(_track_block(src, grey, b0, b1, r, samp, params))
+            if progress is not None:
+                progress(i + 1, len(jobs))
+    else:
+        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, pure=False) for b0, b1 in jobs]
+        results = client.gather(futures)
+    t_track = time.perf_counter() - t0
+    raw = [_Piece(k, p.astype(np.float64), rr) for res, _ in results for k, p, rr in res]
+    n_det = int(sum(n for _, n in results))
+    del results
+    out, n_merged = finish_tracks(raw, v, (0, 1, 2), r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
+                                  min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
+                                  spacing_vox=spacing_vox)
+    out.meta.update(method="slices", axis=0, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
+                    n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
+                    time_track_s=t_track, time_total_s=time.perf_counter() - t0,
+                    params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
+                                min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
+                                smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
+                                peak_threshold=peak_threshold, min_distance_vox=min_distance))
+    return _join(out, voxel_size_m)

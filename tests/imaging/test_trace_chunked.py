@@ -1,0 +1,94 @@
+"""Tracing a mask on disk block by block (volumes larger than memory), in process and on Dask."""
+
+import h5py
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from fiberpipe.imaging.accuracy import trace_accuracy
+from fiberpipe.imaging.phantom import make_hard_phantom
+from fiberpipe.imaging.segment import segment
+from fiberpipe.imaging.trace import _BIG, assign_within, trace
+from fiberpipe.imaging.trace_chunked import SliceSource, trace_chunked
+
+
+def test_sparse_assignment_matches_the_dense_hungarian():
+    """assign_within: as many pairs and the same total distance as the Hungarian on the full gated matrix."""
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        n, m = rng.integers(1, 30, 2)
+        a, b = rng.uniform(0, 20, (n, 2)), rng.uniform(0, 20, (m, 2))
+        lim = rng.uniform(0.5, 4, n)
+        got = assign_within(a, b, lim)
+        C = np.linalg.norm(a[:, None] - b[None], axis=2)
+        C[C > lim[:, None]] = _BIG
+        rr, cc = linear_sum_assignment(C)
+        ref = [(i, j) for i, j in zip(rr, cc) if C[i, j] < _BIG]
+        assert len(got) == len(ref)
+        assert sum(C[i, j] for i, j in got) == pytest.approx(sum(C[i, j] for i, j in ref), abs=1e-9)
+        assert len({i for i, _ in got}) == len(got) == len({j for _, j in got})
+
+
+@pytest.fixture(scope="module")
+def on_disk(tmp_path_factory):
+    vol, truth = make_hard_phantom(2)
+    mask, _ = segment(vol)
+    p = tmp_path_factory.mktemp("chunked") / "mask.h5"
+    with h5py.File(p, "w") as f:
+        f.create_dataset("mask", data=mask, chunks=(16, 64, 64), compression="lzf")
+    return p, mask, truth
+
+
+@pytest.mark.parametrize("block", [40, 64, 1000])
+def test_blocks_give_the_whole_volume_tracing(on_disk, block):
+    """Blocks of 40 / 64 / all slices read from HDF5: same fibers, each whole (joined across block boundaries)."""
+    p, mask, truth = on_disk
+    vs = truth.meta["voxel_size_m"]
+    r = truth.meta["radius_vox"] * vs
+    ref = trace(mask, voxel_size_m=vs, expected_radius_m=r, off_axis="none")
+    got = trace_chunked(SliceSource(p, "mask"), vs, expected_radius_m=r, block=block)
+    assert got.meta["blocks"] == -(-mask.shape[0] // block)
+    acc = trace_accuracy(got, truth, voxel_size_m=vs)
+    assert acc["recall"] >= 0.98 and acc["precision"] >= 0.98 and acc["n_split"] == 0, acc
+    assert acc["mean_error_vox"] <= 0.30
+    ra = trace_accuracy(ref, truth, voxel_size_m=vs)
+    assert got.n_fibers == ref.n_fibers
+    assert acc["mean_error_vox"] == pytest.approx(ra["mean_error_vox"], abs=0.01)
+
+
+def test_blocks_run_on_a_dask_cluster(on_disk):
+    """The same blocks on a local Dask cluster (two workers, processes) give the in-process result."""
+    distributed = pytest.importorskip("dask.distributed")
+    p, mask, truth = on_disk
+    vs = truth.meta["voxel_size_m"]
+    r = truth.meta["radius_vox"] * vs
+    local = trace_chunked(SliceSource(p, "mask"), vs, expected_radius_m=r, block=48)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+        with distributed.Client(c) as client:
+            remote = trace_chunked(SliceSource(p, "mask"), vs, expected_radius_m=r, block=48, scheduler=client)
+    assert remote.n_fibers == local.n_fibers
+    for a, b in zip(local, remote):
+        assert np.allclose(a, b)
+
+
+def test_missing_dataset_is_one_line(tmp_path, on_disk):
+    from fiberpipe.errors import InputError
+
+    p, _, _ = on_disk
+    with pytest.raises(InputError, match="dataset 'nope' not found"):
+        trace_chunked(SliceSource(p, "nope"), 1e-5, expected_radius_m=5e-5)
+
+
+def test_large_volume_benchmark_runs_every_pass(tmp_path, capsys):
+    """bench_large_volume on a small volume: the three passes report wall time, CPU time and peak memory; full-length fibers."""
+    from fiberpipe.benchmarks import bench_large_volume
+
+    bench_large_volume.main(["--shape", "40", "96", "96", "--slab", "16", "--block", "16", "--dir", str(tmp_path)])
+    out = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ") and "{" in line}
+    assert set(rows) == {"segment", "trace", "skeleton"}, out
+    import json
+
+    trace_row = json.loads(rows["trace"].split("|")[5])
+    assert trace_row["fibers"] == 25 and trace_row["fibers_full_length"] == 25  # the 5 x 5 grid, whole length
+    assert not list(tmp_path.iterdir())  # nothing left behind
