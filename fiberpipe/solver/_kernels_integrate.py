@@ -35,7 +35,7 @@ from numba import njit
 from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
 from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
-from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
@@ -453,7 +453,10 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             n_pen = eval_planes(scene.planes, x, v, model.radius_node, work.f, acc, t, dt)
         # the hook adds its forces (or leaves them in its own array) and moments at t_n from x_n, q_n
         # and the half-step velocities v_{n−½}, w_{n−½}; books its work and friction dissipation
+        stored_planes = acc[ACC_STORED]
         n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
+        if acc[ACC_STORED0] < 0.0:  # −1: the run's first step; the hook's stored energy at t_0 (≥ 0)
+            acc[ACC_STORED0] = acc[ACC_STORED] - stored_planes
         eval_drives(scene.drives, t, dt)
         # ---- update ----
         ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, coef, record, gyro)

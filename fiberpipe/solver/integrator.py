@@ -25,7 +25,7 @@ from ._kernels_beam import EB_SIZE, beam_forces
 from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
-from .layout import (H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (ACC_STORED0, H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
@@ -406,6 +406,14 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
             + f"{energy}. Suggested fix: {'; '.join(hint)}")
 
 
+def _residual_start(state: State, ke0: float, se0: float) -> float:
+    """The state energy at t = 0 the residual counts from: kinetic, strain and the planes' penalties
+    (``ke0 + se0``) plus the contact hook's stored energy at the first step (``ACC_STORED0``: fibre
+    pairs whose initial overlap acts at once), once the step loop has recorded it."""
+    stored0 = float(state.acc[ACC_STORED0])
+    return ke0 + se0 + max(stored0, 0.0)
+
+
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
     h = hist[:n_rows]
     KE, SE, VD, WK, PW, FD, ST, KL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF))
@@ -561,8 +569,10 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
                        e_ref_J=max(ke0 + se0, 1e-12), threads=settings.threads)
     sc = integ.scene
     if resume is None:
-        e0_stored = _plane_energy(sc, state.x)  # the stored energy at t = 0, for the residual's start
-        se0 += e0_stored
+        se0 += _plane_energy(sc, state.x)  # the stored energy at t = 0, for the residual's start
+        # the step loop records the hook's stored energy (the fibre pairs' potential) at its first
+        # step in ACC_STORED0; the residual starts from both
+        state.acc[ACC_STORED0] = -1.0
     frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
     frame_set = {int(k) for k in frame_steps}
     ft, fx, fq = [], [], []
@@ -607,7 +617,7 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
         return SimulationResult(
             frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
             frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
-            history=_history_dict(integ.hist, integ.h_row, sc.n_walls, ke0 + se0),
+            history=_history_dict(integ.hist, integ.h_row, sc.n_walls, _residual_start(state, ke0, se0)),
             dt_s=dt, steps=state.step, elements=model.n_elements,
             wall_time_s=wall_before + time.perf_counter() - t_wall,
             effects=names, timestep=rep, final_state=state, completed=completed,

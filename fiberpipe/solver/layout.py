@@ -13,6 +13,7 @@ ACC_PW = 2   # contact penalty work (planes + fiber–fiber contact hook)
 ACC_FD = 3   # friction dissipation (contact hook)
 ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW)
 ACC_STORED = 5  # stored contact energy at t_n (plane penalties + the hook's potential and springs): a state
+ACC_STORED0 = 6  # the hook's stored energy at the first step a run evaluates (−1 until then; a sentinel fastmath keeps, unlike NaN): the residual's start
 ACC_SIZE = 8
 
 # history columns (one row per recorded step)
