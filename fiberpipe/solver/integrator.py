@@ -570,9 +570,7 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     sc = integ.scene
     if resume is None:
         se0 += _plane_energy(sc, state.x)  # the stored energy at t = 0, for the residual's start
-        # the step loop records the hook's stored energy (the fibre pairs' potential) at its first
-        # step in ACC_STORED0; the residual starts from both
-        state.acc[ACC_STORED0] = -1.0
+        state.acc[ACC_STORED0] = -1.0  # the step loop records the hook's there (_residual_start)
     frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
     frame_set = {int(k) for k in frame_steps}
     ft, fx, fq = [], [], []
