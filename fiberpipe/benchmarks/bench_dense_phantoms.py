@@ -25,6 +25,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from fiberpipe.benchmarks.bench_hard_phantoms import fibretracker_cell, worst_of, write_report  # noqa: E402
+
 
 def _seeds(text: str) -> list[int]:
     a, _, b = text.partition("-")
@@ -69,28 +71,14 @@ def main(argv=None) -> None:
         main_acc = trace_accuracy(_subset(f, np.arange(n_main)), _subset(truth, np.flatnonzero(m["axis_zyx"] == 0)),
                                   voxel_size_m=vs)
         cross = sum(v["fibers"] for v in (f.meta.get("off_axis") or {}).values())
-        worst = {"recall": min(worst["recall"], acc["recall"]), "precision": min(worst["precision"], acc["precision"]),
-                 "mean": max(worst["mean"], acc["mean_error_vox"])}
-        ft = "-"
-        if run_fibretracker is not None:
-            try:
-                fa = trace_accuracy(run_fibretracker(vol, vs, r), truth, voxel_size_m=vs)
-                ft = f"{fa['recall']:.3f} / {fa['precision']:.3f} / {fa['mean_error_vox']:.3f} / {fa['n_split']}"
-            except Exception as exc:  # noqa: BLE001
-                ft = f"failed ({type(exc).__name__})"
+        worst = worst_of(worst, acc)
+        ft = fibretracker_cell(run_fibretracker, vol, vs, r, truth, splits=True)
         rows.append(f"| {s} | {r:.2f} | {m['contrast_to_noise']:.2f} | {m['n_main']} + {m['n_cross']} | "
                     f"{m['contact_fraction']:.2f} | {acc['recall']:.3f} | {acc['precision']:.3f} | "
                     f"{acc['mean_error_vox']:.3f} | {acc['p95_error_vox']:.3f} | {acc['coverage']:.3f} | {acc['n_split']} | "
                     f"{cross} | {main_acc['recall']:.3f} / {main_acc['precision']:.3f} | {dt:.1f} | {ft} |")
         print(rows[-1], flush=True)
-    text = "\n".join([f"# Dense-composite phantom family, seeds {a.seeds} ({time.strftime('%Y-%m-%d')})", "", *rows, "",
-                      f"worst recall {worst['recall']:.3f}, worst precision {worst['precision']:.3f}, "
-                      f"worst mean error {worst['mean']:.3f} voxel", ""])
-    print(text)
-    if a.out:
-        from fiberpipe.artifacts import write_text_atomic
-
-        write_text_atomic(a.out, text)
+    write_report(f"Dense-composite phantom family, seeds {a.seeds}", rows, worst, a.out)
 
 
 if __name__ == "__main__":

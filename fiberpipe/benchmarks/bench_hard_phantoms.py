@@ -55,27 +55,45 @@ def main(argv=None) -> None:
         f = trace(mask, voxel_size_m=vs, method="slices")
         dt = time.perf_counter() - t0
         acc = trace_accuracy(f, truth, voxel_size_m=vs)
-        worst = {"recall": min(worst["recall"], acc["recall"]), "precision": min(worst["precision"], acc["precision"]),
-                 "mean": max(worst["mean"], acc["mean_error_vox"])}
-        ft = "-"
-        if run_fibretracker is not None:
-            try:
-                fa = trace_accuracy(run_fibretracker(vol, vs, r), truth, voxel_size_m=vs)
-                ft = f"{fa['recall']:.3f} / {fa['precision']:.3f} / {fa['mean_error_vox']:.3f}"
-            except Exception as exc:  # noqa: BLE001
-                ft = f"failed ({type(exc).__name__})"
+        worst = worst_of(worst, acc)
+        ft = fibretracker_cell(run_fibretracker, vol, vs, r, truth)
         rows.append(f"| {s} | {r:.2f} | {truth.meta['contrast_to_noise']:.2f} | {auto} | {acc['recall']:.3f} | "
                     f"{acc['precision']:.3f} | {acc['mean_error_vox']:.3f} | {acc['p95_error_vox']:.3f} | "
                     f"{acc['coverage']:.3f} | {dt:.1f} | {ft} |")
         print(rows[-1], flush=True)
-    text = "\n".join([f"# Harder phantom family, seeds {a.seeds} ({time.strftime('%Y-%m-%d')})", "", *rows, "",
+    write_report(f"Harder phantom family, seeds {a.seeds}", rows, worst, a.out)
+
+
+def worst_of(worst: dict, acc: dict) -> dict:
+    """The worst recall, precision and mean error so far, with one more seed's accuracy ``acc``."""
+    return {"recall": min(worst["recall"], acc["recall"]), "precision": min(worst["precision"], acc["precision"]),
+            "mean": max(worst["mean"], acc["mean_error_vox"])}
+
+
+def fibretracker_cell(run_fibretracker, vol, vs, r, truth, splits: bool = False) -> str:
+    """The fibretracker column of a seed's row ("-" when it is not installed)."""
+    from fiberpipe.imaging.accuracy import trace_accuracy
+
+    if run_fibretracker is None:
+        return "-"
+    try:
+        fa = trace_accuracy(run_fibretracker(vol, vs, r), truth, voxel_size_m=vs)
+    except Exception as exc:  # noqa: BLE001 - a peer tool's failure is a table cell, not a stop
+        return f"failed ({type(exc).__name__})"
+    cell = f"{fa['recall']:.3f} / {fa['precision']:.3f} / {fa['mean_error_vox']:.3f}"
+    return cell + (f" / {fa['n_split']}" if splits else "")
+
+
+def write_report(title: str, rows: list[str], worst: dict, out) -> None:
+    """Print the table with its worst-case line, and write it atomically to ``out`` if given."""
+    text = "\n".join([f"# {title} ({time.strftime('%Y-%m-%d')})", "", *rows, "",
                       f"worst recall {worst['recall']:.3f}, worst precision {worst['precision']:.3f}, "
                       f"worst mean error {worst['mean']:.3f} voxel", ""])
     print(text)
-    if a.out:
+    if out:
         from fiberpipe.artifacts import write_text_atomic
 
-        write_text_atomic(a.out, text)
+        write_text_atomic(out, text)
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import apply_pair_force, crossing_angle, segment_distance2_s
+from .geometry import apply_line_point, apply_pair_force, crossing_angle, segment_distance2_s
 from ._specialise import specialise
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
@@ -198,32 +198,7 @@ def _line_half(
         f0 = d0 * inv
         f1 = d1 * inv
         f2 = d2 * inv
-        ws = 1.0 - s
-        wt = 1.0 - t
-        f_out[na0, 0] += ws * f0
-        f_out[na0, 1] += ws * f1
-        f_out[na0, 2] += ws * f2
-        f_out[na1, 0] += s * f0
-        f_out[na1, 1] += s * f1
-        f_out[na1, 2] += s * f2
-        f_out[nb0, 0] -= wt * f0
-        f_out[nb0, 1] -= wt * f1
-        f_out[nb0, 2] -= wt * f2
-        f_out[nb1, 0] -= t * f0
-        f_out[nb1, 1] -= t * f1
-        f_out[nb1, 2] -= t * f2
-        rec[0] += fm
-        rec[1] += sign * f0
-        rec[2] += sign * f1
-        rec[3] += sign * f2
-        if sign > 0.0:
-            rec[4] += fm * s
-            rec[5] += fm * t
-        else:
-            rec[4] += fm * t
-            rec[5] += fm * s
-        if delta > rec[6]:
-            rec[6] = delta
+        apply_line_point(f_out, (na0, na1, nb0, nb1), s, t, f0, f1, f2, fm, delta, rec, sign)
     return energy
 
 
@@ -313,6 +288,31 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
     return w * wst * ep
 
 
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def record_pair(out, k, rec, phi, n_active, use_list, use_share):
+    """The pair's records in ``out`` (:class:`~fiberpipe.solver.contact_state.PairRecords`) from its
+    accumulator ``rec`` (Σ|f|, Σf, Σ|f|·s, Σ|f|·t, max δ, share); returns the count of pairs in contact."""
+    fsum = rec[0]
+    if not fsum > 0.0:
+        return n_active
+    if use_list:
+        out.active[n_active] = k
+    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+    out.fn[k] = fv
+    if fv > 0.0:
+        out.normal[k, 0] = rec[1] / fv
+        out.normal[k, 1] = rec[2] / fv
+        out.normal[k, 2] = rec[3] / fv
+    out.s[k] = rec[4] / fsum
+    out.t[k] = rec[5] / fsum
+    out.phi[k] = phi
+    out.delta[k] = rec[6]
+    if use_share:
+        out.share[k] = rec[7]
+        out.fsum[k] = fsum
+    return n_active + 1
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out, out, c_off,
                       reach):
@@ -350,11 +350,11 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
     constant blend weight), number of pairs in contact.
     """
     # the fields as local arrays: no attribute access in the pair loop
-    c_fn, c_n, c_s, c_t, c_phi, c_delta, c_share, c_fsum, c_gap, c_active = out
+    c_fn, c_gap = out.fn, out.gap
     use_gap = c_gap.shape[0] > 0
-    use_list = c_active.shape[0] > 0
+    use_list = out.active.shape[0] > 0
     use_off = c_off.shape[0] > 0
-    use_share = c_share.shape[0] > 0
+    use_share = out.share.shape[0] > 0
     energy = 0.0
     n_active = 0
     rec = np.zeros(8)
@@ -422,24 +422,7 @@ def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_para
                                  off)
             energy += _line_half(x, nb0, nb1, na0, na1, rb, ra, law_id, law_params, gxi, gw, half, f_out, rec, -1.0,
                                  off)
-        if rec[0] > 0.0:
-            if use_list:
-                c_active[n_active] = k
-            n_active += 1
-            fsum = rec[0]
-            fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-            c_fn[k] = fv
-            if fv > 0.0:
-                c_n[k, 0] = rec[1] / fv
-                c_n[k, 1] = rec[2] / fv
-                c_n[k, 2] = rec[3] / fv
-            c_s[k] = rec[4] / fsum
-            c_t[k] = rec[5] / fsum
-            c_phi[k] = phi
-            c_delta[k] = rec[6]
-            if use_share:
-                c_share[k] = rec[7]
-                c_fsum[k] = fsum
+        n_active = record_pair(out, k, rec, phi, n_active, use_list, use_share)
     return energy, n_active
 
 

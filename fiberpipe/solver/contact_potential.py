@@ -38,8 +38,8 @@ import numpy as np
 from numba import njit
 
 from ._specialise import specialise
-from .contact import _joint_share
-from .geometry import apply_pair_force, crossing_angle, segment_distance2_s
+from .contact import _joint_share, record_pair
+from .geometry import apply_line_point, apply_pair_force, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point, law_line, law_point, law_weight_point)
 
@@ -133,30 +133,7 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
         f0 = d0 * inv
         f1 = d1 * inv
         f2 = d2 * inv
-        f_out[na0, 0] += (1.0 - xi) * f0
-        f_out[na0, 1] += (1.0 - xi) * f1
-        f_out[na0, 2] += (1.0 - xi) * f2
-        f_out[na1, 0] += xi * f0
-        f_out[na1, 1] += xi * f1
-        f_out[na1, 2] += xi * f2
-        f_out[nb0, 0] -= (1.0 - t) * f0
-        f_out[nb0, 1] -= (1.0 - t) * f1
-        f_out[nb0, 2] -= (1.0 - t) * f2
-        f_out[nb1, 0] -= t * f0
-        f_out[nb1, 1] -= t * f1
-        f_out[nb1, 2] -= t * f2
-        rec[0] += fm
-        rec[1] += sign * f0
-        rec[2] += sign * f1
-        rec[3] += sign * f2
-        if sign > 0.0:
-            rec[4] += fm * xi
-            rec[5] += fm * t
-        else:
-            rec[4] += fm * t
-            rec[5] += fm * xi
-        if delta > rec[6]:
-            rec[6] = delta
+        apply_line_point(f_out, (na0, na1, nb0, nb1), xi, t, f0, f1, f2, fm, delta, rec, sign)
     return energy
 
 
@@ -284,31 +261,6 @@ def _blend_forces(f_out, nodes4, a0, b0, ta, tb, geo, gd, G):
                 f_out[nb0, c] -= gb
 
 
-@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def _record_pair(out, k, rec, phi, n_active, use_list, use_share):
-    """The pair's records from its accumulator ``rec`` (as contact.contact_forces_ex writes them);
-    returns the count of pairs in contact."""
-    fsum = rec[0]
-    if not fsum > 0.0:
-        return n_active
-    if use_list:
-        out.active[n_active] = k
-    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-    out.fn[k] = fv
-    if fv > 0.0:
-        out.normal[k, 0] = rec[1] / fv
-        out.normal[k, 1] = rec[2] / fv
-        out.normal[k, 2] = rec[3] / fv
-    out.s[k] = rec[4] / fsum
-    out.t[k] = rec[5] / fsum
-    out.phi[k] = phi
-    out.delta[k] = rec[6]
-    if use_share:
-        out.share[k] = rec[7]
-        out.fsum[k] = fsum
-    return n_active + 1
-
-
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
                        out, c_off, reach):
@@ -413,7 +365,7 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         energy += (1.0 - w) * e_line + w * e_point
         _blend_forces(f_out, (na0, na1, nb0, nb1), a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
                       dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
-        n_active = _record_pair(out, k, rec, phi, n_active, use_list, use_share)
+        n_active = record_pair(out, k, rec, phi, n_active, use_list, use_share)
     return energy, n_active
 
 

@@ -116,3 +116,23 @@ def apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
     f_out[nb1, 0] -= t * f0
     f_out[nb1, 1] -= t * f1
     f_out[nb1, 2] -= t * f2
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def apply_line_point(f_out, nodes4, s, t, f0, f1, f2, fm, delta, rec, sign):
+    """One Gauss point of a line part: the force (f0, f1, f2) of magnitude ``fm`` as
+    :func:`apply_pair_force`, and its share of the pair's accumulator ``rec`` (Σ|f|, Σf from B to A,
+    Σ|f|·s_first, Σ|f|·t_second, max δ; ``sign`` −1 when A is the pair's second segment)."""
+    apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
+    rec[0] += fm
+    rec[1] += sign * f0
+    rec[2] += sign * f1
+    rec[3] += sign * f2
+    if sign > 0.0:
+        rec[4] += fm * s
+        rec[5] += fm * t
+    else:
+        rec[4] += fm * t
+        rec[5] += fm * s
+    if delta > rec[6]:
+        rec[6] = delta
