@@ -302,10 +302,10 @@ class ContactConfig(Section):
         1e-4, description="initial fiber–fiber overlaps (> 5 % of r) are released linearly over this time"
     )
     blend_length: Length = Field(
-        5e-5, description="hertz_oriented: straight length ℓ_blend available to the Hertz contact ellipse; the point "
-        "law holds while its semi-major axis a ≤ ℓ_blend, the line law takes over by a = 2 ℓ_blend (a sixth of a "
-        "0.3 mm element: a crossing whose ellipse spans elements hops across joints and, as a point force, creates "
-        "energy; docs/contact.md)"
+        5e-5, description="every law with a point part (all but hertz_parallel): straight length ℓ_blend available "
+        "to a crossing's Hertz contact ellipse; the point law holds while its semi-major axis a ≤ ℓ_blend, the line "
+        "law takes over by a = 2 ℓ_blend (a sixth of a 0.3 mm element: a crossing whose ellipse spans elements hops "
+        "across joints and, as a point force, creates energy; docs/contact.md)"
     )
     formulation: Literal["legacy", "potential"] = Field(
         "potential", description="normal contact kernel: 'potential' makes every force minus the gradient of one "
@@ -348,8 +348,8 @@ class ContactConfig(Section):
             raise ValueError("contact.onset applies to formulation 'potential' only")
         if not 1 <= self.gauss_points <= 6:
             raise ValueError(f"contact.gauss_points must be 1…6, got {self.gauss_points}")
-        if "blend_length" in self.model_fields_set and self.law != "hertz_oriented":
-            raise ValueError(f"contact.blend_length applies to law 'hertz_oriented' only (the law is {self.law!r})")
+        if "blend_length" in self.model_fields_set and self.law == "hertz_parallel":
+            raise ValueError("contact.blend_length does not apply to law 'hertz_parallel' (it has no point part)")
         return self
 
 

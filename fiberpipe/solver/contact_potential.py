@@ -20,9 +20,9 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
 * **Point part**: clamped segment–segment closest points, ``Π_point = e_point(g(δ_c), Φ)``, with
   the joint share of :func:`fiberpipe.solver.contact._joint_share`.
-* **Blend**: ``w = smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))`` on the crossing angle; hertz_oriented:
-  that times ``w_ξ(δ_c, Φ)`` from the Hertz ellipse against ℓ_blend (:func:`_oriented_weight`), δ_c
-  the pair's clamped penetration. The blend's derivatives and the law's own ``∂e_point/∂Φ`` (hertz_oriented:
+* **Blend**: ``w = smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))`` on the crossing angle, times the patch
+  criterion ``w_ξ(δ_c, Φ)`` from the Hertz ellipse against ℓ_blend (:func:`_patch_weight`; every law
+  with a point part, from ``scene.contact.blend_length``), δ_c the pair's clamped penetration. The blend's derivatives and the law's own ``∂e_point/∂Φ`` (hertz_oriented:
   K(Φ)) enter the force: ``∂w/∂δ_c (s_joint Π_point − Π_line)`` along the closest points' normal, and
   ``G = ∂Π/∂Φ = ∂w/∂Φ (s_joint Π_point − Π_line) + w s_joint ∂Π_point/∂Φ`` through
   ``∂Φ/∂t_A = −σ (t̂_B − c t̂_A)/(|t_A| sin Φ)`` (``c = t̂_A·t̂_B``, ``σ = sign c``): a couple on
@@ -150,13 +150,14 @@ def _point_energy_dphi(law_id, law_params, g, ra, rb, phi):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _oriented_weight(law_params, delta, ds, ra, rb, phi):
-    """hertz_oriented's point share and its partial derivatives: ``(w, ∂w/∂Φ, ∂w/∂δ)``.
+def _patch_weight(law_params, delta, ds, ra, rb, phi):
+    """The patch criterion's point share (:func:`fiberpipe.solver.laws.patch_weight`) and its partial
+    derivatives: ``(w, ∂w/∂Φ, ∂w/∂δ)``; ``(1, 0, 0)`` when ℓ_blend is 0 (off).
 
     ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``, ``ξ = a(g(δ), Φ)/ℓ_blend``, ``a = â(Φ)√(R_e g)``
     the Hertz semi-major axis: the point law while the contact ellipse fits in ℓ_blend, the line law
     once it outgrows it. ``∂a/∂δ = a g'/(2g)``; ``∂a/∂Φ`` by central differences of the table."""
-    if delta <= 0.0:
+    if delta <= 0.0 or law_params[P_LBLEND] <= 0.0:
         return 1.0, 0.0, 0.0
     g, gp = onset(delta, ds)
     f, e, a = hertz_crossed_point(law_params, g, ra, rb, phi)
@@ -181,8 +182,8 @@ def _oriented_weight(law_params, delta, ds, ra, rb, phi):
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _pair_blend(law_id, law_params, delta_c, ds, ra, rb, phi):
     """The point share of a pair and its partial derivatives ``(w, ∂w/∂Φ, ∂w/∂δ_c)`` (module docstring):
-    hertz_parallel 0; hertz_oriented the angle window × the ellipse blend (below Φ_lo no point law:
-    at Φ → 0 the crossed-Hertz stiffness diverges and ∂w/∂δ would carry it); the others the window."""
+    hertz_parallel 0; the others the angle window × the patch criterion (below Φ_lo no point law:
+    at Φ → 0 the crossed-Hertz stiffness diverges and ∂w/∂δ would carry it)."""
     if law_id == LAW_HERTZ_PARALLEL:
         return 0.0, 0.0, 0.0
     inv_span = 1.0 / (law_params[P_PHI_HI] - law_params[P_PHI_LO])
@@ -193,9 +194,7 @@ def _pair_blend(law_id, law_params, delta_c, ds, ra, rb, phi):
     if u < 1.0:
         wp = u * u * (3.0 - 2.0 * u)
         dwp = 6.0 * u * (1.0 - u) * inv_span
-    if law_id != LAW_HERTZ_ORIENTED:
-        return wp, dwp, 0.0
-    wx, dwx, dw_dd = _oriented_weight(law_params, delta_c, ds, ra, rb, phi)
+    wx, dwx, dw_dd = _patch_weight(law_params, delta_c, ds, ra, rb, phi)
     return wx * wp, dwx * wp + wx * dwp, dw_dd * wp
 
 

@@ -442,24 +442,32 @@ def law_point(law_id, params, delta, r1, r2, phi):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def patch_weight(params, delta, r1, r2, phi):
+    """The patch criterion's point share: ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``,
+    ``ξ = a(δ, Φ)/ℓ_blend``, ``a`` the semi-major axis of the Hertz contact ellipse of the crossing at
+    penetration δ: the point law holds while the contact patch fits in the straight length ℓ_blend,
+    the line law takes over when it outgrows it (Φ → 0). 1 when ``ℓ_blend`` is 0 (off) or δ ≤ 0."""
+    if delta <= 0.0 or params[P_LBLEND] <= 0.0:
+        return 1.0
+    f, e, a = hertz_crossed_point(params, delta, r1, r2, phi)
+    xi = a / params[P_LBLEND]
+    return 1.0 - smoothstep((xi - params[P_XI_LO]) / (params[P_XI_HI] - params[P_XI_LO]))
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def law_weight(law_id, params, delta, r1, r2, phi):
     """Point share w ∈ [0, 1] (the distributed line part gets 1 − w).
 
     * hertz_parallel: 0 (always distributed).
-    * hertz_oriented: ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``, ``ξ = a(δ, Φ)/ℓ_blend``,
-      ``a`` the semi-major axis of the Hertz contact ellipse: the point law holds while the ellipse
-      fits in the straight length ℓ_blend, the line law takes over when it outgrows it (Φ → 0).
-    * others: ``smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))``.
+    * hertz_oriented: the patch criterion (:func:`patch_weight`).
+    * others: ``smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))`` times the patch criterion when ℓ_blend is set.
     """
     if law_id == LAW_HERTZ_PARALLEL:
         return 0.0
+    wp = patch_weight(params, delta, r1, r2, phi)
     if law_id == LAW_HERTZ_ORIENTED:
-        if delta <= 0.0:
-            return 1.0
-        f, e, a = hertz_crossed_point(params, delta, r1, r2, phi)
-        xi = a / params[P_LBLEND]
-        return 1.0 - smoothstep((xi - params[P_XI_LO]) / (params[P_XI_HI] - params[P_XI_LO]))
-    return smoothstep((phi - params[P_PHI_LO]) / (params[P_PHI_HI] - params[P_PHI_LO]))
+        return wp
+    return wp * smoothstep((phi - params[P_PHI_LO]) / (params[P_PHI_HI] - params[P_PHI_LO]))
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -573,7 +581,12 @@ class ContactLaw:
     @classmethod
     def from_config(cls, cfg, *, E_pa: float, nu: float) -> "ContactLaw":
         """The law from the ``scene.contact`` block (the base: no parameters of its own)."""
-        return cls(E_pa=E_pa, nu=nu)
+        return cls(E_pa=E_pa, nu=nu, **cls._common_config(cfg))
+
+    @staticmethod
+    def _common_config(cfg) -> dict:
+        """The keywords every law takes from ``scene.contact``: the patch criterion's ℓ_blend."""
+        return {"blend_length_m": float(cfg.blend_length)}
 
     @classmethod
     def check_config(cls, cfg) -> None:
@@ -587,6 +600,9 @@ class ContactLaw:
         ref_length_m: float = 0.3e-3,
         phi_lo_deg: float = 0.5,
         phi_hi_deg: float = 1.5,
+        blend_length_m: float | None = None,
+        xi_lo: float = 1.0,
+        xi_hi: float = 2.0,
     ):
         self.E_pa = float(E_pa)
         self.nu = float(nu)
@@ -599,6 +615,13 @@ class ContactLaw:
         self.phi_lo_deg = float(phi_lo_deg)
         self.phi_hi_deg = float(phi_hi_deg)
         self.per_length = True
+        if blend_length_m is not None and not blend_length_m > 0:
+            raise ConfigError(f"blend_length_m must be > 0, got {blend_length_m}")
+        if not 0 < xi_lo < xi_hi:
+            raise ConfigError(f"need 0 < xi_lo < xi_hi, got {xi_lo}, {xi_hi}")
+        # None: the point part by the angle window alone (the patch criterion off)
+        self.blend_length_m = None if blend_length_m is None else float(blend_length_m)
+        self.xi_lo, self.xi_hi = float(xi_lo), float(xi_hi)
 
     def _header(self) -> np.ndarray:
         l0, dl, khat, ahat = crossed_table()
@@ -611,8 +634,9 @@ class ContactLaw:
         p[P_NSEG] = 1.0
         p[P_S] = 1.0
         p[P_D] = 1.0
-        p[P_LBLEND] = 1.0
-        p[P_XI_HI] = 1.0
+        # the patch criterion (law_weight): 0 switches it off
+        p[P_LBLEND] = 0.0 if self.blend_length_m is None else self.blend_length_m
+        p[P_XI_LO], p[P_XI_HI] = self.xi_lo, self.xi_hi
         p[P_NTAB] = khat.size
         p[P_LNPHI0] = l0
         p[P_DLNPHI] = dl
@@ -677,7 +701,7 @@ class LinearLaw(ContactLaw):
 
     @classmethod
     def from_config(cls, cfg, *, E_pa, nu):
-        return cls(stiffness=float(cfg.stiffness), E_pa=E_pa, nu=nu)
+        return cls(stiffness=float(cfg.stiffness), E_pa=E_pa, nu=nu, **cls._common_config(cfg))
 
     def params(self):
         p = self._header()
@@ -759,8 +783,9 @@ class ScaledStiffnessLaw(ContactLaw):
     @classmethod
     def from_config(cls, cfg, *, E_pa, nu):
         if cfg.preset is not None:
-            return cls.preset(cfg.preset, E_pa=E_pa, nu=nu)
-        return cls(d_m=float(cfg.d), S=float(cfg.s), S0=float(cfg.s0), K_def=float(cfg.k_def), E_pa=E_pa, nu=nu)
+            return cls.preset(cfg.preset, E_pa=E_pa, nu=nu, **cls._common_config(cfg))
+        return cls(d_m=float(cfg.d), S=float(cfg.s), S0=float(cfg.s0), K_def=float(cfg.k_def), E_pa=E_pa, nu=nu,
+                   **cls._common_config(cfg))
 
     def params(self):
         p = self._header()
@@ -812,7 +837,7 @@ class HertzCrossedLaw(ContactLaw):
 
     @classmethod
     def from_config(cls, cfg, *, E_pa, nu):
-        return cls(phi_rad=float(cfg.angle), E_pa=E_pa, nu=nu)
+        return cls(phi_rad=float(cfg.angle), E_pa=E_pa, nu=nu, **cls._common_config(cfg))
 
     def params(self):
         p = self._header()
@@ -837,23 +862,9 @@ class HertzOrientedLaw(ContactLaw):
     law_id = LAW_HERTZ_ORIENTED
     name = "hertz_oriented"
 
-    def __init__(self, blend_length_m: float = 5.0e-5, xi_lo: float = 1.0, xi_hi: float = 2.0, **kw):
-        super().__init__(**kw)
-        if not blend_length_m > 0:
-            raise ConfigError(f"blend_length_m must be > 0, got {blend_length_m}")
-        if not 0 < xi_lo < xi_hi:
-            raise ConfigError(f"need 0 < xi_lo < xi_hi, got {xi_lo}, {xi_hi}")
-        self.blend_length_m = float(blend_length_m)
-        self.xi_lo, self.xi_hi = float(xi_lo), float(xi_hi)
-
-    @classmethod
-    def from_config(cls, cfg, *, E_pa, nu):
-        return cls(blend_length_m=float(cfg.blend_length), E_pa=E_pa, nu=nu)
-
-    def params(self):
-        p = self._header()
-        p[P_LBLEND], p[P_XI_LO], p[P_XI_HI] = self.blend_length_m, self.xi_lo, self.xi_hi
-        return p
+    def __init__(self, blend_length_m: float = 5.0e-5, **kw):
+        # the patch criterion is this law's own blend: always on
+        super().__init__(blend_length_m=blend_length_m, **kw)
 
 
 def make_law(name: str, **kw) -> ContactLaw:

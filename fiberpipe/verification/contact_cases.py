@@ -241,8 +241,12 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
     symmetry). Error = max over those samples of |X − ref|/ref: the static error of a run at rest,
     the swing of one that has not settled. The note gives the settled β − β₀.
 
-    α = 0 rows are informational: the undamped run (no dissipation: nothing brings the suddenly
-    loaded beams to rest) does not settle in T; the note gives its NF range.
+    α = 0 (undamped: nothing brings the suddenly loaded beams to rest, they oscillate about the
+    equilibrium): NF is checked as its mean over the last half of the run (ten times the config's
+    frames, so the mean samples the oscillation), 2 % against Eq. 6 (informational in the quick
+    variant, whose 6 mm beams ring almost off contact); its RF row is informational
+    (the swing of the reactions), and the note gives the NF range, the kinetic energy and the
+    state-function energy residual.
 
     Scene, loads, α, T and frames from configs/verify/three-beam-static.yaml (15 mm beams, q = 66 N/m);
     ``alphas`` defaults to (the config's α, 0); quick: 6 mm beams, q only; full: q/4, q/2, q.
@@ -275,19 +279,22 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
             if alpha > 0:
                 eff.append(Damping(alpha))
             xs = []
-            res = simulate(m, eff, s.settings(), on_frame=lambda k, t, x: xs.append(x.copy()))
+            n_frames = frames if alpha > 0 else 10 * frames
+            res = simulate(m, eff, s.settings(output_frames=n_frames), on_frame=lambda k, t, x: xs.append(x.copy()))
             QW = (q + w_line) * L
             nf_ref = QW / (2 * math.cos(beta0))
             rf_ref = math.hypot(0.5 * QW * math.tan(beta0), 0.5 * (q + 3 * w_line) * L)
-            last = xs[-(frames // 4 + 1):]
-            nf = np.array([np.linalg.norm(pair_force(m, x, law, 0, 1)) for x in last])
+            nf_half = np.array([np.linalg.norm(pair_force(m, x, law, 0, 1)) for x in xs[len(xs) // 2:]])
+            nf = nf_half[-(len(xs) // 4 + 1):]
             h = res.history
             sel = h["time"] >= 0.75 * T
             wall = h["wall_force"][:, res.wall_names.index("y_lo")]  # beam 2's wall (y = −2r)
             rf = np.hypot(wall[sel], 0.5 * h["plate_force"][sel, 0])
             x = xs[-1]
             beta = math.atan2(x[b1, 1].mean() - x[b2, 1].mean(), x[b1, 2].mean() - x[b2, 2].mean())
-            e_nf = float(np.max(np.abs(nf - nf_ref)) / nf_ref)
+            # undamped: the mean of the oscillation; damped: the largest deviation of the settled run
+            e_nf = (float(np.max(np.abs(nf - nf_ref)) / nf_ref) if alpha > 0
+                    else abs(float(nf_half.mean()) - nf_ref) / nf_ref)
             e_rf = float(np.max(np.abs(rf - rf_ref)) / rf_ref)
             err["NF"].append(e_nf)
             err["RF"].append(e_rf)
@@ -299,20 +306,28 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
             rf_note = (f"wall (y = −2r) {wall[-1]:.6g} N, plate/2 {0.5 * h['plate_force'][-1, 0]:.6g} N "
                        f"(last row); RF over the last quarter ∈ [{rf.min():.6g}, {rf.max():.6g}] N")
             if alpha == 0:
-                nf_note += (f"; does not settle in T = {T * 1e3:g} ms: NF/ref ∈ [{nf.min() / nf_ref:.2f}, "
-                            f"{nf.max() / nf_ref:.2f}], kinetic energy {ke[len(ke) // 4]:.2e} → {ke[-1]:.2e} J "
-                            f"over the last 3/4, |energy residual| up to {resid:.2g}")
+                nf_note += (f"; oscillates about Eq. 6 in T = {T * 1e3:g} ms: mean NF over the last half / ref "
+                            f"{nf_half.mean() / nf_ref:.4f}, NF/ref ∈ [{nf_half.min() / nf_ref:.2f}, "
+                            f"{nf_half.max() / nf_ref:.2f}], kinetic energy {ke[len(ke) // 4]:.2e} → {ke[-1]:.2e} J "
+                            f"over the last 3/4, |energy residual| up to {resid:.2g} (energy lost by the step "
+                            f"near its stability limit; docs/verification.md)")
             data = {"beta0_deg": math.degrees(beta0), "settled_beta_minus_beta0_deg": math.degrees(beta - beta0),
+                    "mean_nf_last_half_over_ref": float(nf_half.mean() / nf_ref),
                     "nf_over_ref": (float(nf.min() / nf_ref), float(nf.max() / nf_ref)),
                     "rf_over_ref": (float(rf.min() / rf_ref), float(rf.max() / rf_ref)),
                     "max_energy_residual": resid}
             vals = (nf_ref, float(nf[-1]), rf_ref, float(rf[-1]), nf_note, rf_note, data)
         nf_ref, NF, rf_ref, rf_last, nf_note, rf_note, data = vals
         rng = f"q ∈ {{{', '.join(f'{q:g}' for q in qs)}}} N/m"
-        label = f"α = {alpha:g}" + (" (undamped, informational)" if alpha == 0 else "")
+        # the quick variant's 6 mm beams ring almost off contact (NF/ref 0.05–2.5): its undamped mean
+        # is a comparison, not a check
+        nf_info = alpha == 0 and quick
+        label = f"α = {alpha:g}" + ((" (undamped, informational)" if quick else " (undamped)") if alpha == 0 else "")
+        over = "the mean over the last half of the run" if alpha == 0 else "the last quarter of the run"
         rows.append(Row(f"3-beam static {label}: NF (Eq. 6, β₀ from the set-up), q = {qs[-1]:g} N/m "
-                        f"(max error over {rng} and the last quarter of the run)", nf_ref, NF,
-                        max(err["NF"]), 0.01, "N", nf_note, informational=alpha == 0, data=data))
+                        f"(max error over {rng} and {over})", nf_ref, NF,
+                        max(err["NF"]), 0.01 if alpha > 0 else 0.02, "N", nf_note, informational=nf_info, data=data))
+        label = f"α = {alpha:g}" + (" (undamped, informational)" if alpha == 0 else "")
         rows.append(Row(f"3-beam static {label}: RF (Eq. 7, from the wall and plate reaction history), "
                         f"q = {qs[-1]:g} N/m (max error over {rng} and the last quarter)", rf_ref, rf_last,
                         max(err["RF"]), 0.01, "N", rf_note, informational=alpha == 0, data=data))

@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from fiberpipe.config import ContactConfig
 from fiberpipe.solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, simulate
 from fiberpipe.solver.effects import LineLoad
 from fiberpipe.solver.laws import make_law
@@ -41,14 +42,15 @@ def _six_fibres(L=6e-3, n_el=20, phi_deg=3.0):
     return build_model(np.vstack(fibres), off, R, MAT), pitch
 
 
-def _excess(law, q, formulation, t_end=2e-3):
+def _excess(law, q, formulation, t_end=2e-3, dt_safety=0.9):
     """max over the rows of (state energy − loads' work)/max|W|, and the kinetic energy per row."""
     m, pitch = _six_fibres()
     eff = [Loads([LineLoad(4, (0, 0, -q)), LineLoad(5, (0, 0, -q))]),
            Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
            Walls({"y": (0.0, 4 * pitch + GAP)}),
            contact_hook(m, law=law, formulation=formulation)]
-    res = simulate(m, eff, SimulationSettings(end_time_s=t_end, output_frames=3, history_every=100))
+    res = simulate(m, eff, SimulationSettings(end_time_s=t_end, output_frames=3, history_every=100,
+                                                      dt_safety=dt_safety))
     h = res.history
     ke, se, st, wk = (h[f"energy/{k}"] for k in ("kinetic_leapfrog", "strain", "contact_stored", "external"))
     assert st.max() > 0 and res.history["contacts"].max() > 0, "no contact: the case tests nothing"
@@ -56,16 +58,39 @@ def _excess(law, q, formulation, t_end=2e-3):
 
 
 LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness": 1e9}),
-        ("hertz_crossed", {"phi_deg": 90.0})]
+        ("hertz_crossed", {"phi_deg": 90.0}), ("scaled_stiffness", {"preset": "table1_phi6"}),
+        ("scaled_stiffness", {"preset": "table1_parallel"}), ("scaled_stiffness", {"preset": "table3_identified"})]
 
 
+def _law(name, kw):
+    """The law as a config builds it: with the schema's blend length (the patch criterion)."""
+    return make_law(name, E_pa=15e9, nu=0.3, blend_length_m=float(ContactConfig().blend_length), **kw)
+
+
+@pytest.mark.parametrize("q", [3.0, 300.0])
 @pytest.mark.parametrize("law_name,kw", LAWS)
-def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw):
-    law = make_law(law_name, E_pa=15e9, nu=0.3, **kw)
-    excess, ke = _excess(law, 3.0, "potential")
+def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw, q):
+    excess, ke = _excess(_law(law_name, kw), q, "potential")
     assert excess < 0.01, excess
     n = len(ke) // 4
     assert np.max(ke[-n:]) < 2.0 * np.max(ke[:n]) + 1e-12  # no secular growth
+
+
+@pytest.mark.parametrize("law_name,kw", [LAWS[1], LAWS[4]])
+def test_six_fibres_create_no_energy_at_1000_n_per_m_on_a_converged_step(law_name, kw):
+    # the sudden 1000 N/m load rattles the fibres; at dt_safety 0.9 the step's error gains 2–18 % of
+    # W here (0.6: +3 %), at 0.45 and 0.225 the balance holds (docs/contact.md)
+    excess, _ = _excess(_law(law_name, kw), 1000.0, "potential", dt_safety=0.45)
+    assert excess < 0.01, excess
+
+
+@pytest.mark.xfail(strict=True, reason="known defect of the point part: without the patch criterion the angle "
+                   "window gives the 3° crossings to the point law, whose force hops across element joints "
+                   "(measured +5.7 % of the loads' work for table1_phi6)")
+def test_six_fibres_create_no_energy_with_the_point_part_alone_at_300_n_per_m():
+    law = make_law("scaled_stiffness", preset="table1_phi6", E_pa=15e9, nu=0.3)  # blend_length_m None: off
+    excess, _ = _excess(law, 300.0, "potential")
+    assert excess < 0.01, excess
 
 
 @pytest.mark.xfail(strict=True, reason="known defect of the legacy kernel: hertz_oriented's blend and K(Φ) enter "

@@ -24,13 +24,19 @@ def _check_informational(r):
         assert d["frames_contact_lost"] > d["frames"] // 2 and 0 < d["max_gap_m"] < 0.05 * 0.25e-3, (
             f"undamped rearrangement: beams 2/3 off beam 1 in {d['frames_contact_lost']}/{d['frames']} frames, "
             f"gap up to {d['max_gap_m'] * 1e6:.3g} µm (measured 55/61 frames, 6.1–6.2 µm)")
-    elif r.case.startswith("3-beam static α = 0"):
+    elif r.case.startswith("3-beam static α = 0") and ": NF" in r.case:
         lo, hi = r.data["nf_over_ref"]
-        # measured (quick): NF/ref ∈ [0.81, 1.12] over the last quarter of 0.6 ms, RF error 67 %
+        mean = r.data["mean_nf_last_half_over_ref"]
+        # measured (quick, 6 mm beams): mean NF/ref 0.975 over the last half, swinging over [0.05, 2.5]
+        assert lo < 0.95 and hi > 1.05 and abs(mean - 1.0) < 0.05, (
+            f"undamped 3-beam quick case: mean NF/ref {mean:.4f} (measured 0.975), range [{lo:.3f}, {hi:.3f}]; "
+            f"if the mean is now within 2 %, make the row a checked one ({r.note})")
+    elif r.case.startswith("3-beam static α = 0"):
+        lo, hi = r.data["rf_over_ref"]
+        # measured (quick): RF error 59 % over the last quarter of 0.6 ms
         assert not r.passed and r.error > 0.05 and lo < 0.95 and hi > 1.05, (
-            f"undamped 3-beam case from the set-up: NF/ref ∈ [{lo:.3f}, {hi:.3f}] over the last quarter, "
-            f"error {100 * r.error:.2f} % (measured: does not settle, NF/ref ∈ [0.81, 1.12]); if it now settles "
-            f"within 1 %, make the row a checked one ({r.note})")
+            f"undamped 3-beam case from the set-up: RF/ref ∈ [{lo:.3f}, {hi:.3f}] over the last quarter, "
+            f"error {100 * r.error:.2f} %; if it now settles within 1 %, make the row a checked one ({r.note})")
     else:
         raise AssertionError(f"unexpected informational row {r.case!r}: {r.note}")
 
