@@ -76,10 +76,15 @@ def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw
     assert np.max(ke[-n:]) < 2.0 * np.max(ke[:n]) + 1e-12  # no secular growth
 
 
-@pytest.mark.parametrize("law_name,kw", [LAWS[1], LAWS[4]])
+_T3_STEP = pytest.mark.xfail(strict=True, reason="known limit: table3_identified's stiffness grows as S^(δ/d) "
+                             "(×2e4 per µm) and outruns the step at 1000 N/m: +1.2 % of W at dt_safety 0.45, "
+                             "+0.57 % at 0.225 (docs/contact.md)")
+
+
+@pytest.mark.parametrize("law_name,kw", LAWS[:6] + [pytest.param(*LAWS[6], marks=_T3_STEP)])
 def test_six_fibres_create_no_energy_at_1000_n_per_m_on_a_converged_step(law_name, kw):
-    # the sudden 1000 N/m load rattles the fibres; at dt_safety 0.9 the step's error gains 2–18 % of
-    # W here (0.6: +3 %), at 0.45 and 0.225 the balance holds (docs/contact.md)
+    # the sudden 1000 N/m load rattles the fibres; at dt_safety 0.9 the step's error gains 2–29 % of
+    # W here (docs/contact.md), at 0.45 the balance holds
     excess, _ = _excess(_law(law_name, kw), 1000.0, "potential", dt_safety=0.45)
     assert excess < 0.01, excess
 
