@@ -111,6 +111,11 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
         d1 = r1 - t * tb1
         d2 = r2 - t * tb2
         dd2 = d0 * d0 + d1 * d1 + d2 * d2
+        d = math.sqrt(dd2)
+        delta = rr - d - off
+        # out of contact with this segment: no share of Π whichever segment owns the point
+        if delta <= 0.0 or d <= 0.0:
+            continue
         # ownership: the Gauss point belongs to the segment of B nearest to it, against B's neighbour
         # at the nearer end (ties to the later segment), so Π_line integrates e(min over B's segments
         # of the distance): continuous on kinked fibres too; at a free end the clamped point (end cap)
@@ -118,10 +123,6 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
             if b_next >= 0 and _point_segment_distance2(p0, p1, p2, x, nb1, b_next) <= dd2:
                 continue
         elif b_prev >= 0 and _point_segment_distance2(p0, p1, p2, x, b_prev, nb0) < dd2:
-            continue
-        d = math.sqrt(dd2)
-        delta = rr - d - off
-        if delta <= 0.0 or d <= 0.0:
             continue
         gg, gp = onset(delta, ds)
         pl, el = law_line(law_id, law_params, gg, ra, rb)
