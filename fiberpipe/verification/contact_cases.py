@@ -309,8 +309,8 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
                 nf_note += (f"; oscillates about Eq. 6 in T = {T * 1e3:g} ms: mean NF over the last half / ref "
                             f"{nf_half.mean() / nf_ref:.4f}, NF/ref ∈ [{nf_half.min() / nf_ref:.2f}, "
                             f"{nf_half.max() / nf_ref:.2f}], kinetic energy {ke[len(ke) // 4]:.2e} → {ke[-1]:.2e} J "
-                            f"over the last 3/4, |energy residual| up to {resid:.2g} (energy lost by the step "
-                            f"near its stability limit; docs/verification.md)")
+                            f"over the last 3/4, |energy residual| up to {resid:.2g} (energy lost: the step's "
+                            f"error on the penalties, docs/verification.md)")
             data = {"beta0_deg": math.degrees(beta0), "settled_beta_minus_beta0_deg": math.degrees(beta - beta0),
                     "mean_nf_last_half_over_ref": float(nf_half.mean() / nf_ref),
                     "nf_over_ref": (float(nf.min() / nf_ref), float(nf.max() / nf_ref)),
