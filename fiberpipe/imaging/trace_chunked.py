@@ -92,6 +92,25 @@ class SliceSource:
         return self.open()[k]
 
 
+class StridedSample:
+    """A 3D array on disk as seen by the orientation measures: ``shape``, ``size``, ``ndim`` and
+    strided boxes ``[::a, ::b, ::c]`` read one sampled slice at a time (no whole-volume read)."""
+
+    def __init__(self, arr):
+        self.arr = arr
+        self.shape = tuple(int(n) for n in arr.shape)
+        self.size = int(np.prod(self.shape))
+        self.ndim = 3
+        self.dtype = np.dtype(bool)
+
+    def __getitem__(self, key):
+        if not (isinstance(key, tuple) and len(key) == 3 and all(isinstance(k, slice) for k in key)):
+            raise TypeError("StridedSample reads strided boxes [a:b:s, ...] only")
+        ks = range(*key[0].indices(self.shape[0]))
+        rows = [np.asarray(self.arr[k])[key[1], key[2]] for k in ks]
+        return np.stack(rows).astype(bool, copy=False)
+
+
 class _Block:
     """Slices ``b0 .. b1 - 1`` across ``axis`` of an array as the (N, H, W) input of
     :func:`track_slices` (the other two axes in their order, as the in-memory tracer's transpose),
@@ -160,7 +179,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
                   scheduler=None, grey=None, max_jump_vox: float | None = None, max_skip: int = 3,
                   momentum: float = 0.5, min_length_vox: float | None = None, merge_gap_vox: int | None = None,
                   smooth_sigma_vox: float | None = None, spacing_vox: float = 1.0, peak_threshold: float = 0.5,
-                  refine: bool = True, progress=None, axis: int = 0, join: dict | None = None) -> Polylines:
+                  refine: bool = True, progress=None, axis: int | str = "auto", join: dict | None = None) -> Polylines:
     """The slices tracer (:func:`fiberpipe.imaging.trace.trace_slices`) on a mask read slice by
     slice across ``axis`` (the fibers' axis; 0 reads slabs of the storage order, 1 or 2 boxes
     across it), in blocks of ``block`` slices.
@@ -184,8 +203,10 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         As :func:`fiberpipe.imaging.trace.trace`; fibers must run within ~45 degrees of ``axis``
         (one slicing axis: no region split).
     progress : callable(done_blocks, total_blocks), optional
-    axis : int
-        The slicing axis (0, 1 or 2), the volume axis nearest to the fibers' direction.
+    axis : int or "auto"
+        The slicing axis (0, 1 or 2); ``"auto"``: the volume axis nearest the dominant fiber
+        direction of :func:`fiberpipe.imaging.orientation.mask_orientation` on a strided sample
+        (read a sampled slice at a time; axis 0 when the sample is too thin to tell).
     join : dict, optional
         ``join_gap_vox``, ``join_offset_vox``, ``join_angle_deg`` of :func:`fiberpipe.imaging.trace.trace`.
 
@@ -201,11 +222,16 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         raise InputError(f"trace: expected a 3D mask, got shape {shape}")
     if int(block) < 1:
         raise InputError(f"trace: block must be at least 1 slice, got {block!r}")
-    axis = int(axis)
-    if axis not in (0, 1, 2):
-        raise InputError(f"trace: axis must be 0, 1 or 2, got {axis!r}")
-    perm = (axis,) + tuple(i for i in range(3) if i != axis)
     v = voxel_size_zyx(voxel_size_m)
+    if axis == "auto":
+        from .orientation import mask_orientation
+
+        o = mask_orientation(StridedSample(arr), v)
+        axis = {"z": 0, "y": 1, "x": 2}[o["nearest_volume_axis"]] if o.get("n_samples") else 0
+    if axis not in (0, 1, 2):
+        raise InputError(f"trace: axis must be 0, 1, 2 or 'auto', got {axis!r}")
+    axis = int(axis)
+    perm = (axis,) + tuple(i for i in range(3) if i != axis)
     vt = v[list(perm)]
     samp = vt[1:] / vt[1:].min()
     if expected_radius_m is not None:

@@ -1,6 +1,6 @@
 """When the imaging stages run chunk by chunk (``chunks``, docs/imaging.md "Volumes larger than
-memory"), and the pieces they share: the chunked mask and skeleton artifacts, a strided sample of
-a volume on disk."""
+memory"), and what they share: the source of the input volume, the chunked datasets of the mask
+and skeleton artifacts."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import logging
 import numpy as np
 
 from fiberpipe.config import Config
-from fiberpipe.errors import InputError
 
 log = logging.getLogger("fiberpipe")
 
@@ -68,27 +67,3 @@ def create_volume_dataset(f, name: str, shape, dtype, units: str):
                           compression_opts=1, shuffle=True)
     ds.attrs["units"] = units
     return ds
-
-
-class StridedSample:
-    """A 3D array on disk as seen by the orientation measures: ``shape``, ``size``, ``ndim`` and
-    strided boxes ``[::a, ::b, ::c]`` read one sampled slice at a time (no whole-volume read)."""
-
-    def __init__(self, arr):
-        self.arr = arr
-        self.shape = tuple(int(n) for n in arr.shape)
-        self.size = int(np.prod(self.shape))
-        self.ndim = 3
-        self.dtype = np.dtype(bool)
-
-    def __getitem__(self, key):
-        if not (isinstance(key, tuple) and len(key) == 3 and all(isinstance(k, slice) for k in key)):
-            raise TypeError("StridedSample reads strided boxes [a:b:s, ...] only")
-        ks = range(*key[0].indices(self.shape[0]))
-        rows = [np.asarray(self.arr[k])[key[1], key[2]] for k in ks]
-        return np.stack(rows).astype(bool, copy=False)
-
-
-def check_not_empty(n_voxels: int, where: str) -> None:
-    if n_voxels == 0:
-        raise InputError("segmentation found no fiber voxels; check segment.threshold", where=where)
