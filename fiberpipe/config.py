@@ -216,7 +216,7 @@ def _memory(value):
     return to_bytes(value)
 
 
-_memory.dimension = "memory"
+_memory.dimension = "memory (bytes)"
 Memory = Annotated[float, BeforeValidator(_memory)]
 
 
