@@ -62,6 +62,9 @@ def _smoothed_slab(src, a: int, b: int, sigma: float) -> np.ndarray:
     h = int(np.ceil(4.0 * sigma)) if sigma > 0 else 0
     lo, hi = max(0, a - h), min(n, b + h)
     block = np.asarray(src[lo:hi])
+    if block.dtype.kind == "f" and not np.isfinite(block).all():  # the whole-volume reader's check, per slab
+        bad = int(np.count_nonzero(~np.isfinite(block)))
+        raise InputError(f"segment: the volume has {bad} NaN or infinite voxels in slices {lo}..{hi - 1}")
     if sigma > 0:
         out = ndi.gaussian_filter(block, sigma, output=np.float32, mode="nearest")
     else:

@@ -115,13 +115,13 @@ class _Block:
     """Slices ``b0 .. b1 - 1`` across ``axis`` of an array as the (N, H, W) input of
     :func:`track_slices` (the other two axes in their order, as the in-memory tracer's transpose),
     read ``read_ahead`` slices at a time (a chunked store decompresses each chunk once, not once
-    per slice; along axis 0 at least 16, across it the store's chunk extent)."""
+    per slice; by default 16 along axis 0, across it the store's chunk extent up to 128)."""
 
-    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int = 16, axis: int = 0):
+    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int | None = None, axis: int = 0):
         self.arr, self.b0, self.b1, self.dtype, self.axis = arr, int(b0), int(b1), dtype, int(axis)
-        chunks = getattr(arr, "chunks", None)
-        if self.axis != 0 and chunks:
-            read_ahead = max(int(read_ahead), int(chunks[self.axis]))
+        if read_ahead is None:
+            chunks = getattr(arr, "chunks", None)
+            read_ahead = 16 if self.axis == 0 or not chunks else min(128, max(16, int(chunks[self.axis])))
         self.ahead = int(read_ahead)
         rest = [n for i, n in enumerate(arr.shape) if i != self.axis]
         self.shape = (int(b1) - int(b0),) + tuple(int(n) for n in rest)
@@ -237,7 +237,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     if expected_radius_m is not None:
         r = float(expected_radius_m) / vt[1:].min()
     else:
-        r = estimate_radius_vox(_Block(arr, 0, shape[axis], axis=axis), samp)
+        r = estimate_radius_vox(_Block(arr, 0, shape[axis], axis=axis, read_ahead=1), samp)  # 16 spread slices
     min_distance = max(1, int(round((0.75 if grey is not None else 0.5) * r)))
     max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
     min_length_vox = max(10.0, 3.0 * r) if min_length_vox is None else min_length_vox

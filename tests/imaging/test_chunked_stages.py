@@ -197,3 +197,30 @@ def test_the_skeleton_tracer_is_refused_when_chunked(phantom, tmp_path):
             "trace": {"method": "skeleton"}, "mesh": {"element_length": "0.05 mm"}}
     with pytest.raises(InputError, match="trace.method is skeleton.*set trace.method: slices, or chunks.mode: off"):
         run_pipeline(validate_config(data, where="t.yaml"), tmp_path, to_stage="trace")
+
+
+def test_nan_voxels_are_a_one_line_error_when_chunked(phantom, tmp_path):
+    _, vol, _ = phantom
+    bad = vol.copy()
+    bad[40, 10, 10] = np.nan
+    np.save(tmp_path / "v.npy", bad)
+    data = {"input": {"volume": str(tmp_path / "v.npy"), "voxel_size": "10 um"}, "chunks": {"mode": "on", "slices": 16}}
+    with pytest.raises(InputError, match="NaN or infinite voxels in slices"):
+        run_pipeline(validate_config(data, where="t.yaml"), tmp_path / "run", to_stage="segment")
+    assert not (tmp_path / "run" / "mask.h5").exists()  # atomic: no half-written mask
+
+
+def test_large_volume_benchmark_runs_the_pipeline_stages(tmp_path, capsys):
+    """bench_large_volume's stage passes: the pipeline's chunked stages each report wall time, CPU
+    time and peak memory; every fiber of the 5 x 5 grid traced."""
+    import json
+
+    from fiberpipe.benchmarks import bench_large_volume
+
+    bench_large_volume.main(["--shape", "40", "96", "96", "--slab", "16", "--dir", str(tmp_path),
+                             "--passes", "stage-segment", "stage-skeletonize", "stage-trace"])
+    out = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ") and "{" in line}
+    assert set(rows) == {"stage-segment", "stage-skeletonize", "stage-trace"}, out
+    assert json.loads(rows["stage-trace"].split("|")[5])["fibers"] == 25
+    assert not list(tmp_path.iterdir())  # nothing left behind
