@@ -164,7 +164,7 @@ def segment_chunked(src, out_dataset, *, slab: int = 32, method: str = "otsu", t
     Returns the same ``info`` as ``segment`` plus ``time_s`` per pass.
     """
     if scheduler is not None:
-        from .trace_chunked import connect
+        from ._dask import connect
 
         with connect(scheduler) as client:
             return _segment_on_cluster(client, src, out_dataset, slab=slab, method=method, threshold=threshold,

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
+from ._dask import _client
 from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, track_slices
 
 
@@ -163,18 +164,6 @@ def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, 
              np.asarray(t.r, dtype=np.float32)) for t in tracks], n_det
 
 
-def _client(scheduler):
-    if scheduler is None:
-        return None
-    if hasattr(scheduler, "submit"):
-        return scheduler
-    try:
-        from dask.distributed import Client
-    except ImportError as exc:  # pragma: no cover - optional extra
-        raise InputError("a Dask scheduler needs dask.distributed: pip install 'fiberpipe[dask]'") from exc
-    return Client(scheduler)
-
-
 def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, block: int = 128,
                   scheduler=None, grey=None, max_jump_vox: float | None = None, max_skip: int = 3,
                   momentum: float = 0.5, min_length_vox: float | None = None, merge_gap_vox: int | None = None,
@@ -273,21 +262,3 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
                                 peak_threshold=peak_threshold, min_distance_vox=min_distance))
     return _join(out, voxel_size_m, **(join or {}))
 
-
-class connect:
-    """``with connect(scheduler) as client``: a Dask client for a scheduler address (closed at the
-    end), the client itself when given one, None when given None (one process)."""
-
-    def __init__(self, scheduler):
-        self.scheduler, self.client = scheduler, None
-
-    def __enter__(self):
-        if self.scheduler is None or hasattr(self.scheduler, "submit"):
-            return self.scheduler
-        self.client = _client(self.scheduler)
-        return self.client
-
-    def __exit__(self, *exc):
-        if self.client is not None:
-            self.client.close()
-        return False

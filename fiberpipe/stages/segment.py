@@ -69,7 +69,7 @@ def run_segment_chunked(cfg: Config, volume_path: Path, out: Path, chunk_src, *,
     from fiberpipe.artifacts import artifact_writer
     from fiberpipe.imaging._util import voxel_size_zyx
     from fiberpipe.imaging.segment_chunked import segment_chunked
-    from fiberpipe.imaging.trace_chunked import connect
+    from fiberpipe.imaging._dask import connect
     from fiberpipe.stages._chunks import create_volume_dataset
 
     src, file_vs, source = chunk_src

@@ -58,7 +58,8 @@ def run_skeletonize_chunked(cfg: Config, mask_path: Path, out: Path, *, config_s
     from fiberpipe.artifacts import artifact_writer, open_checked
     from fiberpipe.errors import InputError
     from fiberpipe.imaging.skeleton_chunked import skeletonize_chunked
-    from fiberpipe.imaging.trace_chunked import SliceSource, connect
+    from fiberpipe.imaging._dask import connect
+    from fiberpipe.imaging.trace_chunked import SliceSource
     from fiberpipe.stages._chunks import create_volume_dataset
 
     with open_checked(mask_path, "mask") as f:

@@ -221,7 +221,8 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     (a cross ply) are not split off as ``trace.off_axis`` does in memory: one warning line."""
     from fiberpipe.artifacts import open_checked
     from fiberpipe.imaging.orientation import axis_fractions
-    from fiberpipe.imaging.trace_chunked import SliceSource, StridedSample, connect, trace_chunked
+    from fiberpipe.imaging._dask import connect
+    from fiberpipe.imaging.trace_chunked import SliceSource, StridedSample, trace_chunked
 
     t = cfg.trace
     with open_checked(mask_path, "mask") as f:
