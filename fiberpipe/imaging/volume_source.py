@@ -118,6 +118,8 @@ def open_volume_source(path, *, dataset: str | None = None, shape=None, dtype=No
     shp = tuple(int(n) for n in arr.shape)
     if len(shp) != 3:
         raise InputError(f"expected a 3D volume, got shape {shp}", where=where)
+    if int(np.prod(shp)) == 0:
+        raise InputError(f"the volume is empty (shape {shp})", where=where)
     if np.dtype(arr.dtype).kind not in "biuf":
         raise InputError(f"unsupported voxel type {arr.dtype}", where=where)
     if min(shp) < MIN_VOXELS_PER_AXIS:

@@ -38,7 +38,9 @@ def volume_source(cfg: Config, volume_path):
     """The input volume as a slab-by-slab source when the segment stage runs chunked, else None.
 
     ``chunks.mode: on`` on a format that is read whole is an InputError naming the key; ``auto``
-    reads such a file whole (its size is not known without reading it)."""
+    reads such a file whole (its size is not known without reading it), and leaves a file it
+    cannot open slab by slab (damaged, empty) to the whole-volume reader, whose errors say why."""
+    from fiberpipe.errors import InputError
     from fiberpipe.imaging.volume_source import chunkable, open_volume_source
 
     if cfg.chunks.mode == "off":
@@ -48,8 +50,13 @@ def volume_source(cfg: Config, volume_path):
             open_volume_source(volume_path)  # raises the one-line error naming the format
         return None
     inp = cfg.input
-    src, vs, desc = open_volume_source(volume_path, dataset=inp.dataset, shape=tuple(inp.shape) if inp.shape else None,
-                                       dtype=inp.dtype)
+    try:
+        src, vs, desc = open_volume_source(volume_path, dataset=inp.dataset,
+                                           shape=tuple(inp.shape) if inp.shape else None, dtype=inp.dtype)
+    except InputError:
+        if cfg.chunks.mode == "on":
+            raise
+        return None
     if not chunked(cfg, src.shape):
         src.close()
         return None
