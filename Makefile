@@ -64,6 +64,11 @@ bench-segment-large: setup
 bench-large-volume: setup
 	$(PY) -m fiberpipe.benchmarks.bench_large_volume --shape 1000 2000 2000 --slab 32 --block 64
 
+# the pipeline's own stages (fiberpipe run, chunks.mode: on) on the same volume, peak memory per stage
+.PHONY: bench-large-volume-stages
+bench-large-volume-stages: setup
+	$(PY) -m fiberpipe.benchmarks.bench_large_volume --shape 1000 2000 2000 --slab 32 --passes stage-segment stage-skeletonize stage-trace
+
 # the dense-composite family (v_f 0.6, r 2.5-3.5 voxels, CNR 2-3, a cross ply), 10 seeds, fibretracker beside
 .PHONY: bench-dense-phantoms
 bench-dense-phantoms: setup

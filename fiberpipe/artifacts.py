@@ -206,6 +206,32 @@ def write_artifact(
     return Path(path)
 
 
+@contextmanager
+def artifact_writer(path: str | Path, kind: str, *, attrs: dict[str, Any] | None = None, config_sha256: str = "",
+                    inputs: dict[str, str] | None = None) -> Iterator[h5py.File]:
+    """An artifact written piece by piece (a volume larger than memory, slab by slab): yields the
+    open HDF5 file with the root attributes of :func:`write_artifact` set; the caller creates the
+    datasets (each with its ``units`` attribute) and may add attributes. Atomic like
+    :func:`write_artifact`: the file appears under ``path`` only when the block succeeds."""
+    if kind not in SCHEMA_VERSIONS:
+        raise ValueError(f"unknown artifact kind {kind!r}")
+    root = {
+        "kind": kind,
+        "schema_version": SCHEMA_VERSIONS[kind],
+        "fiberpipe_version": __version__,
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "config_sha256": config_sha256,
+        "inputs": json.dumps(inputs or {}, sort_keys=True),
+    }
+    for k, v in (attrs or {}).items():
+        root[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            for k, v in root.items():
+                f.attrs[k] = v
+            yield f
+
+
 def _decode(v):
     if isinstance(v, bytes):
         return v.decode()

@@ -105,6 +105,13 @@ def _load(config):
     return cfg
 
 
+def _with_scheduler(cfg, scheduler):
+    """``--scheduler`` over ``chunks.scheduler`` (where the chunked stages run, not what they compute)."""
+    if scheduler:
+        cfg.chunks.scheduler = scheduler
+    return cfg
+
+
 def _default_out(config) -> Path:
     return Path("runs") / Path(config).stem
 
@@ -115,12 +122,13 @@ def _default_out(config) -> Path:
 @click.option("--from", "from_stage", help="First stage to run.")
 @click.option("--to", "to_stage", help="Last stage to run.")
 @click.option("--force", is_flag=True, help="Rerun stages even when their inputs and settings are unchanged.")
+@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there (chunks.scheduler).")
 @click.pass_context
-def run(ctx, config, out, from_stage, to_stage, force):
+def run(ctx, config, out, from_stage, to_stage, force, scheduler=None):
     """Run the stages CONFIG asks for, skipping those that are up to date."""
     from fiberpipe.pipeline import run_pipeline
 
-    cfg = _load(config)
+    cfg = _with_scheduler(_load(config), scheduler)
     out = Path(out) if out else _default_out(config)
     run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=_echo, progress=_progress())
     _echo(f"run folder: {out}")
@@ -131,14 +139,17 @@ def _stage_command(name: str, doc: str):
     @click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
     @click.option("--force", is_flag=True, help="Rerun even if up to date.")
     @click.pass_context
-    def cmd(ctx, config, out, force):
+    def cmd(ctx, config, out, force, scheduler=None):
         from fiberpipe.pipeline import run_pipeline
 
-        cfg = _load(config)
+        cfg = _with_scheduler(_load(config), scheduler)
         out = Path(out) if out else _default_out(config)
         run_pipeline(cfg, out, from_stage=name, to_stage=name, force=force, echo=_echo, progress=_progress())
 
     cmd.__doc__ = doc + " Reads its inputs from, and writes into, the run folder."
+    if name in ("segment", "skeletonize"):  # the stages that run chunk by chunk
+        cmd = click.option("--scheduler", help="Address of a Dask scheduler for the chunked imaging stages "
+                           "(chunks.scheduler).")(cmd)
     return main.command(name=name)(cmd)
 
 
@@ -177,12 +188,13 @@ _stage_command("post", "Post-process a simulation: curves, energies, plots, repo
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.option("--truth", type=click.Path(dir_okay=False), help="Ground-truth fibers.h5: print the tracing accuracy.")
-def trace(config, out, force, truth):
+@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there (chunks.scheduler).")
+def trace(config, out, force, truth, scheduler=None):
     """Trace one mid-line per fiber from the mask (fibers.h5)."""
     from fiberpipe.pipeline import run_pipeline
     from fiberpipe.stages.trace import trace_accuracy_report
 
-    cfg = _load(config)
+    cfg = _with_scheduler(_load(config), scheduler)
     out = Path(out) if out else _default_out(config)
     run_pipeline(cfg, out, from_stage="trace", to_stage="trace", force=force, echo=_echo, progress=_progress())
     if truth:

@@ -208,6 +208,47 @@ class TraceConfig(Section):
                                                "summary.json, one warning line)")
 
 
+def _memory(value):
+    if value is None:
+        return None
+    from fiberpipe.units import to_bytes
+
+    return to_bytes(value)
+
+
+_memory.dimension = "memory (bytes)"
+Memory = Annotated[float, BeforeValidator(_memory)]
+
+
+def _on_off(value):
+    # YAML 1.1 reads a bare on / off as a boolean
+    return {True: "on", False: "off"}.get(value, value) if isinstance(value, bool) else value
+
+
+class ChunksConfig(Section):
+    """Volumes larger than memory: the segment, skeletonize and trace stages chunk by chunk
+    (docs/imaging.md, "Volumes larger than memory")."""
+
+    mode: Annotated[Literal["auto", "on", "off"], BeforeValidator(_on_off)] = Field(
+        "auto", description="on: segment, skeletonize and trace read and write the volume slab by slab (input.volume "
+        "in HDF5, Zarr, MetaImage, .npy or raw); off: in memory; auto: chunked when the volume's voxels × 16 bytes "
+        "(the in-memory stages' working set) exceed memory_budget")
+    memory_budget: Memory = Field(4e9, description="auto: the memory the in-memory stages may use, e.g. '4 GB', "
+                                  "'16 GiB' (a bare number is bytes)")
+    slices: int = Field(32, ge=1, description="slices per slab (segment, skeletonize) and per block (trace); "
+                        "memory follows slices × Y × X")
+    halo_vox: int = Field(32, ge=1, description="skeletonize: voxels read around each slab and tile, more than "
+                          "the largest fiber radius")
+    scheduler: Optional[str] = Field(None, exclude=True, description="address of a Dask scheduler: slabs and "
+                                     "blocks run on its workers, which read the input files themselves "
+                                     "(`--scheduler`); not part of the stages' cache keys")
+
+    @field_validator("memory_budget")
+    @classmethod
+    def _budget(cls, v):
+        return _positive("chunks.memory_budget", v)
+
+
 class MeshConfig(Section):
     element_length: Length = 0.3e-3
     smooth_sigma: Length = 0.0
@@ -715,6 +756,7 @@ class Config(Section):
     segment: SegmentConfig = Field(default_factory=SegmentConfig)
     skeletonize: SkeletonizeConfig = Field(default_factory=SkeletonizeConfig)
     trace: TraceConfig = Field(default_factory=TraceConfig)
+    chunks: ChunksConfig = Field(default_factory=ChunksConfig)
     mesh: MeshConfig = Field(default_factory=MeshConfig)
     material: MaterialConfig = Field(default_factory=MaterialConfig)
     fiber: FiberConfig = Field(default_factory=FiberConfig)

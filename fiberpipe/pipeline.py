@@ -151,16 +151,16 @@ STAGES: dict[str, Stage] = {
     "input": Stage("input", ("input",), lambda c, d: {}, lambda c, d: [d / "fibers.h5"], _do_input, "fibers",
                    code=("polylines.py", "stages/polylines.py")),
     "segment": Stage(
-        "segment", ("input", "segment"), lambda c, d: {"volume": _volume_path(c, d)}, lambda c, d: [d / "mask.h5"], _do_segment, "mask",
+        "segment", ("input", "segment", "chunks"), lambda c, d: {"volume": _volume_path(c, d)}, lambda c, d: [d / "mask.h5"], _do_segment, "mask",
         code=("imaging", "stages/segment.py")
     ),
     "skeletonize": Stage(
-        "skeletonize", ("skeletonize",), lambda c, d: {"mask": d / "mask.h5"}, lambda c, d: [d / "skeleton.h5"], _do_skeletonize, "skeleton",
+        "skeletonize", ("skeletonize", "chunks"), lambda c, d: {"mask": d / "mask.h5"}, lambda c, d: [d / "skeleton.h5"], _do_skeletonize, "skeleton",
         code=("imaging", "stages/skeletonize.py")
     ),
     "trace": Stage(
         "trace",
-        ("trace", "fiber", "mesh"),
+        ("trace", "fiber", "mesh", "chunks"),
         lambda c, d: {"mask": d / "mask.h5", **({"skeleton": d / "skeleton.h5"} if c.trace.method == "skeleton" or (c.trace.method == "auto" and (d / "skeleton.h5").exists()) else {})},
         lambda c, d: [d / "fibers.h5"],
         _do_trace,

@@ -96,3 +96,33 @@ def to_si(value, dimension: str) -> float:
             f"(e.g. in {SI_UNITS[dimension] or 'no unit'}) is expected"
         )
     return float(q.to(want).magnitude)
+
+
+def to_bytes(value) -> float:
+    """An amount of memory in bytes: a bare number (bytes) or a string such as ``"4 GB"``,
+    ``"512 MB"`` or ``"16 GiB"`` (decimal and binary prefixes, as pint reads them).
+
+    Raises
+    ------
+    ValueError
+        When the string does not parse or is not an amount of bytes (or bits).
+    """
+    if isinstance(value, bool):
+        raise ValueError("expected an amount of memory such as '4 GB', got a boolean")
+    if isinstance(value, (int, float)):
+        return float(value)
+    if not isinstance(value, str):
+        raise ValueError(f"expected an amount of memory such as '4 GB', got {value!r}")
+    try:
+        return float(value)
+    except ValueError:
+        pass
+    reg = ureg()
+    try:
+        q = reg.Quantity(value.strip())
+        unit = str(q.units)
+        if not ("byte" in unit or "bit" in unit):
+            raise ValueError
+        return float(q.to("byte").magnitude)
+    except Exception:  # pint raises several types for bad strings
+        raise ValueError(f"cannot read {value!r} as an amount of memory (e.g. '4 GB', '512 MB', '16 GiB')") from None

@@ -12,6 +12,12 @@ memory (ru_maxrss): ``segment_chunked`` (raw -> lzf HDF5 mask), ``trace_chunked`
 fibers, blocks of ``--block`` slices), ``skeletonize_chunked`` (HDF5 mask -> HDF5 skeleton and
 radius, slabs of ``--slab`` slices with a 32-slice halo). With ``--scheduler`` the trace and
 skeleton passes run their blocks on that Dask cluster.
+
+The passes ``stage-segment``, ``stage-skeletonize`` and ``stage-trace`` run the pipeline's own
+stages on the raw volume (``fiberpipe run`` with ``chunks.mode: on``, ``chunks.slices`` =
+``--slab``, one stage per process, in one run folder), so the figures are those of the artifacts a
+user gets (``mask.h5``, ``skeleton.h5``, ``fibers.h5``): ``--passes stage-segment stage-skeletonize
+stage-trace``.
 """
 
 from __future__ import annotations
@@ -70,6 +76,8 @@ def child(pass_: str, raw: str, shape, slab: int, block: int, d: str, scheduler:
             r = g.create_dataset("radius_vox", shape=tuple(shape), dtype=np.float32, chunks=chunks,
                                  compression="lzf")
             out = skeletonize_chunked(SliceSource(mask_p, "mask"), s, r, slab=slab, halo=32, scheduler=scheduler)
+    elif pass_.startswith("stage-"):
+        out = _stage(pass_[len("stage-"):], raw, shape, slab, Path(d), scheduler)
     else:
         raise SystemExit(f"unknown pass {pass_!r}")
     import resource
@@ -79,6 +87,28 @@ def child(pass_: str, raw: str, shape, slab: int, block: int, d: str, scheduler:
     out.update(wall_s=round(time.perf_counter() - t0, 1), cpu_s=round(ru.ru_utime + ru.ru_stime, 1),
                peak_rss_gb=_peak_gb())
     return out
+
+
+#: Voxel size of the benchmark volume in the stage passes (the fibers' radius is 6 voxels).
+VOXEL_SIZE_M = 10e-6
+
+
+def _stage(name: str, raw: str, shape, slab: int, d: Path, scheduler: str | None) -> dict:
+    """One pipeline stage, chunked, on the raw volume, into ``d/fiberpipe-large-run``."""
+    from fiberpipe.config import validate_config
+    from fiberpipe.pipeline import run_pipeline
+
+    data = {"name": "large-volume", "input": {"volume": raw, "shape": list(shape), "dtype": "uint16",
+                                              "voxel_size": VOXEL_SIZE_M},
+            "chunks": {"mode": "on", "slices": slab},
+            "trace": {"expected_radius": 6 * VOXEL_SIZE_M, "min_length": 0.0, "pictures": False,
+                      "method": "slices"}}
+    cfg = validate_config(data, where="bench_large_volume")
+    cfg.chunks.scheduler = scheduler
+    fig = run_pipeline(cfg, d / "fiberpipe-large-run", from_stage=name, to_stage=name, force=True).stages[name]
+    keep = {"segment": ("volume_fraction",), "skeletonize": ("skeleton_voxels", "median_radius_vox"),
+            "trace": ("fibers", "mean_length_m", "slicing_axis")}[name]
+    return {k: fig[k] for k in keep if k in fig}
 
 
 def main(argv=None) -> None:
@@ -121,6 +151,9 @@ def main(argv=None) -> None:
     if not a.keep:
         for q in (raw, a.dir / "fiberpipe-large-mask.h5", a.dir / "fiberpipe-large-skeleton.h5"):
             q.unlink(missing_ok=True)
+        import shutil
+
+        shutil.rmtree(a.dir / "fiberpipe-large-run", ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -170,14 +170,32 @@ def axis_regions(mask: np.ndarray, voxel_size_m=1.0, *, grey: np.ndarray | None 
         Share of the mask's voxels in each class.
     """
     v = voxel_size_zyx(voxel_size_m)
+    labels = np.full(mask.shape, 255, dtype=np.uint8)
+    n_mask = int(np.count_nonzero(mask))
+    classes = _axis_classes(mask, v, grey, radius_vox, max_voxels) if n_mask else None
+    if classes is None:
+        labels[mask] = 0
+        return labels, np.array([1.0, 0.0, 0.0])
+    cls, _, st = classes
+    # expand the sample grid back to the full grid: sample i covers voxels i*st - st/2 .. i*st + st/2
+    idx = [np.clip(np.rint(np.arange(n) / s).astype(np.int64), 0, cls.shape[a] - 1)
+           for a, (n, s) in enumerate(zip(mask.shape, st))]
+    for k in range(mask.shape[0]):  # one slice at a time: no full-size index arrays
+        lab = cls[idx[0][k]][np.ix_(idx[1], idx[2])]
+        labels[k][mask[k]] = lab[mask[k]]
+    counts = np.bincount(labels[labels < 3].ravel(), minlength=3)[:3].astype(np.float64)
+    return labels, counts / max(1.0, counts.sum())
+
+
+def _axis_classes(mask, v: np.ndarray, grey, radius_vox, max_voxels: int):
+    """The volume axis of the smallest structure-tensor diagonal term at every sample of a strided
+    subsample (see :func:`axis_regions`): (classes, the mask's subsample, strides), or None when
+    the subsample is too thin."""
     step = max(1, int(np.ceil((mask.size / float(max_voxels)) ** (1.0 / 3.0))))
     sub, scale, r = _subsample(mask, v, step)
     st = [max(1, min(step, (n - 1) // 2)) for n in mask.shape]
-    labels = np.full(mask.shape, 255, dtype=np.uint8)
-    n_mask = int(np.count_nonzero(mask))
-    if min(sub.shape) < 3 or n_mask == 0:
-        labels[mask] = 0
-        return labels, np.array([1.0, 0.0, 0.0])
+    if min(sub.shape) < 3:
+        return None
     rho = float(np.clip(r, 1.0, 6.0))
     src = sub if grey is None else grey[::st[0], ::st[1], ::st[2]]
     f = ndi.gaussian_filter(src.astype(np.float32), 1.0)
@@ -188,13 +206,16 @@ def axis_regions(mask: np.ndarray, voxel_size_m=1.0, *, grey: np.ndarray | None 
     win = 2.0 * rho if grey is None or radius_vox is None else max(1.0, float(radius_vox) / step)
     D = np.stack([ndi.gaussian_filter(g[a] * g[a], win / scale, truncate=2.0) for a in range(3)])
     del g
-    cls = np.argmin(D, axis=0).astype(np.uint8)
-    del D
-    # expand the sample grid back to the full grid: sample i covers voxels i*st - st/2 .. i*st + st/2
-    idx = [np.clip(np.rint(np.arange(n) / s).astype(np.int64), 0, cls.shape[a] - 1)
-           for a, (n, s) in enumerate(zip(mask.shape, st))]
-    for k in range(mask.shape[0]):  # one slice at a time: no full-size index arrays
-        lab = cls[idx[0][k]][np.ix_(idx[1], idx[2])]
-        labels[k][mask[k]] = lab[mask[k]]
-    counts = np.bincount(labels[labels < 3].ravel(), minlength=3)[:3].astype(np.float64)
-    return labels, counts / max(1.0, counts.sum())
+    return np.argmin(D, axis=0).astype(np.uint8), sub, st
+
+
+def axis_fractions(mask, voxel_size_m=1.0, *, max_voxels: int = 2_000_000) -> np.ndarray:
+    """Share of the fiber volume running along each volume axis (z y x), measured on the strided
+    subsample of :func:`axis_regions` only (no full-size labels: a mask on disk is sampled, not
+    read)."""
+    classes = _axis_classes(mask, voxel_size_zyx(voxel_size_m), None, None, max_voxels)
+    if classes is None:
+        return np.array([1.0, 0.0, 0.0])
+    cls, sub, _ = classes
+    counts = np.bincount(cls[sub.astype(bool)].ravel(), minlength=3)[:3].astype(np.float64)
+    return counts / max(1.0, counts.sum())

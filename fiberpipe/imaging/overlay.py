@@ -60,7 +60,8 @@ def slice_overlay_png(path, mask: np.ndarray, fibers: Polylines, voxel_size_m, *
     matched_true = {m[1] for m in matches} if matches is not None else None
     cmap = plt.get_cmap("tab10")
     for ax, k in zip(axes[0], ks):
-        ax.imshow(np.take(mask, k, axis=axis), cmap="gray", interpolation="nearest", vmin=0, vmax=1.6)
+        # an index, not np.take: a mask on disk (h5py dataset) reads one slice
+        ax.imshow(np.asarray(mask[(slice(None),) * axis + (k,)]), cmap="gray", interpolation="nearest", vmin=0, vmax=1.6)
         P, ids = crossings(fibers, axis, k, v)
         if len(P):
             r_pix = fibers.radius_m[ids, None] / v[other][None, :]  # radius in pixels along rows, columns

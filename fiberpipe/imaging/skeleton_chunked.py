@@ -81,7 +81,7 @@ def skeletonize_chunked(src, out_skeleton, out_radius, *, slab: int = 64, halo: 
     InputError
         When a radius reaches the halo (the EDT there would not be exact): raise ``halo``.
     """
-    from .trace_chunked import _client
+    from ._dask import _client
 
     arr = src.open() if hasattr(src, "open") else src
     n = int(arr.shape[0])

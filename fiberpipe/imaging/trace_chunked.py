@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
+from ._dask import _client
 from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, track_slices
 
 
@@ -28,13 +29,15 @@ class SliceSource:
 
     ``SliceSource(path.h5, "mask")`` (HDF5 dataset), ``SliceSource(path.zarr)`` or
     ``SliceSource(path.zarr, "name")`` (Zarr array or an array of a group), ``SliceSource(path.raw,
-    shape=(z, y, x), dtype="uint16")`` (headerless raw, C order). The file is opened on first use
-    in each process (Dask workers get the path, not an open handle).
+    shape=(z, y, x), dtype="uint16")`` (headerless raw, C order; ``offset``: bytes before the
+    voxels, as in a MetaImage or ``.npy`` file). The file is opened on first use in each process
+    (Dask workers get the path, not an open handle).
     """
 
-    def __init__(self, path, dataset: str | None = None, *, shape=None, dtype=None):
+    def __init__(self, path, dataset: str | None = None, *, shape=None, dtype=None, offset: int = 0):
         self.path, self.dataset = str(path), dataset
         self.shape_raw, self.dtype = (tuple(int(s) for s in shape) if shape is not None else None), dtype
+        self.offset = int(offset)
         self._arr = None
 
     def __getstate__(self):
@@ -51,7 +54,7 @@ class SliceSource:
         if self.shape_raw is not None:
             from .segment_chunked import RawSlabs
 
-            self._arr = RawSlabs(p, self.shape_raw, self.dtype or "uint8")
+            self._arr = RawSlabs(p, self.shape_raw, self.dtype or "uint8", offset=self.offset)
         elif p.suffix.lower() in (".h5", ".hdf5", ".hdf", ".nxs"):
             import h5py
 
@@ -72,26 +75,71 @@ class SliceSource:
     def shape(self):
         return tuple(self.open().shape)
 
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def chunks(self):
+        return getattr(self.open(), "chunks", None)
+
+    def close(self) -> None:
+        f = getattr(self._arr, "file", None)
+        if f is not None and hasattr(f, "close"):
+            f.close()
+        self._arr = None
+
     def __getitem__(self, k):
         return self.open()[k]
 
 
-class _Block:
-    """Slices ``b0 .. b1 - 1`` of an array as the (N, H, W) input of :func:`track_slices`, read
-    ``read_ahead`` slices at a time (a chunked store decompresses each chunk once, not once per
-    slice; RawSlabs reads slabs only)."""
+class StridedSample:
+    """A 3D array on disk as seen by the orientation measures: ``shape``, ``size``, ``ndim`` and
+    strided boxes ``[::a, ::b, ::c]`` read one sampled slice at a time (no whole-volume read)."""
 
-    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int = 16):
-        self.arr, self.b0, self.b1, self.dtype, self.ahead = arr, int(b0), int(b1), dtype, int(read_ahead)
-        self.shape = (int(b1) - int(b0),) + tuple(arr.shape[1:])
+    def __init__(self, arr):
+        self.arr = arr
+        self.shape = tuple(int(n) for n in arr.shape)
+        self.size = int(np.prod(self.shape))
+        self.ndim = 3
+        self.dtype = np.dtype(bool)
+
+    def __getitem__(self, key):
+        if not (isinstance(key, tuple) and len(key) == 3 and all(isinstance(k, slice) for k in key)):
+            raise TypeError("StridedSample reads strided boxes [a:b:s, ...] only")
+        ks = range(*key[0].indices(self.shape[0]))
+        rows = [np.asarray(self.arr[k])[key[1], key[2]] for k in ks]
+        return np.stack(rows).astype(bool, copy=False)
+
+
+class _Block:
+    """Slices ``b0 .. b1 - 1`` across ``axis`` of an array as the (N, H, W) input of
+    :func:`track_slices` (the other two axes in their order, as the in-memory tracer's transpose),
+    read ``read_ahead`` slices at a time (a chunked store decompresses each chunk once, not once
+    per slice; by default 16 along axis 0, across it the store's chunk extent up to 128)."""
+
+    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int | None = None, axis: int = 0):
+        self.arr, self.b0, self.b1, self.dtype, self.axis = arr, int(b0), int(b1), dtype, int(axis)
+        if read_ahead is None:
+            chunks = getattr(arr, "chunks", None)
+            read_ahead = 16 if self.axis == 0 or not chunks else min(128, max(16, int(chunks[self.axis])))
+        self.ahead = int(read_ahead)
+        rest = [n for i, n in enumerate(arr.shape) if i != self.axis]
+        self.shape = (int(b1) - int(b0),) + tuple(int(n) for n in rest)
         self._lo, self._buf = -1, None
+
+    def _read(self, lo: int, hi: int) -> np.ndarray:
+        if self.axis == 0:
+            return np.asarray(self.arr[lo:hi])
+        box = (slice(None),) * self.axis + (slice(lo, hi),)
+        return np.moveaxis(np.asarray(self.arr[box]), self.axis, 0)
 
     def __getitem__(self, k):
         i = self.b0 + int(k)
         if self._buf is None or not (self._lo <= i < self._lo + len(self._buf)):
             # the slices tracer's grey path also reads a few slices back: keep them in the window
             lo = max(self.b0, i - 6) if self.dtype is not bool else i
-            self._lo, self._buf = lo, np.asarray(self.arr[lo:min(self.b1, lo + self.ahead)])
+            self._lo, self._buf = lo, self._read(lo, min(self.b1, lo + self.ahead))
         a = self._buf[i - self._lo]
         return a.astype(bool, copy=False) if self.dtype is bool else a
 
@@ -103,38 +151,27 @@ class _Piece:
         self.k, self.p, self.r = k, p, r
 
 
-def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict):
-    """Track one block of slices; the pieces in compact arrays (slice indices global)."""
+def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, axis: int = 0):
+    """Track one block of slices across ``axis``; the pieces in compact arrays (slice indices global)."""
     arr = src.open() if hasattr(src, "open") else src
-    block = _Block(arr, b0, b1)
+    block = _Block(arr, b0, b1, axis=axis)
     grey_t = None
     if grey_src is not None:
         g = grey_src.open() if hasattr(grey_src, "open") else grey_src
-        grey_t = _GreySlices(_Block(g, b0, b1, dtype=None), block, samp)
+        grey_t = _GreySlices(_Block(g, b0, b1, dtype=None, axis=axis), block, samp)
     tracks, n_det = track_slices(block, r, samp, grey_t=grey_t, **params)
     return [(np.asarray(t.k, dtype=np.int32) + b0, np.asarray(t.p, dtype=np.float32),
              np.asarray(t.r, dtype=np.float32)) for t in tracks], n_det
-
-
-def _client(scheduler):
-    if scheduler is None:
-        return None
-    if hasattr(scheduler, "submit"):
-        return scheduler
-    try:
-        from dask.distributed import Client
-    except ImportError as exc:  # pragma: no cover - optional extra
-        raise InputError("a Dask scheduler needs dask.distributed: pip install 'fiberpipe[dask]'") from exc
-    return Client(scheduler)
 
 
 def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, block: int = 128,
                   scheduler=None, grey=None, max_jump_vox: float | None = None, max_skip: int = 3,
                   momentum: float = 0.5, min_length_vox: float | None = None, merge_gap_vox: int | None = None,
                   smooth_sigma_vox: float | None = None, spacing_vox: float = 1.0, peak_threshold: float = 0.5,
-                  refine: bool = True, progress=None) -> Polylines:
+                  refine: bool = True, progress=None, axis: int | str = "auto", join: dict | None = None) -> Polylines:
     """The slices tracer (:func:`fiberpipe.imaging.trace.trace_slices`) on a mask read slice by
-    slice along axis 0, in blocks of ``block`` slices.
+    slice across ``axis`` (the fibers' axis; 0 reads slabs of the storage order, 1 or 2 boxes
+    across it), in blocks of ``block`` slices.
 
     Parameters
     ----------
@@ -152,9 +189,15 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         The grey volume, for detection on grey (see :func:`fiberpipe.imaging.trace.detect_slice`).
     max_jump_vox, max_skip, momentum, min_length_vox, merge_gap_vox, smooth_sigma_vox, spacing_vox,
     peak_threshold, refine
-        As :func:`fiberpipe.imaging.trace.trace`; fibers must run within ~45 degrees of axis 0
-        (the slicing axis is the storage's slab axis; no reorientation, no region split).
+        As :func:`fiberpipe.imaging.trace.trace`; fibers must run within ~45 degrees of ``axis``
+        (one slicing axis: no region split).
     progress : callable(done_blocks, total_blocks), optional
+    axis : int or "auto"
+        The slicing axis (0, 1 or 2); ``"auto"``: the volume axis nearest the dominant fiber
+        direction of :func:`fiberpipe.imaging.orientation.mask_orientation` on a strided sample
+        (read a sampled slice at a time; axis 0 when the sample is too thin to tell).
+    join : dict, optional
+        ``join_gap_vox``, ``join_offset_vox``, ``join_angle_deg`` of :func:`fiberpipe.imaging.trace.trace`.
 
     Returns
     -------
@@ -169,11 +212,21 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     if int(block) < 1:
         raise InputError(f"trace: block must be at least 1 slice, got {block!r}")
     v = voxel_size_zyx(voxel_size_m)
-    samp = v[1:] / v[1:].min()
+    if axis == "auto":
+        from .orientation import mask_orientation
+
+        o = mask_orientation(StridedSample(arr), v)
+        axis = {"z": 0, "y": 1, "x": 2}[o["nearest_volume_axis"]] if o.get("n_samples") else 0
+    if axis not in (0, 1, 2):
+        raise InputError(f"trace: axis must be 0, 1, 2 or 'auto', got {axis!r}")
+    axis = int(axis)
+    perm = (axis,) + tuple(i for i in range(3) if i != axis)
+    vt = v[list(perm)]
+    samp = vt[1:] / vt[1:].min()
     if expected_radius_m is not None:
-        r = float(expected_radius_m) / v[1:].min()
+        r = float(expected_radius_m) / vt[1:].min()
     else:
-        r = estimate_radius_vox(_Block(arr, 0, shape[0]), samp)
+        r = estimate_radius_vox(_Block(arr, 0, shape[axis], axis=axis, read_ahead=1), samp)  # 16 spread slices
     min_distance = max(1, int(round((0.75 if grey is not None else 0.5) * r)))
     max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
     min_length_vox = max(10.0, 3.0 * r) if min_length_vox is None else min_length_vox
@@ -181,30 +234,31 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     smooth_sigma_vox = max(1.0, 0.5 * r) if smooth_sigma_vox is None else smooth_sigma_vox
     params = dict(min_distance=min_distance, peak_threshold=peak_threshold, max_jump=max_jump,
                   max_skip=max_skip, momentum=momentum, refine=refine)
-    edges = list(range(0, shape[0], int(block))) + [shape[0]]
+    edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
     client = _client(scheduler)
     results = []
     if client is None:
         for i, (b0, b1) in enumerate(jobs):
-            results.append(_track_block(src, grey, b0, b1, r, samp, params))
+            results.append(_track_block(src, grey, b0, b1, r, samp, params, axis))
             if progress is not None:
                 progress(i + 1, len(jobs))
     else:
-        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, pure=False) for b0, b1 in jobs]
+        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, axis, pure=False) for b0, b1 in jobs]
         results = client.gather(futures)
     t_track = time.perf_counter() - t0
     raw = [_Piece(k, p.astype(np.float64), rr) for res, _ in results for k, p, rr in res]
     n_det = int(sum(n for _, n in results))
     del results
-    out, n_merged = finish_tracks(raw, v, (0, 1, 2), r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
+    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
                                   min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
                                   spacing_vox=spacing_vox)
-    out.meta.update(method="slices", axis=0, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
+    out.meta.update(method="slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,
                     params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
                                 min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
                                 smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
                                 peak_threshold=peak_threshold, min_distance_vox=min_distance))
-    return _join(out, voxel_size_m)
+    return _join(out, voxel_size_m, **(join or {}))
+

@@ -27,9 +27,13 @@ def run_trace(
     config_sha256: str = "",
     volume_path: Path | None = None,
 ) -> dict:
-    from fiberpipe.imaging.orientation import fiber_orientation
     from fiberpipe.imaging.trace import trace
+    from fiberpipe.stages._chunks import chunked
+    from fiberpipe.stages.skeletonize import mask_shape
 
+    if chunked(cfg, mask_shape(mask_path)):
+        return run_trace_chunked(cfg, mask_path, out, truth_path=truth_path, config_sha256=config_sha256,
+                                 volume_path=volume_path)
     art = read_artifact(mask_path, "mask")
     mask = art["mask"]
     voxel_size = eval_list(art.attrs["voxel_size_m"])
@@ -62,6 +66,18 @@ def run_trace(
                     "lying in the slices): %s (%d fibers); trace.off_axis: %s", 100 * info["volume_fraction"],
                     ax, info["action"], info["fibers"], "drop leaves it out" if t.off_axis == "trace"
                     else "trace follows it")
+    return finish_trace(cfg, fibers, method, orient_mask, off_axis, inputs, out, mask, voxel_size,
+                        truth_path=truth_path, config_sha256=config_sha256)
+
+
+def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: dict, inputs: dict, out: Path, mask,
+                 voxel_size, *, truth_path: Path | None = None, config_sha256: str = "") -> dict:
+    """What the trace stage does after tracing, in memory or chunked: folds cut, short fibers
+    dropped, ``fibers.h5``, ``orientation.json``, the accuracy against ground truth, the pictures
+    (``mask``: an array or a dataset on disk, read three slices), the figures."""
+    from fiberpipe.imaging.orientation import fiber_orientation
+
+    t = cfg.trace
     fibers, folds = split_folds_for_mesh(cfg, fibers)
     fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
@@ -191,3 +207,83 @@ def trace_accuracy_report(fibers_path: Path, truth_path: Path, voxel_size_m: flo
     if out_json is not None:
         write_text_atomic(out_json, json.dumps(acc, indent=2, default=float))
     return acc
+
+
+def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Path | None = None,
+                      config_sha256: str = "", volume_path: Path | None = None) -> dict:
+    """The trace stage block by block (``chunks``): the orientation measured on a strided sample of
+    ``mask.h5`` (read a sampled slice at a time), then the slices tracer
+    (:func:`fiberpipe.imaging.trace_chunked.trace_chunked`) in blocks of ``chunks.slices`` slices
+    across the volume axis nearest the fibers' direction, on a Dask cluster when
+    ``chunks.scheduler`` is set; the same artifacts as the in-memory path.
+
+    The skeleton tracer needs the whole skeleton and is refused; fibers along a second volume axis
+    (a cross ply) are not split off as ``trace.off_axis`` does in memory: one warning line."""
+    from fiberpipe.artifacts import open_checked
+    from fiberpipe.imaging.orientation import axis_fractions
+    from fiberpipe.imaging._dask import connect
+    from fiberpipe.imaging.trace_chunked import SliceSource, StridedSample, trace_chunked
+
+    t = cfg.trace
+    with open_checked(mask_path, "mask") as f:
+        voxel_size = eval_list(f.attrs["voxel_size_m"])
+    src = SliceSource(mask_path, "mask")
+    sample = StridedSample(src.open())
+    method, orient_mask = choose_method(cfg, sample, voxel_size)
+    if method == "skeleton":
+        frac = 100 * float(orient_mask.get("aligned_fraction_45deg", 0.0))
+        why = ("trace.method is skeleton" if t.method == "skeleton" else
+               f"only {frac:.0f} % of the fiber volume runs within 45 deg of one volume axis, so trace.method auto "
+               "picks the skeleton tracer")
+        raise InputError(f"{why}, which holds the whole skeleton in memory; the chunked trace stage runs the slices "
+                         "tracer only: set trace.method: slices, or chunks.mode: off", where=str(mask_path))
+    axis = {"z": 0, "y": 1, "x": 2}.get(orient_mask.get("nearest_volume_axis"), 0) if orient_mask.get("n_samples") else 0
+    off_axis = {}
+    fr = axis_fractions(sample, voxel_size)
+    for b in (b for b in range(3) if b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION):
+        off_axis["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": 0, "action": "not traced (chunked)"}
+        log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis %s (a cross ply or a "
+                    "tow lying in the slices); the chunked tracer follows %s only: chunks.mode: off traces it "
+                    "region by region (trace.off_axis)", 100 * fr[b], "zyx"[b], "zyx"[axis], "zyx"[axis])
+    grey, inputs = None, {"mask": Path(mask_path)}
+    if t.grey and volume_path is not None:
+        grey = grey_source(cfg, volume_path, src.shape)
+        inputs["volume"] = Path(volume_path)
+    opts = {k: getattr(t, k) for k in ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox")
+            if getattr(t, k) is not None}
+    join = {"join_gap_vox": t.join_gap_vox} if t.join_gap_vox is not None else {}
+    with connect(cfg.chunks.scheduler) as client:
+        fibers = trace_chunked(src, voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
+                               expected_radius_m=t.expected_radius or cfg.fiber.radius, block=cfg.chunks.slices,
+                               scheduler=client, grey=grey, axis=axis, join=join, **opts)
+    fibers.meta["off_axis"] = off_axis
+    try:
+        figures = finish_trace(cfg, fibers, method, orient_mask, off_axis, inputs, out, src.open(), voxel_size,
+                               truth_path=truth_path, config_sha256=config_sha256)
+    finally:
+        src.close()
+        if grey is not None:
+            grey.close()
+    figures.update(chunked=True, slicing_axis="zyx"[axis], blocks=int(fibers.meta.get("blocks", 0)))
+    return figures
+
+
+#: Share of the fiber volume along a second volume axis above which the chunked trace stage warns
+#: (the in-memory tracer's ``off_axis_min_fraction``).
+OFF_AXIS_MIN_FRACTION = 0.02
+
+
+def grey_source(cfg: Config, volume_path: Path, shape):
+    """The input volume as a slab-by-slab source (``trace.grey``, chunked), checked against the mask's shape."""
+    from fiberpipe.imaging.volume_source import chunkable, open_volume_source
+
+    if not chunkable(volume_path):
+        raise InputError("trace.grey reads the input volume again, slab by slab when chunked, and this format is "
+                         "read whole: convert it to HDF5 or Zarr, or set trace.grey: false", where=str(volume_path))
+    inp = cfg.input
+    src, _, _ = open_volume_source(volume_path, dataset=inp.dataset, shape=tuple(inp.shape) if inp.shape else None,
+                                   dtype=inp.dtype)
+    if tuple(src.shape) != tuple(shape):
+        raise InputError(f"trace.grey: the volume {volume_path} has shape {tuple(src.shape)}, the mask {tuple(shape)}",
+                         where=str(volume_path))
+    return src

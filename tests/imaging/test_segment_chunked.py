@@ -42,3 +42,22 @@ def test_slab_segmentation_into_hdf5(tmp_path):
         ds = f.create_dataset("mask", shape=vol.shape, dtype=bool, chunks=(8, 48, 48), compression="lzf")
         segment_chunked(vol, ds, slab=9)
         assert np.array_equal(ds[()], ref)
+
+
+def test_slabs_on_a_dask_cluster_give_the_one_process_mask(tmp_path):
+    """The slabs on a local two-worker Dask cluster (workers read the .npy file themselves): the
+    mask equals the whole-volume segment's voxel for voxel, cavity, shell and specks included."""
+    distributed = pytest.importorskip("dask.distributed")
+    from fiberpipe.imaging.volume_source import open_volume_source
+
+    vol = _volume().astype(np.float32)
+    np.save(tmp_path / "v.npy", vol)
+    ref, info = segment(vol, min_object_vox=30)
+    src, _, _ = open_volume_source(tmp_path / "v.npy")
+    out = np.zeros(vol.shape, dtype=bool)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+        with distributed.Client(c) as client:
+            got = segment_chunked(src, out, slab=13, min_object_vox=30, scheduler=client)
+    assert np.array_equal(out, ref), int((out != ref).sum())
+    assert got["threshold"] == pytest.approx(info["threshold"], rel=1e-6)
+    assert got["n_components"] == info["n_components"]

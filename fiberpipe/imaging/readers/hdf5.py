@@ -105,39 +105,57 @@ def _read_data(ds, dataset: str, where: str) -> np.ndarray:
     return read_whole(ds, f"dataset {dataset!r}", where)
 
 
-def read(path: Path, *, dataset: str | None = None, **_):
+def _locate(h5, dataset: str | None, where: str):
+    """The dataset to read in an open file (named, the NeXus default signal, or the only 3D one)
+    and its voxel size (or None)."""
+    kind = _text(h5.attrs.get("kind"))
+    if dataset is None and isinstance(kind, str) and kind not in _IMAGE_KINDS:
+        raise InputError(
+            f"is a fiberpipe {kind} artifact, not a volume; input.volume takes a CT volume (TIFF, folder "
+            f"of slices, .npy, HDF5 image, raw)" + (", and input.fibers a fibers artifact" if kind == "fibers" else ""),
+            where=where)
+    if dataset is None:
+        names = _find_3d_datasets(h5)
+        if len(names) != 1:
+            sig = _nexus_signal(h5)
+            if sig is not None:
+                names = [sig]
+        if len(names) != 1:
+            what = "no 3D dataset" if not names else f"several 3D datasets {names}"
+            raise InputError(f"{what}; give the dataset name", where=where)
+        dataset = names[0]
+    if dataset not in h5:
+        raise InputError(f"no dataset {dataset!r}", where=where)
+    try:
+        vs = _voxel_size(h5[dataset])
+    except (ValueError, TypeError):  # an unreadable attribute is no voxel size (give voxel_size)
+        vs = None
+    return dataset, vs
+
+
+def _open(path: Path):
     import h5py
 
-    where = str(path)
     try:
-        h5 = h5py.File(path, "r")
+        return h5py.File(path, "r")
     except OSError as exc:
-        raise InputError(f"cannot open HDF5 file ({why(exc)}); not HDF5 or truncated", where=where) from None
-    with h5:
-        kind = _text(h5.attrs.get("kind"))
-        if dataset is None and isinstance(kind, str) and kind not in _IMAGE_KINDS:
-            raise InputError(
-                f"is a fiberpipe {kind} artifact, not a volume; input.volume takes a CT volume (TIFF, folder "
-                f"of slices, .npy, HDF5 image, raw)" + (", and input.fibers a fibers artifact" if kind == "fibers" else ""),
-                where=where)
-        if dataset is None:
-            names = _find_3d_datasets(h5)
-            if len(names) != 1:
-                sig = _nexus_signal(h5)
-                if sig is not None:
-                    names = [sig]
-            if len(names) != 1:
-                what = "no 3D dataset" if not names else f"several 3D datasets {names}"
-                raise InputError(f"{what}; give the dataset name", where=where)
-            dataset = names[0]
-        if dataset not in h5:
-            raise InputError(f"no dataset {dataset!r}", where=where)
-        ds = h5[dataset]
-        try:
-            vs = _voxel_size(ds)
-        except (ValueError, TypeError):  # an unreadable attribute is no voxel size (give voxel_size)
-            vs = None
-        vol = _read_data(ds, dataset, where)
+        raise InputError(f"cannot open HDF5 file ({why(exc)}); not HDF5 or truncated", where=str(path)) from None
+
+
+def locate(path: Path, *, dataset: str | None = None):
+    """(dataset name, voxel size or None, shape, dtype) without reading the data: the input of
+    the chunked stages."""
+    with _open(path) as h5:
+        name, vs = _locate(h5, dataset, str(path))
+        ds = h5[name]
+        return name, vs, tuple(ds.shape), ds.dtype
+
+
+def read(path: Path, *, dataset: str | None = None, **_):
+    where = str(path)
+    with _open(path) as h5:
+        dataset, vs = _locate(h5, dataset, where)
+        vol = _read_data(h5[dataset], dataset, where)
     return vol, vs, f"hdf5:{path}:{dataset}"
 
 

@@ -48,7 +48,10 @@ def _true(v) -> bool:
     return str(v).strip().lower() in ("true", "1", "yes")
 
 
-def read(path: Path, **_):
+def layout(path: Path) -> dict:
+    """Where and how the voxels are stored, from the header, checked against the data file's
+    size: ``data`` (file), ``start`` (byte offset), ``shape`` (z y x), ``dtype``, ``compressed``,
+    ``voxel_size_m`` (z y x, or None). The chunked stages read an uncompressed file slab by slab."""
     where = str(path)
     h, offset = read_header(path)
     try:
@@ -78,7 +81,33 @@ def read(path: Path, **_):
         if not data.exists():
             raise InputError(f"MetaImage data file {src} (ElementDataFile) does not exist", where=where)
     size = data.stat().st_size - start
-    if _true(h.get("CompressedData", "False")):
+    compressed = _true(h.get("CompressedData", "False"))
+    if not compressed:
+        hs = int(h.get("HeaderSize", "0"))
+        if hs == -1:  # the data are the last bytes of the file
+            start, size = start + size - need, need
+        elif hs > 0:
+            start, size = start + hs, size - hs
+        if size != need:
+            raise InputError(f"MetaImage header DimSize {' '.join(map(str, dims))} of {et} needs {need} bytes, "
+                             f"{data.name} holds {size}", where=where)
+    vs = None
+    spacing = h.get("ElementSpacing", h.get("ElementSize"))
+    if spacing:
+        try:
+            sx, sy, sz = (float(x) for x in spacing.split())
+            vs = np.array([sz, sy, sx]) * 1e-3
+        except ValueError:
+            vs = None
+    return {"data": data, "start": start, "shape": shape, "dtype": dtype, "compressed": compressed,
+            "voxel_size_m": vs, "dims": dims, "element_type": et, "bytes": need}
+
+
+def read(path: Path, **_):
+    where = str(path)
+    lay = layout(path)
+    data, start, shape, dtype, need = lay["data"], lay["start"], lay["shape"], lay["dtype"], lay["bytes"]
+    if lay["compressed"]:
         with open(data, "rb") as f:
             f.seek(start)
             blob = f.read()
@@ -88,30 +117,14 @@ def read(path: Path, **_):
             raise InputError(f"MetaImage compressed data {data.name} are unreadable ({why(exc)}); truncated or damaged",
                              where=where) from None
         if len(buf) != need:
-            raise InputError(f"MetaImage header DimSize {' '.join(map(str, dims))} of {et} needs {need} bytes, the "
-                             f"compressed data hold {len(buf)}", where=where)
+            raise InputError(f"MetaImage header DimSize {' '.join(map(str, lay['dims']))} of {lay['element_type']} "
+                             f"needs {need} bytes, the compressed data hold {len(buf)}", where=where)
         vol = np.frombuffer(buf, dtype=dtype).reshape(shape)
     else:
-        hs = int(h.get("HeaderSize", "0"))
-        if hs == -1:  # the data are the last bytes of the file
-            start, size = start + size - need, need
-        elif hs > 0:
-            start, size = start + hs, size - hs
-        if size != need:
-            raise InputError(f"MetaImage header DimSize {' '.join(map(str, dims))} of {et} needs {need} bytes, "
-                             f"{data.name} holds {size}", where=where)
         vol = np.memmap(data, dtype=dtype, mode="r", offset=start, shape=shape)
-    vs = None
-    spacing = h.get("ElementSpacing", h.get("ElementSize"))
-    if spacing:
-        try:
-            sx, sy, sz = (float(x) for x in spacing.split())
-            vs = np.array([sz, sy, sx]) * 1e-3
-        except ValueError:
-            vs = None
     if not dtype.isnative:
         vol = vol.astype(dtype.newbyteorder("="))
-    return vol, vs, f"metaimage:{path}"
+    return vol, lay["voxel_size_m"], f"metaimage:{path}"
 
 
 register("metaimage", (".mhd", ".mha"), read)

@@ -50,7 +50,8 @@ def _arrays(group, prefix=""):
     return out
 
 
-def read(path: Path, *, dataset: str | None = None, **_):
+def _locate(path: Path, dataset: str | None):
+    """(array, its name in the store, voxel size or None) without reading the data."""
     where = str(path)
     zarr = need("zarr", "Zarr", where)
     try:
@@ -84,7 +85,19 @@ def read(path: Path, *, dataset: str | None = None, **_):
             vs = attrs_voxel_size(dict(arr.attrs))
         except (ValueError, TypeError):
             vs = None
-    vol = read_whole(arr, f"Zarr array {name or '/'!r}", where)
+    return arr, name, vs
+
+
+def locate(path: Path, *, dataset: str | None = None):
+    """(array name or None for a plain array, voxel size or None, shape, dtype) without reading
+    the data: the input of the chunked stages."""
+    arr, name, vs = _locate(path, dataset)
+    return name or None, vs, tuple(arr.shape), np.dtype(arr.dtype)
+
+
+def read(path: Path, *, dataset: str | None = None, **_):
+    arr, name, vs = _locate(path, dataset)
+    vol = read_whole(arr, f"Zarr array {name or '/'!r}", str(path))
     return np.asarray(vol), vs, f"zarr:{path}" + (f":{name}" if name else "")
 
 
