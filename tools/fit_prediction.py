@@ -10,7 +10,8 @@ study's parallel model (Φ = 0) and its oblique model (Φ = 6°), the laws of
 ``configs/paper-40/parallel.yaml`` and ``configs/paper-40/oblique-6.yaml``. Nothing is fitted
 here. The seed the fit ran with, at the fitted spool radius, is the fit's best evaluation: that
 specimen and its orientation-aware run are taken from ``--fit`` instead of being run again (they
-are the same inputs; the reuse is checked on the spool radius and the seed).
+are the same inputs; the reuse needs the config's spool radius to equal the fit's best in SI, bit for
+bit, and the fit to have run one seed).
 
 Writes ``OUT/prediction.csv`` (one row per law and seed: final and peak load, phase boundaries,
 v_f0 → v_f, contacts per fiber), ``OUT/prediction.json`` (each law's final load over the seeds:
@@ -120,7 +121,7 @@ def main(argv=None):
     fit_run = None
     if fit is not None:
         best = fit["best"].get("specimen.bow.spool_radius")
-        if best is not None and abs(best - radius) <= 1e-9 * radius and len(fit["seeds"]) == 1:
+        if best == radius and len(fit["seeds"]) == 1:  # the same inputs, bit for bit
             fit_run = (int(fit["seeds"][0]), fit_dir / "evaluations" / fit["best_runs"][0])
     rows = []
     for seed in a.seeds:
@@ -190,29 +191,25 @@ def write_doc(page: Path, fit: dict, fit_dir: Path, summary: dict, rows: list[di
 
     img = page.parent / "img"
     img.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(fit_dir / "fit.png", img / "paper40_fit.png")
+    plot_fit(fit_dir, fit, out)
+    shutil.copyfile(out / "fit_evaluations.png", img / "paper40_fit.png")
     shutil.copyfile(out / "prediction.png", img / "paper40_fitted_laws.png")
-    with (fit_dir / "history.csv").open(newline="") as fh:
-        hist = list(csv.DictReader(fh))
     key = "specimen.bow.spool_radius"
     lo, hi = fit["bounds"][key]
     best_mm = 1e3 * fit["best"][key]
     L = 15e-3  # the fibers' length: the bow's sagitta over it, L^2 / (8 R)
-    walls = [float(h["wall_time_s"]) for h in hist]
     best_row = next(r for r in rows if r["law"] == "oriented" and r["seed"] == fit["seeds"][0])
     text = [
         "### The fit (`make study-fit`)", "",
         "| parameter | range | evaluations | seed | best | sagitta over 15 mm | RMS load error | final load at U = 1.15 mm |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
-        f"| `{key}` | {1e3 * lo:.4g}–{1e3 * hi:.4g} mm | {fit['evaluations']} ({fit['method']}) | "
+        f"| `{key}` | {1e3 * lo:.4g}–{1e3 * hi:.4g} mm | {fit['evaluations']} (`{fit['method']}`) | "
         f"{', '.join(str(s) for s in fit['seeds'])} | {best_mm:.4g} mm | {1e3 * L**2 / (8 * fit['best'][key]):.3g} mm | "
         f"{fit['objective_N']:.3g} N ({100 * fit['objective_relative']:.3g} % of the target's RMS load) | "
         f"{best_row['final_load_N']:.3g} N (target 12 N) |", "",
-        "| evaluation | spool radius (mm) | RMS load error (N) | wall time (min) |", "| --- | --- | --- | --- |",
-        *[f"| {h['evaluation']} | {1e3 * float(h[key]):.4g} | {float(h['objective_N']):.3g} | {float(h['wall_time_s']) / 60:.3g} |"
-          for h in hist], "",
-        f"An evaluation (build, settle and compact one specimen) takes {min(walls) / 60:.2g}–{max(walls) / 60:.2g} min "
-        "of wall time on one core.", "",
+        "| evaluation | spool radius (mm) | sagitta (mm) | v_f0 → v_f | final load (N) | RMS load error (N) | settle steps | compaction solver wall time (s) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        *evaluation_rows(fit_dir, key, L), "",
         "![the fitted specimen's curve against the target](img/paper40_fit.png)", "",
         f"### The laws on the fitted specimen ({len(summary['seeds'])} seeds)", "",
         "| contact model | final load at U = 1.15 mm, per seed (N) | mean ± sd (N) | min–max (N) | the study (N) |",
@@ -232,6 +229,60 @@ def write_doc(page: Path, fit: dict, fit_dir: Path, summary: dict, rows: list[di
                     f"{r['vf_initial']:.3f} → {r['vf_final']:.3f} | {r['contacts_per_fiber_final']:.3g} |")
     text += ["", "![the laws' curves on the fitted specimen](img/paper40_fitted_laws.png)", ""]
     replace_section(page, FIT_BEGIN, FIT_END, "\n".join(text))
+
+
+def plot_fit(fit_dir: Path, fit: dict, out: Path) -> None:
+    """The target and every evaluation's curve (the best one bold): ``out/fit_evaluations.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fiberpipe.post.plots import _save
+    from fiberpipe.studies.fit import load_curve, read_target
+
+    key = "specimen.bow.spool_radius"
+    U_t, F_t = read_target(fit["target"])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(U_t * 1e3, F_t, "ko", ms=3, label="target (the study's text)")
+    evals = []
+    for d in (fit_dir / "evaluations").iterdir():
+        sj = d / "specimen" / "specimen.json"
+        if sj.exists() and (d / "post" / "force_displacement.csv").exists():
+            evals.append((json.loads(sj.read_text())["generator"]["spool_radius_m"], d))
+    for R, d in sorted(evals):
+        U, F = load_curve(d)
+        best = d.name in fit["best_runs"]
+        ax.plot(U * 1e3, F, lw=2 if best else 0.9, label=f"R = {1e3 * R:.4g} mm" + (" (best)" if best else ""))
+    ax.set_xlabel("U [mm]")
+    ax.set_ylabel("load [N]")
+    ax.set_title(f"fit of {key}, {fit['evaluations']} evaluations, seed {', '.join(map(str, fit['seeds']))}", fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    _save(fig, out / "fit_evaluations.png")
+
+
+def evaluation_rows(fit_dir: Path, key: str, L: float) -> list[str]:
+    """One table row per evaluation of the fit (history.csv's order), its figures read from its run."""
+    with (fit_dir / "history.csv").open(newline="") as fh:
+        hist = list(csv.DictReader(fh))
+    runs = {}
+    for d in sorted((fit_dir / "evaluations").iterdir()):
+        if (d / "specimen" / "specimen.json").exists() and (d / "post" / "summary.json").exists():
+            sj = json.loads((d / "specimen" / "specimen.json").read_text())
+            runs[sj["generator"]["spool_radius_m"]] = (d, sj)
+    out = []
+    for h in hist:
+        R = float(h[key])
+        match = [v for r, v in runs.items() if abs(r - R) <= 1e-8 * R]
+        if len(match) != 1:
+            raise SystemExit(f"{fit_dir}: no single evaluation folder for {key} = {R}")
+        d, sj = match[0]
+        m = measure(d)
+        out.append(f"| {h['evaluation']} | {1e3 * R:.4g} | {1e3 * L**2 / (8 * R):.3g} | {m['vf_initial']:.3f} → "
+                   f"{m['vf_final']:.3f} | {m['final_load_N']:.3g} | {float(h['objective_N']):.4g} | "
+                   f"{sj['settle']['steps']} | {m['solver_wall_time_s']:.0f} |")
+    return out
 
 
 FIT_BEGIN, FIT_END = "<!-- fit: begin", "<!-- fit: end"
