@@ -151,7 +151,15 @@ specimen-400: setup
 
 # the spool radius of the study-like specimen fitted to the study's curve as its text describes it
 # (data-samples/paper-40-fit/target.csv); each evaluation builds and settles a specimen and compacts it
-# (≈ 8 min on one core), 8 evaluations
+# (11-15 min on one core), 3 evaluations; the range brackets Gutowski's estimate (β ≈ 46: R ≈ 85 mm)
 study-fit: setup
 	$(FP) fit configs/specimens/paper-40.yaml --target data-samples/paper-40-fit/target.csv \
-	    --param "specimen.bow.spool_radius=40 mm:400 mm" --budget 8 --out runs/fits/paper-40-spool
+	    --param "specimen.bow.spool_radius=40 mm:160 mm" --budget 3 --out runs/fits/paper-40-spool
+
+# the study's contact models on the fitted specimen (configs/specimens/paper-40-fitted.yaml, the radius
+# study-fit finds) over three seeds, and the fit section of docs/results.md (≈ 1 h on one core)
+.PHONY: reproduce-fit
+reproduce-fit: study-fit
+	$(PY) tools/fit_prediction.py --config configs/specimens/paper-40-fitted.yaml --fit runs/fits/paper-40-spool \
+	    --seeds 0 1 2 --out runs/fits/paper-40-fitted --doc docs/results.md
+reproduce: reproduce-fit
