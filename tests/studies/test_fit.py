@@ -71,6 +71,12 @@ def test_fit_recovers_the_youngs_modulus_of_a_bowed_fiber_within_3_percent(targe
     assert len(rows) == res["evaluations"]
     assert min(float(r["objective_N"]) for r in rows) == pytest.approx(res["objective_N"], rel=1e-6)
     assert (tmp_path / "fit" / "fit.png").stat().st_size > 0
+    # a second fit over the same folder reuses the runs and reports what they cost the first time
+    again = run_fit(config, curve, ["material.youngs_modulus=10 GPa:20 GPa"], budget=8, out=tmp_path / "fit",
+                    echo=lambda *_: None)
+    rows2 = list(csv.DictReader((tmp_path / "fit" / "history.csv").open()))
+    assert again["best"] == res["best"]
+    assert [r["wall_time_s"] for r in rows2] == [r["wall_time_s"] for r in rows]
 
 
 def _write(path, text):
