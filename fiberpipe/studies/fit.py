@@ -212,16 +212,16 @@ class _Evaluator:
             pid = hashlib.sha256(json.dumps({"x": self.overrides(x), "seed": s}, sort_keys=True).encode()).hexdigest()[:10]
             jobs.append((pid, raw, str(self.out / "evaluations" / pid)))
         stamps = [Path(d) / "evaluation_wall_time.json" for _, _, d in jobs]
-        cached = all(p.exists() for p in stamps)
+        new = [not Path(d).exists() for _, _, d in jobs]
         t0 = time.perf_counter()
         execute(jobs, self.workers, self.scheduler, self.where, lambda *_: None, fn=run_point)
         wall_s = time.perf_counter() - t0
-        if cached:  # the runs come from an earlier fit: report what they cost then, not the cache look-up
-            wall_s = max(json.loads(p.read_text())["wall_time_s"] for p in stamps)
-        else:
-            for p in stamps:
-                if not p.exists():
-                    write_text_atomic(p, json.dumps({"wall_time_s": wall_s}))
+        for p, is_new in zip(stamps, new):
+            if is_new:
+                write_text_atomic(p, json.dumps({"wall_time_s": wall_s}))
+        if not any(new):  # runs of an earlier fit: what they cost then (NaN if it did not record it)
+            wall_s = (max(json.loads(p.read_text())["wall_time_s"] for p in stamps)
+                      if all(p.exists() for p in stamps) else float("nan"))
         curves = np.array([self.interp(Path(d)) for _, _, d in jobs])
         mean = curves.mean(axis=0)
         obj = float(np.sqrt(np.mean((mean - self.F_t) ** 2)))
