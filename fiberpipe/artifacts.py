@@ -174,35 +174,20 @@ def write_artifact(
     compression : str, optional
         h5py compression for large arrays (e.g. ``"gzip"``); None stores them raw.
     """
-    if kind not in SCHEMA_VERSIONS:
-        raise ValueError(f"unknown artifact kind {kind!r}")
     units = units or {}
-    root = {
-        "kind": kind,
-        "schema_version": SCHEMA_VERSIONS[kind],
-        "fiberpipe_version": __version__,
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "config_sha256": config_sha256,
-        "inputs": json.dumps(inputs or {}, sort_keys=True),
-    }
-    for k, v in (attrs or {}).items():
-        root[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            for k, v in root.items():
-                f.attrs[k] = v
-            for name, arr in datasets.items():
-                name = name.strip("/")
-                arr = np.asarray(arr)
-                kw = {}
-                if compression and arr.size > 4096:
-                    kw = {"compression": compression, "shuffle": True, "chunks": True}
-                ds = f.create_dataset(name, data=arr, **kw)
-                ds.attrs["units"] = units.get(name) or DIMENSIONLESS
-            for name, gattrs in (group_attrs or {}).items():
-                obj = f.require_group(name.strip("/")) if name.strip("/") not in f else f[name.strip("/")]
-                for k, v in gattrs.items():
-                    obj.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+    with artifact_writer(path, kind, attrs=attrs, config_sha256=config_sha256, inputs=inputs) as f:
+        for name, arr in datasets.items():
+            name = name.strip("/")
+            arr = np.asarray(arr)
+            kw = {}
+            if compression and arr.size > 4096:
+                kw = {"compression": compression, "shuffle": True, "chunks": True}
+            ds = f.create_dataset(name, data=arr, **kw)
+            ds.attrs["units"] = units.get(name) or DIMENSIONLESS
+        for name, gattrs in (group_attrs or {}).items():
+            obj = f.require_group(name.strip("/")) if name.strip("/") not in f else f[name.strip("/")]
+            for k, v in gattrs.items():
+                obj.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
     return Path(path)
 
 

@@ -53,6 +53,22 @@ def ureg() -> pint.UnitRegistry:
     return reg
 
 
+def _bare_number(value, what: str, expected: str) -> float | None:
+    """``value`` as a float when it is a bare number (already SI), None when it is a string to parse
+    with its unit; a boolean or another type is refused naming ``what``/``expected``. YAML 1.1 reads
+    "1e-3" (no dot) as a string: a bare number in a string is still a number."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected {what}, got a boolean")
+    if isinstance(value, (int, float)):
+        return float(value)
+    if not isinstance(value, str):
+        raise ValueError(f"expected {expected}, got {value!r}")
+    try:
+        return float(value)
+    except ValueError:
+        return None
+
+
 def to_si(value, dimension: str) -> float:
     """Convert a number (already SI) or a unit string to an SI float of the given dimension.
 
@@ -68,16 +84,9 @@ def to_si(value, dimension: str) -> float:
     ValueError
         When the string does not parse or has the wrong dimension (message names both).
     """
-    if isinstance(value, bool):
-        raise ValueError(f"expected a {dimension}, got a boolean")
-    if isinstance(value, (int, float)):
-        return float(value)
-    if not isinstance(value, str):
-        raise ValueError(f"expected a number or a quantity string for a {dimension}, got {value!r}")
-    try:  # YAML 1.1 reads "1e-3" (no dot) as a string: a bare number is still SI
-        return float(value)
-    except ValueError:
-        pass
+    bare = _bare_number(value, f"a {dimension}", f"a number or a quantity string for a {dimension}")
+    if bare is not None:
+        return bare
     reg = ureg()
     try:
         q = reg.Quantity(value.strip())
@@ -107,16 +116,10 @@ def to_bytes(value) -> float:
     ValueError
         When the string does not parse or is not an amount of bytes (or bits).
     """
-    if isinstance(value, bool):
-        raise ValueError("expected an amount of memory such as '4 GB', got a boolean")
-    if isinstance(value, (int, float)):
-        return float(value)
-    if not isinstance(value, str):
-        raise ValueError(f"expected an amount of memory such as '4 GB', got {value!r}")
-    try:
-        return float(value)
-    except ValueError:
-        pass
+    what = "an amount of memory such as '4 GB'"
+    bare = _bare_number(value, what, what)
+    if bare is not None:
+        return bare
     reg = ureg()
     try:
         q = reg.Quantity(value.strip())

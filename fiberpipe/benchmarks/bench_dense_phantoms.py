@@ -13,7 +13,6 @@ installed (the ``bench`` extra), ``fibretracker`` on the same grey volume (it sl
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -25,12 +24,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from fiberpipe.benchmarks.bench_hard_phantoms import fibretracker_cell, worst_of, write_report  # noqa: E402
-
-
-def _seeds(text: str) -> list[int]:
-    a, _, b = text.partition("-")
-    return list(range(int(a), int(b or a) + 1))
+from fiberpipe.benchmarks.bench_hard_phantoms import (  # noqa: E402
+    fibretracker_cell, phantom_bench_args, worst_of, write_report)
 
 
 def _subset(p, idx):
@@ -45,20 +40,13 @@ def main(argv=None) -> None:
     from fiberpipe.imaging.segment import segment
     from fiberpipe.imaging.trace import trace
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", default="0-9")
-    ap.add_argument("--out", type=Path)
-    a = ap.parse_args(argv)
-    try:
-        from fiberpipe.benchmarks.bench_imaging import run_fibretracker
-    except Exception:  # noqa: BLE001 — fibretracker is optional (bench extra)
-        run_fibretracker = None
+    a, seeds, run_fibretracker = phantom_bench_args(argv, __doc__, "0-9")
     rows = ["| seed | r (vox) | CNR | fibers (main + cross) | contact fraction | recall | precision | mean err (vox) | "
             "p95 (vox) | coverage | split | cross ply traced (fibers) | main ply recall / precision | time (s) | "
             "fibretracker recall / precision / mean err / split |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     worst = {"recall": 1.0, "precision": 1.0, "mean": 0.0}
-    for s in _seeds(a.seeds):
+    for s in seeds:
         vol, truth = make_dense_family_phantom(s)
         m = truth.meta
         vs, r = m["voxel_size_m"], m["radius_vox"]

@@ -27,6 +27,20 @@ def _seeds(text: str) -> list[int]:
     return list(range(int(a), int(b or a) + 1))
 
 
+def phantom_bench_args(argv, doc: str, default_seeds: str):
+    """The phantom benchmarks' command line (``--seeds A-B``, ``--out``): ``(args, seeds,
+    run_fibretracker)``, the last None when the optional fibretracker (the bench extra) is missing."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--seeds", default=default_seeds)
+    ap.add_argument("--out", type=Path)
+    a = ap.parse_args(argv)
+    try:
+        from fiberpipe.benchmarks.bench_imaging import run_fibretracker
+    except Exception:  # noqa: BLE001 — fibretracker is optional (bench extra)
+        run_fibretracker = None
+    return a, _seeds(a.seeds), run_fibretracker
+
+
 def main(argv=None) -> None:
     from fiberpipe.imaging.accuracy import trace_accuracy
     from fiberpipe.imaging.orientation import is_quasi_parallel, mask_orientation
@@ -34,18 +48,11 @@ def main(argv=None) -> None:
     from fiberpipe.imaging.segment import segment
     from fiberpipe.imaging.trace import trace
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", default="0-19")
-    ap.add_argument("--out", type=Path)
-    a = ap.parse_args(argv)
-    try:
-        from fiberpipe.benchmarks.bench_imaging import run_fibretracker
-    except Exception:  # noqa: BLE001 — fibretracker is optional (bench extra)
-        run_fibretracker = None
+    a, seeds, run_fibretracker = phantom_bench_args(argv, __doc__, "0-19")
     rows = ["| seed | r (vox) | CNR | auto | recall | precision | mean err (vox) | p95 (vox) | coverage | time (s) | fibretracker recall / precision / mean err |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     worst = {"recall": 1.0, "precision": 1.0, "mean": 0.0}
-    for s in _seeds(a.seeds):
+    for s in seeds:
         vol, truth = make_hard_phantom(s)
         vs = truth.meta["voxel_size_m"]
         r = truth.meta["radius_vox"]

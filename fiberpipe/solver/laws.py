@@ -450,6 +450,12 @@ def patch_weight(params, delta, r1, r2, phi):
     if delta <= 0.0 or params[P_LBLEND] <= 0.0:
         return 1.0
     f, e, a = hertz_crossed_point(params, delta, r1, r2, phi)
+    return _patch_share(params, a)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _patch_share(params, a):
+    """The point share of a crossing whose Hertz ellipse has the semi-major axis ``a`` [m]."""
     xi = a / params[P_LBLEND]
     return 1.0 - smoothstep((xi - params[P_XI_LO]) / (params[P_XI_HI] - params[P_XI_LO]))
 
@@ -481,8 +487,7 @@ def law_weight_point(law_id, params, delta, r1, r2, phi):
         if delta <= 0.0:
             return 1.0, 0.0, 0.0
         f, e, a = hertz_crossed_point(params, delta, r1, r2, phi)
-        xi = a / params[P_LBLEND]
-        return 1.0 - smoothstep((xi - params[P_XI_LO]) / (params[P_XI_HI] - params[P_XI_LO])), f, e
+        return _patch_share(params, a), f, e
     fp, ep = law_point(law_id, params, delta, r1, r2, phi)
     return law_weight(law_id, params, delta, r1, r2, phi), fp, ep
 
