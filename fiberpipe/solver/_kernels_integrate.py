@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._specialise import specialise
 from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
@@ -146,7 +146,7 @@ def rotate_node(q, i, dt, w1x, w1y, w1z):
 
 
 @njit(inline="always", **_FLAGS)
-def prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, fx_i, fy_i, fz_i):
+def prescribe_node(node_drive, drive_v, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, fx_i, fy_i, fz_i):
     """Impose a fixed or driven node's translations; returns the new velocity and the reaction's
     work over the step.
 
@@ -156,10 +156,10 @@ def prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, f
     """
     wk = 0.0
     if mask & DRIVEN:
-        d = scene.node_drive[i]
-        px = scene.drives.v[d, 0]
-        py = scene.drives.v[d, 1]
-        pz = scene.drives.v[d, 2]
+        d = node_drive[i]
+        px = drive_v[d, 0]
+        py = drive_v[d, 1]
+        pz = drive_v[d, 2]
         fx = 1
         fy = 1
         fz = 1
@@ -195,27 +195,28 @@ def damping_factors(alpha, dt):
 
 
 @njit(inline="always", **_FLAGS)
-def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
-    """The central-difference update of every node (module docstring), gathering the beam
-    resultants per node and adding the contact hook's force array ``fc`` (cleared here).
+def update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib):
+    """The central-difference update of the nodes of fiber ``fib`` (module docstring), gathering
+    the beam resultants per node and adding the contact hook's force array ``fc`` (cleared here).
 
-    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad)``: the kinetic energy at t_n and the
-    leapfrog's kinetic term ½ v_{n−½}·M v_{n+½} (if ``record``),
+    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad)`` over the fiber's nodes: the kinetic
+    energy at t_n and the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½} (if ``record``),
     Σ m|v̄|² + J|Ω̄|² for the damping dissipation, the prescribed nodes' reaction work, Σ fc·v̄
     (the hook's power), the largest |v_{n+½}|² and its node. ``coef = (c_keep, dt_c)``: the damped
-    update's constant factors, v_{n+½} = c_keep v_{n−½} + (dt_c / m) f (:func:`damping_factors`).
+    update's constant factors, v_{n+½} = c_keep v_{n−½} + (dt_c / m) f (:func:`damping_factors`);
+    ``prescribed = (α [1/s], fix_mask, node_drive, the drives' velocities)`` from the scene (flat: a
+    parallel loop takes no nested structure).
     """
+    alpha, fix_mask, node_drive, drive_v = prescribed
     x, q, v, w = state.x, state.q, state.v, state.w
     f, mom, eb = work.f, work.mom, work.eb
     mass, inv_mass, J, inv_J = model.mass, model.inv_mass, model.J, model.inv_J
     node_offsets = model.node_offsets
     N = x.shape[0]
-    alpha = scene.alpha_per_s
     use_damp = alpha > 0.0
-    has_fix = scene.fix_mask.shape[0] == N
+    has_fix = fix_mask.shape[0] == N
     has_fc = fc.shape[0] == N
     c_keep, dt_c = coef
-    NF = node_offsets.shape[0] - 1
     ke = 0.0
     ke_lf = 0.0
     vd = 0.0
@@ -223,15 +224,9 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
     pw_c = 0.0
     vmax2 = 0.0
     bad = -1
-    # the nodes of fiber `fib` are node_lo … node_end − 1 (the beam resultants gather per fiber)
-    fib = 0
-    node_lo = 0
-    node_end = node_offsets[1] if NF > 0 else N
-    for i in range(N):
-        if i == node_end:
-            fib += 1
-            node_lo = node_end
-            node_end = node_offsets[fib + 1]
+    node_lo = node_offsets[fib]
+    node_end = node_offsets[fib + 1]
+    for i in range(node_lo, node_end):
         bfx, bfy, bfz, bmx, bmy, bmz = node_resultant(eb, node_lo, node_end, fib, i)
         fx_i = f[i, 0] + bfx
         fy_i = f[i, 1] + bfy
@@ -250,7 +245,7 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
             fy_i += cfy
             fz_i += cfz
         m = mass[i]
-        mask = scene.fix_mask[i] if has_fix else 0
+        mask = fix_mask[i] if has_fix else 0
         v0x = v[i, 0]
         v0y = v[i, 1]
         v0z = v[i, 2]
@@ -288,8 +283,8 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
             w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
             w1z = w0z + dt * (mbz - gz) * inv_J[i, 2]
         if mask != 0:
-            v1x, v1y, v1z, wk = prescribe_node(scene, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z,
-                                               fx_i, fy_i, fz_i)
+            v1x, v1y, v1z, wk = prescribe_node(node_drive, drive_v, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x,
+                                               v1y, v1z, fx_i, fy_i, fz_i)
             wk_fix += wk
             if mask & (FIX_ROT | DRIVEN):
                 w1x = 0.0
@@ -319,10 +314,7 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
             # kinetic term), it differs from the mean of the half-step energies by ¼Δt² Σ|f|²/m
             ke_lf += 0.5 * (m * (v0x * v1x + v0y * v1y + v0z * v1z) + jx * w0x * w1x + jy * w0y * w1y
                             + jz * w0z * w1z)
-            if not (v2 <= vmax2):
-                if not (v2 == v2) or v2 > vmax2:
-                    vmax2 = v2 if v2 == v2 else np.inf
-                    bad = i
+            vmax2, bad = merge_speed(vmax2, bad, v2, i)
         v[i, 0] = v1x
         v[i, 1] = v1y
         v[i, 2] = v1z
@@ -333,6 +325,73 @@ def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
         x[i, 1] += dt * v1y
         x[i, 2] += dt * v1z
         rotate_node(q, i, dt, w1x, w1y, w1z)
+    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
+
+
+@njit(inline="always", **_FLAGS)
+def merge_speed(vmax2, bad, v2, i):
+    """The largest squared speed so far and its node, with ``v2`` of node(s) ``i`` (NaN: inf)."""
+    if not (v2 <= vmax2):
+        if not (v2 == v2) or v2 > vmax2:
+            return (v2 if v2 == v2 else np.inf), i
+    return vmax2, bad
+
+
+@njit(inline="always", **_FLAGS)
+def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
+    """:func:`update_fiber` for every fiber in turn; returns its sums over all nodes (the speed's
+    maximum and node)."""
+    ke = 0.0
+    ke_lf = 0.0
+    vd = 0.0
+    wk_fix = 0.0
+    pw_c = 0.0
+    vmax2 = 0.0
+    bad = -1
+    prescribed = (scene.alpha_per_s, scene.fix_mask, scene.node_drive, scene.drives.v)
+    for fib in range(model.node_offsets.shape[0] - 1):
+        a, b, c, d, e, v2, i = update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib)
+        ke += a
+        ke_lf += b
+        vd += c
+        wk_fix += d
+        pw_c += e
+        vmax2, bad = merge_speed(vmax2, bad, v2, i)
+    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
+
+
+# Not cached, as beam_resultants_fibers (its comment): only the solver.threads > 1 loops use it.
+@njit(cache=False, fastmath=True, error_model="numpy", parallel=True)
+def update_nodes_fibers(model, scene, state, work, fc, dt, coef, record, gyro):
+    """:func:`update_nodes` with one ``prange`` task per fiber (``solver.threads`` > 1): every node
+    is updated as in the serial pass (bit-identical state); the sums are taken per fiber, then in
+    fiber order."""
+    nf = model.node_offsets.shape[0] - 1
+    sums = np.empty((nf, 7))
+    prescribed = (scene.alpha_per_s, scene.fix_mask, scene.node_drive, scene.drives.v)
+    for fib in prange(nf):
+        a, b, c, d, e, v2, i = update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib)
+        sums[fib, 0] = a
+        sums[fib, 1] = b
+        sums[fib, 2] = c
+        sums[fib, 3] = d
+        sums[fib, 4] = e
+        sums[fib, 5] = v2
+        sums[fib, 6] = i
+    ke = 0.0
+    ke_lf = 0.0
+    vd = 0.0
+    wk_fix = 0.0
+    pw_c = 0.0
+    vmax2 = 0.0
+    bad = -1
+    for fib in range(nf):
+        ke += sums[fib, 0]
+        ke_lf += sums[fib, 1]
+        vd += sums[fib, 2]
+        wk_fix += sums[fib, 3]
+        pw_c += sums[fib, 4]
+        vmax2, bad = merge_speed(vmax2, bad, sums[fib, 5], int(sums[fib, 6]))
     return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
 
 
@@ -459,7 +518,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             acc[ACC_STORED0] = acc[ACC_STORED] - stored_planes
         eval_drives(scene.drives, t, dt)
         # ---- update ----
-        ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad = update_nodes(model, scene, state, work, fc, dt, coef, record, gyro)
+        ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad = _update_pass(model, scene, state, work, fc, dt, coef, record, gyro)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
@@ -491,12 +550,14 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
 
 _hook = no_contact
 _hook_forces = no_contact_forces
+_update_pass = update_nodes
 
 
 def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False):
     return specialise(_advance_template, name, {
         "_hook": hook, "_hook_forces": forces_of,
         "_beam_pass": beam_resultants_fibers if parallel else beam_resultants,
+        "_update_pass": update_nodes_fibers if parallel else update_nodes,
     }, cache=cache, fastmath=True, error_model="numpy")
 
 

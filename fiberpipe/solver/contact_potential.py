@@ -41,7 +41,7 @@ from ._specialise import specialise
 from .contact import _joint_share, record_pair
 from .geometry import apply_line_point, apply_pair_force, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
-                   hertz_crossed_point, law_line, law_point, law_weight_point)
+                   hertz_crossed_point_d, law_line, law_point, law_weight_point)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -138,30 +138,16 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
     return energy
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _point_energy_dphi(law_id, law_params, g, ra, rb, phi):
-    """∂e_point/∂Φ [J/rad] at fixed mapped penetration g: non-zero only for the law whose point
-    stiffness follows each contact's own angle (hertz_oriented, K(Φ) from the crossed-Hertz table)."""
-    if law_id != LAW_HERTZ_ORIENTED:
-        return 0.0
-    h = 1e-6 * phi + 1e-12
-    fa, ea = law_point(law_id, law_params, g, ra, rb, phi + h)
-    fb, eb = law_point(law_id, law_params, g, ra, rb, phi - h)
-    return (ea - eb) / (2.0 * h)
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _patch_weight(law_params, delta, ds, ra, rb, phi):
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _patch_weight(law_params, a, da_dphi, da_dg):
     """The patch criterion's point share (:func:`fiberpipe.solver.laws.patch_weight`) and its partial
-    derivatives: ``(w, ∂w/∂Φ, ∂w/∂δ)``; ``(1, 0, 0)`` when ℓ_blend is 0 (off).
+    derivatives ``(w, ∂w/∂Φ, ∂w/∂g)`` from the Hertz semi-major axis ``a`` and its derivatives;
+    ``(1, 0, 0)`` when ℓ_blend is 0 (off).
 
-    ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``, ``ξ = a(g(δ), Φ)/ℓ_blend``, ``a = â(Φ)√(R_e g)``
-    the Hertz semi-major axis: the point law while the contact ellipse fits in ℓ_blend, the line law
-    once it outgrows it. ``∂a/∂δ = a g'/(2g)``; ``∂a/∂Φ`` by central differences of the table."""
-    if delta <= 0.0 or law_params[P_LBLEND] <= 0.0:
+    ``w = 1 − smoothstep((ξ − ξ_lo)/(ξ_hi − ξ_lo))``, ``ξ = a/ℓ_blend``, ``a = â(Φ)√(R_e g)``: the
+    point law while the contact ellipse fits in ℓ_blend, the line law once it outgrows it."""
+    if law_params[P_LBLEND] <= 0.0:
         return 1.0, 0.0, 0.0
-    g, gp = onset(delta, ds)
-    f, e, a = hertz_crossed_point(law_params, g, ra, rb, phi)
     inv_l = 1.0 / law_params[P_LBLEND]
     xlo = law_params[P_XI_LO]
     span = law_params[P_XI_HI] - xlo
@@ -170,59 +156,63 @@ def _patch_weight(law_params, delta, ds, ra, rb, phi):
         return 1.0, 0.0, 0.0
     if u >= 1.0:
         return 0.0, 0.0, 0.0
-    w = 1.0 - u * u * (3.0 - 2.0 * u)
-    dw_dxi = -6.0 * u * (1.0 - u) / span
-    h = 1e-6 * phi + 1e-12
-    fa, ea, aa = hertz_crossed_point(law_params, g, ra, rb, phi + h)
-    fb, eb, ab = hertz_crossed_point(law_params, g, ra, rb, phi - h)
-    da_dphi = (aa - ab) / (2.0 * h)
-    da_ddelta = 0.5 * a * gp / g
-    return w, dw_dxi * da_dphi * inv_l, dw_dxi * da_ddelta * inv_l
+    dw_da = -6.0 * u * (1.0 - u) / span * inv_l
+    return 1.0 - u * u * (3.0 - 2.0 * u), dw_da * da_dphi, dw_da * da_dg
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _pair_blend(law_id, law_params, delta_c, ds, ra, rb, phi):
-    """The point share of a pair and its partial derivatives ``(w, ∂w/∂Φ, ∂w/∂δ_c)`` (module docstring):
-    hertz_parallel 0; the others the angle window × the patch criterion (below Φ_lo no point law:
-    at Φ → 0 the crossed-Hertz stiffness diverges and ∂w/∂δ would carry it)."""
+def _pair_blend_point(law_id, law_params, delta_c, ds, ra, rb, phi):
+    """The point share of a pair, its partial derivatives and the point law at the pair's clamped
+    penetration δ_c: ``(w, ∂w/∂Φ, ∂w/∂δ_c, F_point [N], e_point [J], ∂e_point/∂Φ [J/rad])``, the law
+    taken at the mapped penetration g(δ_c).
+
+    w: hertz_parallel 0; the others the angle window × the patch criterion (below Φ_lo no point law:
+    at Φ → 0 the crossed-Hertz stiffness diverges and ∂w/∂δ would carry it). One crossed-Hertz
+    evaluation gives the ellipse (patch criterion) and, for hertz_oriented, the point law with its
+    angle derivative K'(Φ) (:func:`fiberpipe.solver.laws.hertz_crossed_point_d`)."""
     if law_id == LAW_HERTZ_PARALLEL:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     inv_span = 1.0 / (law_params[P_PHI_HI] - law_params[P_PHI_LO])
     u = (phi - law_params[P_PHI_LO]) * inv_span
     if u <= 0.0:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     wp, dwp = 1.0, 0.0
     if u < 1.0:
         wp = u * u * (3.0 - 2.0 * u)
         dwp = 6.0 * u * (1.0 - u) * inv_span
-    wx, dwx, dw_dd = _patch_weight(law_params, delta_c, ds, ra, rb, phi)
-    return wx * wp, dwx * wp + wx * dwp, dw_dd * wp
+    if delta_c <= 0.0:
+        return wp, dwp, 0.0, 0.0, 0.0, 0.0
+    g, gp = onset(delta_c, ds)
+    wx, dwx, dw_dg = 1.0, 0.0, 0.0
+    fp, ep, dep = 0.0, 0.0, 0.0
+    if law_id == LAW_HERTZ_ORIENTED or law_params[P_LBLEND] > 0.0:
+        fh, eh, a, deh, dah = hertz_crossed_point_d(law_params, g, ra, rb, phi)
+        wx, dwx, dw_dg = _patch_weight(law_params, a, dah, 0.5 * a / g)
+        if law_id == LAW_HERTZ_ORIENTED:
+            fp, ep, dep = fh, eh, deh
+    if law_id != LAW_HERTZ_ORIENTED:
+        fp, ep = law_point(law_id, law_params, g, ra, rb, phi)
+    return wx * wp, dwx * wp + wx * dwp, dw_dg * gp * wp, fp, ep, dep
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _pair_blend_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
-    """:func:`_pair_blend` for a law with its own jitted ``weight_point`` (bound by
-    :func:`potential_kernels_for`): its weight at the mapped penetration, the derivatives by central
-    differences."""
-    g, gp = onset(delta_c, ds)
-    w, f, e = law_weight_point(law_id, law_params, g, ra, rb, phi)
+def _pair_blend_point_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
+    """:func:`_pair_blend_point` for a law with its own jitted ``weight_point`` and ``point`` (bound by
+    :func:`potential_kernels_for`): its weight and point law at the mapped penetration, the
+    derivatives by central differences."""
+    g, gp = onset(delta_c, ds) if delta_c > 0.0 else (0.0, 0.0)
+    w, fp, ep = law_weight_point(law_id, law_params, g, ra, rb, phi)
     h = 1e-6 * phi + 1e-9
+    lo = max(phi - h, 0.0)
     wa, fa, ea = law_weight_point(law_id, law_params, g, ra, rb, phi + h)
-    wb, fb, eb = law_weight_point(law_id, law_params, g, ra, rb, max(phi - h, 0.0))
-    dphi = (wa - wb) / (phi + h - max(phi - h, 0.0))
+    wb, fb, eb = law_weight_point(law_id, law_params, g, ra, rb, lo)
     hd = 1e-6 * g + 1e-15
     wc, fc, ec = law_weight_point(law_id, law_params, g + hd, ra, rb, phi)
     wd, fd, ed = law_weight_point(law_id, law_params, max(g - hd, 0.0), ra, rb, phi)
-    return w, dphi, (wc - wd) / (g + hd - max(g - hd, 0.0)) * gp
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _point_energy_dphi_of_law(law_id, law_params, g, ra, rb, phi):
-    """:func:`_point_energy_dphi` for a law with its own jitted ``point``: by central differences."""
-    h = 1e-6 * phi + 1e-9
-    fa, ea = law_point(law_id, law_params, g, ra, rb, phi + h)
-    fb, eb = law_point(law_id, law_params, g, ra, rb, max(phi - h, 0.0))
-    return (ea - eb) / (phi + h - max(phi - h, 0.0))
+    pa, qa = law_point(law_id, law_params, g, ra, rb, phi + h)
+    pb, qb = law_point(law_id, law_params, g, ra, rb, lo)
+    return (w, (wa - wb) / (phi + h - lo), (wc - wd) / (g + hd - max(g - hd, 0.0)) * gp, fp, ep,
+            (qa - qb) / (phi + h - lo))
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
@@ -312,11 +302,12 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
         ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
         phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
-        w, dw, dw_dd = _pair_blend(law_id, law_params, rr - math.sqrt(dist2) - off, ds, ra, rb, phi)
+        d_own = math.sqrt(dist2)
+        delta = rr - d_own - off
+        w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
         e_point = 0.0   # s_joint Π_point (unweighted by w)
         de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
         if w > 0.0:
-            d_own = math.sqrt(dist2)
             wst = 1.0
             den = aa * bb - ab * ab
             if den > 1e-10 * aa * bb:
@@ -329,12 +320,10 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
                 t_l = (aa * br - ab * ar) / den
                 wst = _joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr) * _joint_share(x, seg_nodes, j, t_l,
                                                                                            d_own, a0, ta, rr)
-            delta = rr - d_own - off
             if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
-                gg, gp = onset(delta, ds)
-                fp, ep = law_point(law_id, law_params, gg, ra, rb, phi)
+                gp = onset(delta, ds)[1]
                 e_point = wst * ep
-                de_point = wst * _point_energy_dphi(law_id, law_params, gg, ra, rb, phi)
+                de_point = wst * dep
                 rec[7] += w * wst
                 fm = w * wst * fp * gp
                 inv = 1.0 / d_own
@@ -385,11 +374,8 @@ def potential_kernels_for(law):
         tag = type(law).__name__
         flags = dict(fastmath=True, error_model="numpy")
         lh = specialise(_line_half_pot, f"_line_half_pot_{tag}", {"law_line": line}, cache=False, **flags)
-        blend = specialise(_pair_blend_of_law, f"_pair_blend_{tag}", {"law_weight_point": weight_point},
-                           cache=False, **flags)
-        dphi = specialise(_point_energy_dphi_of_law, f"_point_energy_dphi_{tag}", {"law_point": point},
-                          cache=False, **flags)
+        blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
+                           {"law_weight_point": weight_point, "law_point": point}, cache=False, **flags)
         _LAW_KERNELS[key] = specialise(contact_forces_pot, f"contact_forces_pot_{tag}",
-                                       {"_line_half_pot": lh, "law_point": point, "_pair_blend": blend,
-                                        "_point_energy_dphi": dphi}, cache=False, **flags)
+                                       {"_line_half_pot": lh, "_pair_blend_point": blend}, cache=False, **flags)
     return _LAW_KERNELS[key]

@@ -240,10 +240,17 @@ def _line_table():
             break
         g = g_new
     dg = (-g - 1.0) / (-g - 2.0)
-    return np.ascontiguousarray(np.column_stack([g, dg * _LT_H]))
+    # x = P/C beside g = ln x, both with their λ-slopes times the step (dx/dλ = x dg/dλ): one row
+    # holds what the force and the energy x²(−g/2 − 3/4) need, without an exp
+    x = np.exp(g)
+    return np.ascontiguousarray(np.column_stack([g, dg * _LT_H])), np.ascontiguousarray(
+        np.column_stack([x, x * dg * _LT_H, g, dg * _LT_H]))
 
 
-_LINE_TABLE = _line_table()
+_LINE_TABLE, _LINE_TABLE_XG = _line_table()
+# the x column's interpolation holds 1e-10 up to λ = −6 (δ ≈ 5 µm for our fibres); above, where
+# dg/dλ grows towards the branch point g = −2, x comes from the exp of the interpolated ln x
+_LT_V_X = float(min(_LT_N - 1, int((-6.0 - _LT_LAM0) * _LT_INVH)))
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -277,8 +284,9 @@ def hertz_parallel_line(delta, e_star, r1, r2):
     ``y = W₋₁(−e u)``, ``u = δ/(4(R1+R2))``: ``P = C e^{y−1}`` (equal radii:
     ``P = −πE*δ/W₋₁(−eδ/8R)``). Stored energy ``∫P dδ = C·4(R1+R2)·(−x² ln x /2 − 3x²/4)``.
     Valid for ``u < e⁻²`` (δ < 4(R1+R2)/e², 0.27 mm for our fibres); beyond 0.99 of that the law
-    continues linearly with its secant stiffness there. ``ln x`` comes from a table with cubic
-    Hermite interpolation (relative error < 1e-10, see ``_line_lnx``).
+    continues linearly with its secant stiffness there. ``x`` and ``ln x`` come from a table uniform in
+    ``ln u`` with cubic Hermite interpolation (relative error < 1e-10; outside the table ``ln x``
+    from ``_line_lnx``).
     """
     if delta <= 0.0:
         return 0.0, 0.0
@@ -287,6 +295,21 @@ def hertz_parallel_line(delta, e_star, r1, r2):
     u = delta / (4.0 * sr)
     umax = 0.99 * _EM2
     if u <= umax:
+        v = (math.log(u) - _LT_LAM0) * _LT_INVH
+        if v >= 0.0 and v < _LT_V_X:
+            # x and ln x straight from their table (cubic Hermite in λ): no exp; the integer clamp keeps
+            # the read inside the table even for a NaN v (fastmath may drop the float test)
+            i = min(max(int(v), 0), _LT_N - 2)
+            t = v - i
+            t2 = t * t
+            h00 = (2.0 * t - 3.0) * t2 + 1.0
+            h10 = (t2 - 2.0 * t + 1.0) * t
+            h01 = (3.0 - 2.0 * t) * t2
+            h11 = (t - 1.0) * t2
+            tb = _LINE_TABLE_XG
+            x = h00 * tb[i, 0] + h10 * tb[i, 1] + h01 * tb[i + 1, 0] + h11 * tb[i + 1, 1]
+            g = h00 * tb[i, 2] + h10 * tb[i, 3] + h01 * tb[i + 1, 2] + h11 * tb[i + 1, 3]
+            return c * x, c * 4.0 * sr * x * x * (-0.5 * g - 0.75)
         lx = _line_lnx(u)
         x = math.exp(lx)
         e = c * 4.0 * sr * x * x * (-0.5 * lx - 0.75)
@@ -394,6 +417,63 @@ def hertz_crossed_point(params, delta, r1, r2, phi):
     sd = math.sqrt(delta)
     f = kh * params[P_ESTAR] * sre * delta * sd
     return f, 0.4 * f * delta, ah * sre * sd
+
+
+@njit(cache=True, error_model="numpy")
+def _equivalent_angle_d(phi, r1, r2):
+    """(Φ_eq, dΦ_eq/dΦ) of :func:`_equivalent_angle`: with ``S = a² + b² + 2ab cos 2Φ``
+    (a = 1/r1, b = 1/r2), ``cos Φ_eq = √S/(a + b)``, so ``dΦ_eq/dΦ = 2ab sin 2Φ/(√S (a + b) sin Φ_eq)``,
+    which tends to ``2√(ab)/(a + b)`` as Φ → 0."""
+    if r1 == r2:
+        return phi, 1.0
+    a = 1.0 / r1
+    b = 1.0 / r2
+    s = math.sqrt(max(a * a + b * b + 2.0 * math.cos(2.0 * phi) * a * b, 0.0))
+    c = s / (a + b)
+    if c >= 1.0:
+        return 0.0, 2.0 * math.sqrt(a * b) / (a + b)
+    sin_eq = math.sqrt(1.0 - c * c)
+    if sin_eq < 1e-12 or s <= 0.0:
+        return math.acos(c), 2.0 * math.sqrt(a * b) / (a + b)
+    return math.acos(c), 2.0 * a * b * math.sin(2.0 * phi) / (s * (a + b) * sin_eq)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _table_lookup_d(params, phi_eq):
+    """(k̂, â, dk̂/dΦ_eq, dâ/dΦ_eq) of :func:`_table_lookup`: the interpolant is linear in ln Φ within
+    a cell, so its derivative is the cell's slope over Φ_eq dlnΦ (0 where the look-up clamps)."""
+    nt = int(params[P_NTAB])
+    dl = params[P_DLNPHI]
+    u = (math.log(phi_eq) - params[P_LNPHI0]) / dl if phi_eq > 0.0 else 0.0
+    if not (u == u) or u <= 0.0:
+        return params[N_HEADER], params[N_HEADER + nt], 0.0, 0.0
+    if u >= nt - 1:
+        return params[N_HEADER + nt - 1], params[N_HEADER + 2 * nt - 1], 0.0, 0.0
+    i = min(max(int(u), 0), nt - 2)  # integer clamp: NaN-safe even under fastmath
+    t = u - i
+    kk = N_HEADER + i
+    ka = N_HEADER + nt + i
+    dk = params[kk + 1] - params[kk]
+    da = params[ka + 1] - params[ka]
+    inv = 1.0 / (phi_eq * dl)
+    return params[kk] + dk * t, params[ka] + da * t, dk * inv, da * inv
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def hertz_crossed_point_d(params, delta, r1, r2, phi):
+    """:func:`hertz_crossed_point` with its angle derivatives in one table look-up:
+    ``(F [N], e [J], a [m], ∂e/∂Φ [J/rad], ∂a/∂Φ [m/rad])`` at fixed δ, from
+    ``e = (2/5) k̂(Φ_eq) E* √R_e δ^{5/2}`` and ``a = â(Φ_eq) √(R_e δ)``."""
+    if delta <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    re = 2.0 * r1 * r2 / (r1 + r2)
+    phe, dphe = _equivalent_angle_d(phi, r1, r2)
+    kh, ah, dkh, dah = _table_lookup_d(params, phe)
+    sre = math.sqrt(re)
+    sd = math.sqrt(delta)
+    c = params[P_ESTAR] * sre * delta * sd
+    f = kh * c
+    return f, 0.4 * f * delta, ah * sre * sd, 0.4 * c * delta * dkh * dphe, sre * sd * dah * dphe
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")

@@ -34,12 +34,13 @@ def _two_fibres(phi_deg, depth, n=3, L=0.9e-3, shift=0.0, bend=0.0, seed=0):
     return x, seg, pairs, arc
 
 
-def _energy_forces(x, seg, pairs, arc, law, ds, n_gauss=2):
+def _energy_forces(x, seg, pairs, arc, law, ds, n_gauss=2, radius=None):
     P = pairs.shape[0]
     gxi, gw = gauss_points(n_gauss)
     f = np.zeros_like(x)
     rec = new_records(P)
-    e, n_act = contact_forces_pot(x, seg, np.full(seg.shape[0], R), arc, pairs, P, law.law_id, law.params(), gxi, gw,
+    radius = np.full(seg.shape[0], R) if radius is None else radius
+    e, n_act = contact_forces_pot(x, seg, radius, arc, pairs, P, law.law_id, law.params(), gxi, gw,
                                   ds, f, rec, np.zeros(0), 0.0)
     return e, f, n_act
 
@@ -62,10 +63,29 @@ LAWS = {
     (30.0, 1e-6, 0.07e-3),   # point part, K(Φ) and dK/dΦ (hertz_oriented)
 ])
 def test_force_is_minus_the_gradient_of_the_energy(law_name, phi_deg, depth, shift):
-    law = make_law(law_name, E_pa=15e9, nu=0.3, **LAWS[law_name])
+    _check_gradient(make_law(law_name, E_pa=15e9, nu=0.3, **LAWS[law_name]), phi_deg, depth, shift)
+
+
+@pytest.mark.parametrize("law_name,kw", [
+    ("hertz_oriented", {}), ("linear", {"stiffness": 1e9, "blend_length_m": 5e-5}),
+    ("scaled_stiffness", {"preset": "table1_phi6", "blend_length_m": 5e-5}),
+    ("hertz_crossed", {"phi_deg": 90.0, "blend_length_m": 1e-3})])
+@pytest.mark.parametrize("phi_deg,depth,shift", [(1.0, 1e-6, 0.05e-3), (3.0, 2e-6, 0.0), (30.0, 1e-6, 0.07e-3)])
+def test_force_is_minus_the_gradient_with_the_patch_criterion_and_unequal_radii(law_name, kw, phi_deg, depth,
+                                                                                shift):
+    """The patch criterion's share (its δ and Φ derivatives from the crossed-Hertz ellipse) and, for
+    hertz_oriented, K(Φ) of fibres of unequal radii (the equivalent angle's derivative enters)."""
+    radius = np.r_[np.full(3, R), np.full(3, 0.7 * R)]
+    _check_gradient(make_law(law_name, E_pa=15e9, nu=0.3, **kw), phi_deg, depth, shift, radius=radius,
+                    lift=-0.3 * R)
+
+
+def _check_gradient(law, phi_deg, depth, shift, radius=None, lift=0.0):
     x, seg, pairs, L0 = _two_fibres(phi_deg, depth, shift=shift, bend=0.2e-6, seed=int(10 * phi_deg))
+    x[4:, 2] += lift
     ds = 1e-7
-    e, f, n_act = _energy_forces(x, seg, pairs, L0, law, ds)
+    ef = lambda xx: _energy_forces(xx, seg, pairs, L0, law, ds, radius=radius)  # noqa: E731
+    e, f, n_act = ef(x)
     assert n_act > 0 and e > 0, "not in contact: the case tests nothing"
     h = 1e-9  # below the onset length, above the width of the joint-share ramp (1e-9 (r_i + r_j))
     g = np.zeros_like(x)
@@ -75,7 +95,7 @@ def test_force_is_minus_the_gradient_of_the_energy(law_name, phi_deg, depth, shi
             xp[i, c] += h
             xm = x.copy()
             xm[i, c] -= h
-            g[i, c] = (_energy_forces(xp, seg, pairs, L0, law, ds)[0] - _energy_forces(xm, seg, pairs, L0, law, ds)[0]) / (2 * h)
+            g[i, c] = (ef(xp)[0] - ef(xm)[0]) / (2 * h)
     scale = np.abs(f).max()
     assert scale > 0
     err = np.abs(f + g).max() / scale

@@ -181,3 +181,27 @@ def test_tabulated_line_law_matches_lambert_w():
             p, e = L.hertz_parallel_line(delta, ESTAR, R, r2)
             p0, e0 = L.hertz_parallel_line_exact(delta, ESTAR, R, r2)
             assert p == pytest.approx(p0, rel=1e-10) and e == pytest.approx(e0, rel=1e-10)
+
+
+@pytest.mark.parametrize("r2_over_r1", [1.0, 0.7])
+@pytest.mark.parametrize("phi_deg", [0.8, 3.0, 17.0, 60.0, 89.0])
+def test_crossed_angle_derivatives_match_central_differences(phi_deg, r2_over_r1):
+    """hertz_crossed_point_d's ∂e/∂Φ and ∂a/∂Φ (one table look-up) against central differences of
+    hertz_crossed_point, within 1e-6 of the value (the interpolant is smooth inside a table cell)."""
+    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    p = law.params()
+    r1, r2 = 0.25e-3, 0.25e-3 * r2_over_r1
+    phi, d = math.radians(phi_deg), 1e-6
+    f, e, a, de, da = L.hertz_crossed_point_d(p, d, r1, r2, phi)
+    f0, e0, a0 = L.hertz_crossed_point(p, d, r1, r2, phi)
+    assert (f, e, a) == pytest.approx((f0, e0, a0), rel=1e-12)
+    h = 1e-7 * phi
+    fp_, ep, ap = L.hertz_crossed_point(p, d, r1, r2, phi + h)
+    fm_, em, am = L.hertz_crossed_point(p, d, r1, r2, phi - h)
+    assert de == pytest.approx((ep - em) / (2 * h), rel=1e-6, abs=1e-9 * e)
+    assert da == pytest.approx((ap - am) / (2 * h), rel=1e-6, abs=1e-9 * a)
+    # the equivalent angle's derivative
+    pe, dpe = L._equivalent_angle_d(phi, r1, r2)
+    num = (L.equivalent_angle(phi + h, r1, r2) - L.equivalent_angle(phi - h, r1, r2)) / (2 * h)
+    assert pe == pytest.approx(L.equivalent_angle(phi, r1, r2), rel=1e-12)
+    assert dpe == pytest.approx(num, rel=1e-6)
