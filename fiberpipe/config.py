@@ -629,8 +629,9 @@ class SolverConfig(Section):
     checkpoint_every: Optional[int] = Field(None, ge=1, description="steps between checkpoints")
     rotational_inertia_scaling: float = 1.0
     mass_scaling: float = 1.0
-    threads: int = Field(1, ge=1, description="numba threads for the beam pass (one prange task per fiber); "
-                         "> 1 uses a step loop that is compiled in every process (not cached), no net gain measured on 2 cores")
+    threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (one prange task "
+                         "per fiber; contact and friction stay serial); > 1 uses a step loop compiled in every process "
+                         "(not cached); pays on an idle machine with a core per thread (docs/benchmarks.md)")
     settle_time: Time = 0.0
     stable_step: Literal["element", "modes"] = Field(
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "

@@ -103,12 +103,13 @@ def curve_window_error(ref, new, until_s: float, windows: int = 5) -> float:
 def lines(r: dict, reference: str) -> list[str]:
     return [f"| {' '.join(r['new_overrides']) or 'same settings'} | {r['until_s'] * 1e3:.3g} ms | {r['spans']} | "
             f"{r['steps_ref']} / {r['steps_new']} | {r['cpu_ref_s']:.1f} | {r['cpu_new_s']:.1f} | **{r['speedup']:.2f}×** | "
-            f"{r['speedup_median_span']:.2f}× | {r['load_cell_ref_N']:.4g} / {r['load_cell_new_N']:.4g} | "
+            f"{r['speedup_median_span']:.2f}× | {r['wall_ref_s'] / r['wall_new_s']:.2f}× | "
+            f"{r['load_cell_ref_N']:.4g} / {r['load_cell_new_N']:.4g} | "
             f"{100 * r['curve_window_error']:.2f} % | {r['load_min']:.1f}–{r['load_max']:.1f} |"]
 
 
-HEADER = ["| current side | simulated time | spans | steps ref / new | CPU ref (s) | CPU new (s) | ref / new | median span | load cell ref / new (N) | load-cell curve, 5 window means | load average |",
-          "|---|---|---|---|---|---|---|---|---|---|---|"]
+HEADER = ["| current side | simulated time | spans | steps ref / new | CPU ref (s) | CPU new (s) | ref / new | median span | wall ref / new | load cell ref / new (N) | load-cell curve, 5 window means | load average |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def _time(s: str) -> float:
@@ -123,12 +124,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--until", default=None, help="simulated time, e.g. 12ms (default: the loading's end)")
     ap.add_argument("--spans", type=int, default=20)
     ap.add_argument("--new", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="numba threads of the current side's worker (with --new solver.threads=N); compare the "
+                         "wall-time ratio then, on an idle machine")
     ap.add_argument("--save", type=Path, default=None, help="write the figures and curves as JSON here")
     a = ap.parse_args(argv)
     from fiberpipe.bench import default_paper40_config
     cfg = (a.config or default_paper40_config()).resolve()
     r = measure(a.reference.resolve(), cfg, (a.reference / "configs" / "paper-40.yaml").resolve(),
-                _time(a.until) if a.until else None, a.spans, a.new)
+                _time(a.until) if a.until else None, a.spans, a.new, new_threads=a.threads)
     print("\n".join(HEADER + lines(r, str(a.reference))))
     print("per span ref/new:", " ".join(f"{x:.3f}" for x in r["per_span"]))
     if a.save:

@@ -74,7 +74,9 @@ def kernel_times(state_path) -> dict:
     """µs per call of the kernels of one step, alone, on the state's positions."""
     from fiberpipe.solver._kernels_beam import EB_SIZE, beam_resultants
     from fiberpipe.solver._kernels_boundary import plane_contacts
-    from fiberpipe.solver.contact import contact_forces, gauss_points
+    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_potential import contact_forces_pot
+    from fiberpipe.solver.contact_state import new_records
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.solver.neighbours import build_pairs, max_displacement2_speed2
 
@@ -104,12 +106,15 @@ def kernel_times(state_path) -> dict:
     npairs = int(data.stats.n_pairs[0])
     pairs = data.lists[0].pairs
     gxi, gw = gauss_points(len(prm.gauss_xi))
-    bufs = [np.zeros(max(npairs, 1)) for _ in range(5)]
-    cn = np.zeros((max(npairs, 1), 3))
-    res = contact_forces(x, segs.nodes, segs.radius, pairs, npairs, prm.law_id, prm.law_params, gxi, gw, f,
-                         bufs[0], cn, *bufs[1:])
-    out["contact, every candidate evaluated (contact_forces)"] = _best(lambda: contact_forces(
-        x, segs.nodes, segs.radius, pairs, npairs, prm.law_id, prm.law_params, gxi, gw, f, bufs[0], cn, *bufs[1:]), 500)
+    # the default normal kernel (potential formulation) on every candidate: records without the gap
+    # array, so no pair is skipped (the step loop skips those whose gap exceeds their path bound)
+    recs = new_records(max(npairs, 1))._replace(gap=np.zeros(0))
+    none = np.zeros(0)
+    res = contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, pairs, npairs, prm.law_id, prm.law_params, gxi,
+                             gw, prm.onset_m, f, recs, none, 0.0)
+    out["contact, every candidate evaluated (contact_forces_pot)"] = _best(lambda: contact_forces_pot(
+        x, segs.nodes, segs.radius, segs.arc, pairs, npairs, prm.law_id, prm.law_params, gxi, gw, prm.onset_m, f,
+        recs, none, 0.0), 500)
     out["_candidates"] = npairs
     out["_in_contact"] = int(res[1])
     out["_elements"] = model.n_elements
