@@ -94,8 +94,9 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
-    lb2 = tb0 * tb0 + tb1 * tb1 + tb2 * tb2
+    inv_lb2 = 1.0 / (tb0 * tb0 + tb1 * tb1 + tb2 * tb2)
     rr = ra + rb
+    reach2 = (rr - off) * (rr - off) if rr > off else 0.0
     energy = 0.0
     for g in range(gxi.shape[0]):
         xi = gxi[g]
@@ -105,12 +106,14 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
         r0 = p0 - x[nb0, 0]
         r1 = p1 - x[nb0, 1]
         r2 = p2 - x[nb0, 2]
-        t_raw = (r0 * tb0 + r1 * tb1 + r2 * tb2) / lb2
+        t_raw = (r0 * tb0 + r1 * tb1 + r2 * tb2) * inv_lb2
         t = min(max(t_raw, 0.0), 1.0)
         d0 = r0 - t * tb0
         d1 = r1 - t * tb1
         d2 = r2 - t * tb2
         dd2 = d0 * d0 + d1 * d1 + d2 * d2
+        if dd2 >= reach2:  # out of contact (δ ≤ 0) without the square root
+            continue
         d = math.sqrt(dd2)
         delta = rr - d - off
         # out of contact with this segment: no share of Π whichever segment owns the point
