@@ -337,35 +337,11 @@ def merge_speed(vmax2, bad, v2, i):
     return vmax2, bad
 
 
-@njit(inline="always", **_FLAGS)
-def update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
-    """:func:`update_fiber` for every fiber in turn; returns its sums over all nodes (the speed's
-    maximum and node)."""
-    ke = 0.0
-    ke_lf = 0.0
-    vd = 0.0
-    wk_fix = 0.0
-    pw_c = 0.0
-    vmax2 = 0.0
-    bad = -1
-    prescribed = (scene.alpha_per_s, scene.fix_mask, scene.node_drive, scene.drives.v)
-    for fib in range(model.node_offsets.shape[0] - 1):
-        a, b, c, d, e, v2, i = update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib)
-        ke += a
-        ke_lf += b
-        vd += c
-        wk_fix += d
-        pw_c += e
-        vmax2, bad = merge_speed(vmax2, bad, v2, i)
-    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
-
-
-# Not cached, as beam_resultants_fibers (its comment): only the solver.threads > 1 loops use it.
-@njit(cache=False, fastmath=True, error_model="numpy", parallel=True)
-def update_nodes_fibers(model, scene, state, work, fc, dt, coef, record, gyro):
-    """:func:`update_nodes` with one ``prange`` task per fiber (``solver.threads`` > 1): every node
-    is updated as in the serial pass (bit-identical state); the sums are taken per fiber, then in
-    fiber order."""
+def _update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
+    """:func:`update_fiber` for every fiber (one ``prange`` task per fiber in the parallel copy,
+    ``update_nodes_fibers``; in the serial one ``prange`` is ``range``): every node is updated
+    alike, the sums are taken per fiber, then in fiber order. Returns the sums over all nodes (the
+    speed's maximum and node)."""
     nf = model.node_offsets.shape[0] - 1
     sums = np.empty((nf, 7))
     prescribed = (scene.alpha_per_s, scene.fix_mask, scene.node_drive, scene.drives.v)
@@ -393,6 +369,12 @@ def update_nodes_fibers(model, scene, state, work, fc, dt, coef, record, gyro):
         pw_c += sums[fib, 4]
         vmax2, bad = merge_speed(vmax2, bad, sums[fib, 5], int(sums[fib, 6]))
     return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
+
+
+update_nodes = njit(inline="always", **_FLAGS)(_update_nodes)
+# Not cached, as beam_resultants_fibers (its comment): only the solver.threads > 1 loops use it.
+update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {}, cache=False, fastmath=True,
+                                 error_model="numpy", parallel=True)
 
 
 @njit(**_FLAGS)

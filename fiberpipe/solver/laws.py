@@ -140,7 +140,7 @@ def crossed_table(n: int = 512, phi_min_deg: float = 0.01) -> tuple[float, float
 
     Grid: ``n`` points from ``phi_min_deg`` to 90° (inclusive). Returns
     ``(ln Φ0, Δ ln Φ, khat[n], ahat[n])``. The kernels interpolate the values linearly in ln Φ
-    (:func:`_table_lookup`): within 5.6e-5 of the exact solution between grid points (1e-4 tested).
+    (:func:`_table_lookup_d`): within 5.6e-5 of the exact solution between grid points (1e-4 tested).
     """
     l0 = math.log(phi_min_deg * DEG)
     l1 = math.log(90.0 * DEG)
@@ -365,58 +365,18 @@ def scaled_stiffness_force(delta, d, s, s0, kdef, nseg):
 
 @njit(cache=True, error_model="numpy")
 def _equivalent_angle(phi, r1, r2):
-    if r1 == r2:
-        return phi
-    a = 1.0 / r1
-    b = 1.0 / r2
-    apb = 0.5 * (a + b)
-    bma = 0.5 * math.sqrt(max(a * a + b * b + 2.0 * math.cos(2.0 * phi) * a * b, 0.0))
-    c = bma / apb
-    if c > 1.0:
-        c = 1.0
-    return math.acos(c)
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _table_lookup(params, phi_eq):
-    """(k̂, â) at Φ_eq from the table in ``params``: k̂ and â interpolated linearly in ln Φ, clamped to
-    the grid (within 5.6e-5 of the exact solution between the 512 grid points, 1e-4 tested in
-    tests/solver/test_laws.py; interpolating ln k̂ instead, ≈ 1e-5, costs an exp per value and contact)."""
-    nt = int(params[P_NTAB])
-    if phi_eq <= 0.0:
-        u = 0.0
-    else:
-        u = (math.log(phi_eq) - params[P_LNPHI0]) / params[P_DLNPHI]
-    if not (u == u) or u <= 0.0:  # NaN (a degenerate or diverging geometry) reads the first row
-        i = 0
-        t = 0.0
-    elif u >= nt - 1:
-        i = nt - 2
-        t = 1.0
-    else:
-        i = min(max(int(u), 0), nt - 2)  # integer clamp: NaN-safe even under fastmath
-        t = u - i
-    kk = N_HEADER + i
-    ka = N_HEADER + nt + i
-    return (params[kk] * (1.0 - t) + params[kk + 1] * t,
-            params[ka] * (1.0 - t) + params[ka + 1] * t)
+    return _equivalent_angle_d(phi, r1, r2)[0]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def hertz_crossed_point(params, delta, r1, r2, phi):
     """F = K(Φ) δ^{3/2} [N], energy (2/5)Kδ^{5/2}, and ellipse semi-major axis a [m].
 
-    ``K = k̂(Φ_eq)·E*·√R_e``, ``1/R_e = A + B = (1/r1 + 1/r2)/2``; ``a = â(Φ_eq)√(R_e δ)``.
+    ``K = k̂(Φ_eq)·E*·√R_e``, ``1/R_e = A + B = (1/r1 + 1/r2)/2``; ``a = â(Φ_eq)√(R_e δ)``
+    (:func:`hertz_crossed_point_d` without the angle derivatives).
     """
-    if delta <= 0.0:
-        return 0.0, 0.0, 0.0
-    re = 2.0 * r1 * r2 / (r1 + r2)
-    phe = _equivalent_angle(phi, r1, r2)
-    kh, ah = _table_lookup(params, phe)
-    sre = math.sqrt(re)
-    sd = math.sqrt(delta)
-    f = kh * params[P_ESTAR] * sre * delta * sd
-    return f, 0.4 * f * delta, ah * sre * sd
+    f, e, a, de, da = hertz_crossed_point_d(params, delta, r1, r2, phi)
+    return f, e, a
 
 
 @njit(cache=True, error_model="numpy")
@@ -440,8 +400,10 @@ def _equivalent_angle_d(phi, r1, r2):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _table_lookup_d(params, phi_eq):
-    """(k̂, â, dk̂/dΦ_eq, dâ/dΦ_eq) of :func:`_table_lookup`: the interpolant is linear in ln Φ within
-    a cell, so its derivative is the cell's slope over Φ_eq dlnΦ (0 where the look-up clamps)."""
+    """(k̂, â, dk̂/dΦ_eq, dâ/dΦ_eq) at Φ_eq from the table in ``params``: k̂ and â interpolated linearly
+    in ln Φ, clamped to the grid (within 5.6e-5 of the exact solution between the 512 grid points, 1e-4
+    tested in tests/solver/test_laws.py; a NaN angle reads the first row). The interpolant is linear in
+    ln Φ within a cell, so its derivative is the cell's slope over Φ_eq dlnΦ (0 where it clamps)."""
     nt = int(params[P_NTAB])
     dl = params[P_DLNPHI]
     u = (math.log(phi_eq) - params[P_LNPHI0]) / dl if phi_eq > 0.0 else 0.0
