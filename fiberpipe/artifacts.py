@@ -84,13 +84,65 @@ class Artifact:
 def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
     """sha256 of a file's bytes."""
     h = hashlib.sha256()
+    _update_with_file(h, path, chunk)
+    return h.hexdigest()
+
+
+def _update_with_file(h, path: str | Path, chunk: int = 1 << 20) -> None:
     with open(path, "rb") as f:
         while True:
             b = f.read(chunk)
             if not b:
                 break
             h.update(b)
-    return h.hexdigest()
+
+
+def _input_files(path: Path) -> list[tuple[str, Path]]:
+    """The files whose bytes make up the input ``path``, each with the name it is hashed under: the
+    file itself; a MetaImage header with its separate data file (``ElementDataFile``); every file
+    of a folder (a TIFF stack, a Zarr store), by relative path in sorted order."""
+    if path.is_dir():
+        return [(f.relative_to(path).as_posix(), f) for f in sorted(path.rglob("*")) if f.is_file()]
+    files = [(path.name, path)]
+    if path.suffix.lower() == ".mhd":
+        try:
+            from fiberpipe.imaging.readers.metaimage import read_header
+
+            src = read_header(path)[0].get("ElementDataFile", "LOCAL")
+        except Exception:  # noqa: BLE001 — a broken header is reported by the reader, not here
+            src = "LOCAL"
+        data = path.parent / src
+        if src.upper() != "LOCAL" and data.is_file():
+            files.append((src, data))
+    return files
+
+
+_INPUT_HASHES: dict = {}
+
+
+def input_sha256(path: str | Path) -> str | None:
+    """sha256 of an input as a stage reads it (:func:`_input_files`: a file, a MetaImage pair, or a
+    folder's files with their relative names), None when it does not exist. Remembered per process
+    under the files' sizes and modification times, so the cache key and the provenance record of one
+    run read a large volume once."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    files = _input_files(path)
+    sig = (str(path.resolve()), tuple((name, f.stat().st_size, f.stat().st_mtime_ns) for name, f in files))
+    if sig not in _INPUT_HASHES:
+        if path.is_file() and len(files) == 1:
+            digest = file_sha256(path)  # a single file: its plain sha256, as ``sha256sum`` prints it
+        else:
+            h = hashlib.sha256()
+            for name, f in files:
+                h.update(name.encode() + b"\0")
+                _update_with_file(h, f)
+            digest = h.hexdigest()
+        if len(_INPUT_HASHES) >= 16:  # the inputs of the current stages are what is asked again
+            _INPUT_HASHES.clear()
+        _INPUT_HASHES[sig] = digest
+    return _INPUT_HASHES[sig]
 
 
 def _current_umask() -> int:

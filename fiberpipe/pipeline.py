@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Callable
 
 from fiberpipe import __version__
-from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, write_text_atomic
+from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, write_text_atomic
 from fiberpipe.config import Config
 from fiberpipe.errors import ConfigError, FiberpipeError, InputError
 
@@ -263,7 +263,7 @@ def stage_key(stage: Stage, cfg: Config, inputs: dict[str, Path]) -> str:
     for name in sorted(inputs):
         p = inputs[name]
         h.update(name.encode())
-        h.update(file_sha256(p).encode() if Path(p).is_file() else b"missing")
+        h.update((input_sha256(p) or "missing").encode())
     return h.hexdigest()
 
 

@@ -87,3 +87,42 @@ def test_written_files_get_the_umask_mode_not_0600(tmp_path):
     assert stat.S_IMODE(fib.stat().st_mode) == 0o644
     assert stat.S_IMODE(txt.stat().st_mode) == 0o644
     assert stat.S_IMODE(group.stat().st_mode) == 0o640
+
+
+def test_input_hash_covers_folders_and_metaimage_data_and_reads_each_input_once(tmp_path, monkeypatch):
+    import hashlib
+    import os
+
+    import fiberpipe.artifacts as A
+
+    # a single file: its plain sha256
+    raw = tmp_path / "v.raw"
+    raw.write_bytes(b"\x01\x02" * 64)
+    assert A.input_sha256(raw) == hashlib.sha256(raw.read_bytes()).hexdigest()
+    assert A.input_sha256(tmp_path / "absent.tif") is None
+    # a folder (TIFF stack, Zarr store): a change in any file, or a renamed file, changes the hash
+    stack = tmp_path / "stack"
+    (stack / "sub").mkdir(parents=True)
+    (stack / "s000.tif").write_bytes(b"a" * 10)
+    (stack / "sub" / "0.0.0").write_bytes(b"b" * 10)
+    h0 = A.input_sha256(stack)
+    (stack / "sub" / "0.0.0").write_bytes(b"c" * 10)
+    os.utime(stack / "sub" / "0.0.0", ns=(1, 1))
+    h1 = A.input_sha256(stack)
+    (stack / "s000.tif").rename(stack / "s001.tif")
+    h2 = A.input_sha256(stack)
+    assert len({h0, h1, h2}) == 3
+    # a MetaImage header with a separate data file: the data file's bytes count
+    mhd = tmp_path / "v.mhd"
+    mhd.write_text("NDims = 3\nDimSize = 4 4 4\nElementType = MET_USHORT\nElementDataFile = v.raw\n")
+    m0 = A.input_sha256(mhd)
+    raw.write_bytes(b"\x03\x02" * 64)
+    os.utime(raw, ns=(2, 2))
+    assert A.input_sha256(mhd) != m0
+    # asked again unchanged (the cache key, then the provenance record): the bytes are read once
+    reads = []
+    real = A._update_with_file
+    monkeypatch.setattr(A, "_update_with_file", lambda h, p, *a: (reads.append(p), real(h, p, *a)))
+    A._INPUT_HASHES.clear()
+    first = A.input_sha256(stack)
+    assert A.input_sha256(stack) == first and len(reads) == 2  # the folder's two files, once
