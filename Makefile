@@ -91,7 +91,7 @@ bench: setup
 
 # paper-40's solver profile, against a reference checkout (REFERENCE=path with its own .venv), the
 # largest stable step and the threads (docs/benchmarks.md); minutes each, behind these targets only
-.PHONY: profile-paper40 bench-reference stable-step bench-threads
+.PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy
 REFERENCE ?= ../wt-base
 profile-paper40: setup
 	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
@@ -105,6 +105,11 @@ stable-step: setup
 	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 0 708000
 	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_0.npz --span 2e-3
 	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_708000.npz --span 0.5e-3 --fixed-penalties --factors 0.8 0.85 0.9 0.95 1.0
+
+# energy the time step creates in the six-fibre scene at 1000 N/m, against dt_safety (docs/contact.md)
+step-energy: setup
+	$(PY) -m fiberpipe.benchmarks.bench_step_energy --dt-safety 0.9 0.85 0.8 0.75 0.7 0.6 0.5 0.45 --seeds 4
+	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_parallel --dt-safety 0.9 0.8 0.7 0.6 0.45 --seeds 4
 
 bench-threads: setup
 	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.bench_threads --fibers 160 640

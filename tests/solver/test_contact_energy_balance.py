@@ -8,53 +8,18 @@ load on the top two. With the potential formulation every law stays at or below 
 (measured ≤ +0.001 of max|W| at 3 N/m); the legacy kernel of hertz_oriented creates +22 % here
 (blend and K(Φ) without their derivatives, with ℓ_blend = 1 mm; see docs/contact.md)."""
 
-import math
-
 import numpy as np
 import pytest
 
 from fiberpipe.config import ContactConfig
-from fiberpipe.solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, simulate
-from fiberpipe.solver.effects import LineLoad
 from fiberpipe.solver.laws import make_law
-from fiberpipe.verification.case_config import contact_hook
-
-R = 0.25e-3
-MAT = Material(15e9, 1380.0, 0.3)
-GAP = 0.5e-6
-
-
-def _six_fibres(L=6e-3, n_el=20, phi_deg=3.0):
-    pitch = 2 * R + GAP
-    s = np.linspace(-0.5, 0.5, n_el + 1)
-    fibres = [np.c_[L / 2 + s * L, np.full_like(s, GAP + R + k * pitch), np.full_like(s, R + GAP)] for k in range(4)]
-    ph = math.radians(phi_deg)
-    for yc, sg in ((GAP + R + 0.5 * pitch, 1.0), (GAP + R + 2.5 * pitch, -1.0)):
-        f = np.c_[L / 2 + s * L * math.cos(ph), yc + sg * s * L * math.sin(ph), np.zeros_like(s)]
-        # lift until the smallest surface gap to the lower fibres is GAP
-        tt = np.linspace(0, 1, 400)[:, None]
-        pts = f[0] + tt * (f[-1] - f[0])
-        dy = np.abs(pts[:, 1][:, None] - np.array([g[0, 1] for g in fibres])[None, :]).min(axis=1)
-        dz = np.sqrt(np.maximum((2 * R + GAP) ** 2 - dy**2, 0.0))
-        f[:, 2] = R + GAP + float(dz.max())
-        fibres.append(f)
-    off = np.cumsum([0] + [len(f) for f in fibres])
-    return build_model(np.vstack(fibres), off, R, MAT), pitch
+from fiberpipe.verification.six_fibres import energy_excess, six_fibres_run
 
 
 def _excess(law, q, formulation, t_end=2e-3, dt_safety=0.9):
     """max over the rows of (state energy − loads' work)/max|W|, and the kinetic energy per row."""
-    m, pitch = _six_fibres()
-    eff = [Loads([LineLoad(4, (0, 0, -q)), LineLoad(5, (0, 0, -q))]),
-           Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-           Walls({"y": (0.0, 4 * pitch + GAP)}),
-           contact_hook(m, law=law, formulation=formulation)]
-    res = simulate(m, eff, SimulationSettings(end_time_s=t_end, output_frames=3, history_every=100,
-                                                      dt_safety=dt_safety))
-    h = res.history
-    ke, se, st, wk = (h[f"energy/{k}"] for k in ("kinetic_leapfrog", "strain", "contact_stored", "external"))
-    assert st.max() > 0 and res.history["contacts"].max() > 0, "no contact: the case tests nothing"
-    return float(np.max((ke + se + st - wk) / np.max(np.abs(wk)))), ke
+    _, res = six_fibres_run(law, q, formulation=formulation, t_end_s=t_end, dt_safety=dt_safety)
+    return energy_excess(res)
 
 
 LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness": 1e9}),
