@@ -621,7 +621,9 @@ class SceneConfig(Section):
 
 
 class SolverConfig(Section):
-    dt_safety: float = 0.9
+    dt_safety: float = Field(0.9, description="the step as a fraction of the stable step (ω_max Δt = 2 dt_safety); "
+                             "undamped scenes that ring need ≤ 0.5: above 1/√2 the leapfrog's nonlinear "
+                             "resonances pump energy into the top modes (docs/solver.md)")
     dt: Optional[Time] = Field(None, description="fixed time step; default: the stable step × dt_safety")
     end_time: Optional[Time] = None
     output_frames: int = Field(21, ge=2)
