@@ -276,6 +276,8 @@ def _statistics(data, n_active):
             dmax = rec.delta[k]
     st.fn_sum_n[0] = fsum
     st.delta_max_m[0] = dmax
+    if dmax > st.delta_peak_m[0]:
+        st.delta_peak_m[0] = dmax
     st.n_active[0] = n_active
 
 
@@ -468,38 +470,47 @@ def contact_kernel_for(law, formulation: str = "potential"):
     return _CUSTOM_KERNELS[key], None
 
 
-def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: float = 0.0) -> None:
-    """Refuse a contact law or tangential penalty too stiff for the time step ``dt`` [s].
+def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending")) -> tuple[float, float, float]:
+    """``((ωΔt)², dt_ok [s], k_lim [N/m])`` of a penalty ``k`` [N/m] on the lightest node at step ``dt``.
 
-    A penalty k [N/m] on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two
-    bodies of that mass); central differences stay stable while the beam's element modes it couples
-    with (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal
-    contact, and axial too for the tangential spring, which acts along the fibre) plus this stay
-    below (ωΔt)² = 4, i.e. while Δt ≤ 2/√(ω_beam² + 2k/m) (a mode whose element bound the step
-    already exceeds is locked in the scene: the modal step checked it). Checked for laws whose stiffness is
-    bounded a priori (``node_stiffness_n_per_m``; ×1.17, the onset map's largest slope, with an
-    onset) and for ``k_t``. Several contacts on one node add up; that is not counted here.
+    A penalty k on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two bodies
+    of that mass); central differences stay stable while the beam's element modes it couples with
+    (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal contact,
+    and axial too for the tangential spring, which acts along the fibre) plus this stay below
+    (ωΔt)² = 4, i.e. while Δt ≤ dt_ok = 2/√(ω_beam² + 2k/m); ``k_lim`` is the penalty at that
+    bound. A mode whose element bound the step already exceeds is locked in the scene (the modal
+    step checked it) and does not couple.
     """
     from .timestep import stable_time_step
 
     rep = stable_time_step(model)
     m_min = float(np.min(model.mass))
-    L_max = float(np.max(model.el_L0)) if model.n_elements else 0.0
+    used = [(2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes]
+    beam = max([u for u in used if u < 4.0] or [0.0])
+    total = beam + 2.0 * k * dt * dt / m_min
+    return total, 2.0 * dt / math.sqrt(total) if total > 0 else math.inf, (4.0 - beam) * m_min / (2.0 * dt * dt)
 
+
+def _max_element_length(model) -> float:
+    return float(np.max(model.el_L0)) if model.n_elements else 0.0
+
+
+def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: float = 0.0) -> None:
+    """Refuse a contact law or tangential penalty too stiff for the time step ``dt`` [s]
+    (:func:`penalty_step_bound`). Checked for laws whose stiffness is bounded a priori
+    (``node_stiffness_n_per_m``; ×1.17, the onset map's largest slope, with an onset; a law that
+    stiffens with the penetration is checked at its first slope here and during the run by
+    :class:`ContactSlopeWatch`) and for ``k_t``. Several contacts on one node add up; that is not
+    counted here.
+    """
     def check(k, modes, what, fix):
-        # a step beyond a mode's element bound was checked against the assembled system with the
-        # scene's fixed dofs removed (solver.stable_step: modes): that mode is locked, it does not couple
-        used = [(2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes]
-        beam = max([u for u in used if u < 4.0] or [0.0])
-        total = beam + 2.0 * k * dt * dt / m_min
+        total, dt_ok, k_lim = penalty_step_bound(model, dt, k, modes)
         if total > 4.0:
-            dt_ok = 2.0 * dt / math.sqrt(total)
-            k_lim = (4.0 - beam) * m_min / (2.0 * dt * dt)
             raise FiberpipeError(f"{what} is too stiff for the time step: {k:.3g} N/m per node needs dt ≤ "
                                  f"{dt_ok:.3g} s, the run uses {dt:.3g} s; {fix(k_lim)} or a smaller solver.dt_safety")
 
     if law is not None:
-        k = law.node_stiffness_n_per_m(L_max)
+        k = law.node_stiffness_n_per_m(_max_element_length(model))
         if k is not None:
             k *= 1.17 if onset_m > 0 else 1.0
             check(k, ("shear", "bending"), f"contact law {law.name!r}",
@@ -507,6 +518,46 @@ def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: f
     if k_t is not None:
         check(k_t, ("axial", "shear", "bending"), f"friction.stiffness {k_t:.3g} N/m",
               lambda k_lim: f"use friction.stiffness ≤ {k_lim:.3g} N/m")
+
+
+class ContactSlopeWatch:
+    """The run's look at a stiffening law: between chunks, the law's slope at the largest penetration
+    the contact reached since the last look (``ContactStats.delta_peak_m``, reset here) against the
+    step (:func:`penalty_step_bound`). The first slope the step cannot carry gives one warning; a
+    law whose slope is fixed (``linear``) was checked before the run, and the Hertz laws are not
+    watched (their tangent does not lower the stable step at the loads measured, docs/contact.md).
+    """
+
+    def __init__(self, model, dt: float, law, stats, onset_m: float):
+        self.model, self.dt, self.law, self.stats, self.onset_m = model, float(dt), law, stats, float(onset_m)
+        self.L_max = _max_element_length(model)
+        self.warning: str | None = None
+
+    @staticmethod
+    def for_hook(model, dt: float, hook) -> "ContactSlopeWatch | None":
+        info = getattr(hook, "setup_info", None)
+        law = getattr(info, "law", None)
+        data = getattr(info, "data", None)
+        if law is None or data is None or not getattr(law, "stiffens", False) or not info.contact_on:
+            return None
+        return ContactSlopeWatch(model, dt, law, data.stats, data.params.onset_m)
+
+    def __call__(self, t_s: float) -> str | None:
+        """The warning, the first time the slope outgrows the step (None otherwise)."""
+        peak = float(self.stats.delta_peak_m[0])
+        self.stats.delta_peak_m[0] = 0.0
+        if self.warning is not None or peak <= 0.0:
+            return None
+        g = peak - 0.5 * self.onset_m if peak >= self.onset_m else peak
+        k = self.law.node_stiffness_n_per_m(self.L_max, delta_m=g)
+        total, dt_ok, _ = penalty_step_bound(self.model, self.dt, k)
+        if total <= 4.0:
+            return None
+        self.warning = (f"by t = {t_s:.4g} s the contact law {self.law.name!r} reached a penetration of "
+                        f"{peak:.3g} m, where its slope ({k:.3g} N/m per node) needs dt ≤ {dt_ok:.3g} s; the run "
+                        f"uses {self.dt:.3g} s: from there the step cannot carry the contact (energy is created "
+                        f"or the run diverges); use a smaller solver.dt_safety or a law that stiffens less")
+        return self.warning
 
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
@@ -563,6 +614,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
 
     hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name)
     hook.setup_info = info
+    hook.make_watch = lambda model_, dt: ContactSlopeWatch.for_hook(model_, dt, hook)
     if not contact:
         hook.name = "friction"
     return hook

@@ -57,6 +57,7 @@ class ContactStats(NamedTuple):
     e_spring_J: np.ndarray    # elastic energy of the fiber–fiber tangential springs, J
     offset_max_m: np.ndarray  # largest initial-overlap offset still applied, m
     path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
+    delta_peak_m: np.ndarray  # largest penetration since the caller last reset it (the run's slope watch), m
 
 
 class Segments(NamedTuple):
@@ -133,7 +134,7 @@ class ContactData(NamedTuple):
 
 def new_stats() -> ContactStats:
     i = [np.zeros(1, np.int64) for _ in range(7)]
-    f = [np.zeros(1) for _ in range(6)]
+    f = [np.zeros(1) for _ in range(7)]
     return ContactStats(*i, *f)
 
 

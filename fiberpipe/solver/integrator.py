@@ -121,7 +121,8 @@ class SimulationResult:
         K_lf = ½ v_{n−½}·M v_{n+½}, the kinetic term central differences conserve).
     dt_s, steps, elements, wall_time_s, effects (names), timestep (TimeStepReport),
     final_state (State), completed (False for the partial result of a diverged run),
-    wall_names (labels of the wall columns).
+    wall_names (labels of the wall columns), warnings (what the effects' looks between chunks found,
+    e.g. a contact law whose slope outgrew the step: one line each).
     """
 
     frames_time: np.ndarray
@@ -138,6 +139,7 @@ class SimulationResult:
     completed: bool = True
     wall_names: list = field(default_factory=list)
     notes: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
 
 
 def choose_time_step(model: Model, effects: Sequence[Effect], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
@@ -521,6 +523,25 @@ def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSetti
     return RunPlan(dt, rep, state, end_time, total_steps, every, rows, chunk, ce)
 
 
+def _restore(integ: Integrator, effects: Sequence[Effect], resume: Checkpoint, rows: int):
+    """Put a checkpoint's integrator arrays, history, contact data and effect arrays back; returns its
+    frames ``(times, positions, rotations)`` as lists."""
+    sc = integ.scene
+    integ.restore_arrays(resume.integ)
+    h = np.asarray(resume.hist)
+    if h.shape[0] > rows or h.shape[1] != integ.hist.shape[1]:
+        raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integ.hist.shape}")
+    integ.hist[:h.shape[0]] = h
+    integ.h_row = int(h.shape[0])
+    if sc.contact_on and resume.contact_data is not None:
+        sc.contact_data = restore_into(sc.contact_data, resume.contact_data)
+    for e in effects:
+        if e.name in resume.effect_arrays and hasattr(e, "restore_arrays"):
+            e.restore_arrays(resume.effect_arrays[e.name])
+    return ([float(t) for t in resume.frames_time], [np.array(a) for a in resume.frames_positions],
+            [np.array(a) for a in resume.frames_rotations])
+
+
 def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettings | None = None, *,
              state: State | None = None, progress: Callable | None = None,
              on_frame: Callable | None = None, resume: Checkpoint | None = None,
@@ -577,20 +598,10 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     ft, fx, fq = [], [], []
     names = [e.name for e in effects]
     if resume is not None:
-        integ.restore_arrays(resume.integ)
-        h = np.asarray(resume.hist)
-        if h.shape[0] > rows or h.shape[1] != integ.hist.shape[1]:
-            raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integ.hist.shape}")
-        integ.hist[:h.shape[0]] = h
-        integ.h_row = int(h.shape[0])
-        if sc.contact_on and resume.contact_data is not None:
-            sc.contact_data = restore_into(sc.contact_data, resume.contact_data)
-        for e in effects:
-            if e.name in resume.effect_arrays and hasattr(e, "restore_arrays"):
-                e.restore_arrays(resume.effect_arrays[e.name])
-        ft = [float(t) for t in resume.frames_time]
-        fx = [np.array(a) for a in resume.frames_positions]
-        fq = [np.array(a) for a in resume.frames_rotations]
+        ft, fx, fq = _restore(integ, effects, resume, rows)
+    # the effects' own looks at the run between chunks (a stiffening contact law against the step)
+    watches = [w for w in (e.make_watch(model, dt) for e in effects if hasattr(e, "make_watch")) if w is not None]
+    warnings: list[str] = []
 
     def take_frame():
         ft.append(state.t)
@@ -620,7 +631,7 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
             dt_s=dt, steps=state.step, elements=model.n_elements,
             wall_time_s=wall_before + time.perf_counter() - t_wall,
             effects=names, timestep=rep, final_state=state, completed=completed,
-            wall_names=list(sc.wall_names),
+            wall_names=list(sc.wall_names), warnings=list(warnings),
             notes=[rep.summary(), f"dt = {dt:.4g} s ({dt / rep.dt_stable_s:.3g} × stable)"]
             + ([f"resumed from a checkpoint at t = {resume.t:.6g} s (step {resume.step})"] if resume is not None else [])
             + ([f"rotary inertia scaled by {model.rotary_inertia_scale:g}: rotational dynamics are slowed "
@@ -656,6 +667,7 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
             exc.bad_node = bad
             exc.status = status
             raise exc
+        warnings += [m for m in (w(state.t) for w in watches) if m]
         rel = state.step - origin
         if rel in frame_set:
             take_frame()

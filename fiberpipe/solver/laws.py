@@ -696,9 +696,14 @@ class ContactLaw:
         """float64 parameter array for the kernels (with the crossed-Hertz table appended)."""
         return self._header()
 
-    def node_stiffness_n_per_m(self, element_length_m: float) -> float | None:
-        """The largest stiffness [N/m] one contact puts on a node of an element of that length, for a
-        law whose stiffness is bounded a priori (None: it grows with the penetration, as Hertz's)."""
+    #: whether the law's slope grows with the penetration in steps the run can outgrow (the scaled
+    #: stiffness of the study's Eq. 1): then the run watches it (``contact_effect.ContactSlopeWatch``)
+    stiffens = False
+
+    def node_stiffness_n_per_m(self, element_length_m: float, delta_m: float = 0.0) -> float | None:
+        """The largest stiffness [N/m] one contact puts on a node of an element of that length, at the
+        (mapped) penetration ``delta_m``, for a law whose slope is piecewise constant (None: it grows
+        continuously with the penetration, as Hertz's)."""
         return None
 
     # vectorised helpers (Python loops over the kernels; for tests and plots)
@@ -755,7 +760,7 @@ class LinearLaw(ContactLaw):
         p[P_K] = self.stiffness
         return p
 
-    def node_stiffness_n_per_m(self, element_length_m):
+    def node_stiffness_n_per_m(self, element_length_m, delta_m=0.0):
         # per length: a parallel contact along a whole element gives each node k·L (half from each
         # element), a point contact k·L_ref; per contact: a point k, a line part k·L/L_ref
         return _node_stiffness(self.stiffness, self.per_length, element_length_m, self.ref_length_m)
@@ -805,10 +810,14 @@ class ScaledStiffnessLaw(ContactLaw):
         self.target_phi_deg = None
         self.fit_range_m = None
 
-    def node_stiffness_n_per_m(self, element_length_m):
-        # the first slope S0·K_def: the law only stiffens from there (S ≥ 1), so a first slope the step
-        # cannot carry is refused; deeper slopes are the run's to reach
-        return _node_stiffness(self.S0 * self.K_def, self.per_length, element_length_m, self.ref_length_m)
+    stiffens = True
+
+    def node_stiffness_n_per_m(self, element_length_m, delta_m=0.0):
+        # the slope of the segment of Eq. 1 that holds δ, K_m = S0·K_def·S^m, m = min(⌊δ/d⌋, n − 1):
+        # at δ = 0 the first slope, which the setup refuses when the step cannot carry it
+        m = min(math.floor(max(delta_m, 0.0) / self.d_m), self.n - 1)
+        slope = self.S0 * self.K_def * math.exp(m * math.log(self.S))
+        return _node_stiffness(slope, self.per_length, element_length_m, self.ref_length_m)
 
     @classmethod
     def preset(cls, name: str, **kw) -> "ScaledStiffnessLaw":

@@ -283,6 +283,8 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     finally:
         if bar is not None:
             bar.close()
+    for w in result.warnings:
+        log.warning("simulate: %s", w)
     contact = None
     if "contact" in cfg.scene.effects:
         from fiberpipe.post.contact_field import frame_contact_forces
@@ -304,6 +306,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
         "effects": asked,
         "frames": int(len(result.frames_time)),
         "initial_plane_overlap_max_m": plane_overlap,
+        "warnings": list(result.warnings),
     }
     if ck is not None:
         figures["resumed_from_step"] = int(ck.step)
