@@ -42,7 +42,7 @@ CHECKOUT = (ROOT / "pyproject.toml").exists() and (ROOT / "configs" / "paper-40.
 PACKAGED_PAPER40 = Path(__file__).resolve().parent / "benchmarks" / "data" / "paper-40.yaml"
 BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
-PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging", "reference", "profile", "threads")
+PARTS = ("solver", "contact", "pyelastica", "paper40", "bundle400", "imaging", "reference", "profile", "threads")
 # the time step of the paper-40 row "stable step per active mode" (docs/benchmarks.md)
 MODES_OVERRIDES = {"solver.stable_step": "modes"}
 # paper-40's first 12 ms in steps of the study settings (dt = 8.646e-8 s) and U ≈ 1 mm
@@ -225,6 +225,29 @@ def _profile_part(quick: bool, echo) -> list[str]:
             "rotations of 3000 steps).", ""] + lines + [""]
 
 
+def _bundle_part(quick: bool, echo) -> list[str]:
+    """The 400-fiber specimen's cost per element-step against paper-40 (``make bench-400``): the
+    specimen of ``configs/specimens/bundle-400.yaml`` is built once into ``runs/specimens/bundle-400``
+    of the working folder (≈ 10 min) and reused."""
+    import subprocess
+    import sys
+
+    head = ["## 400 fibers against paper-40", ""]
+    spec = default_paper40_config().parent / "specimens" / "bundle-400.yaml"
+    if quick or not spec.exists():
+        why = "--quick" if quick else f"no {spec} (a source checkout has it)"
+        return head + [f"not run: {why} (`make bench-400`)", ""]
+    run = Path("runs") / "specimens" / "bundle-400"
+    if not (run / "config.yaml").exists():
+        echo(f"bench: building the 400-fiber specimen into {run} (≈ 10 min) ...")
+        subprocess.run([sys.executable, "-m", "fiberpipe.cli", "specimen", str(spec), "--out", str(run)], check=True)
+    echo("bench: 400 fibers against paper-40 ...")
+    bb = _load("bench_bundle_cost")
+    r = bb.measure(run / "config.yaml")
+    return head + [f"`fiberpipe specimen {spec.name} --out {run}` then `python -m fiberpipe.benchmarks.bench_bundle_cost "
+                   f"{run}/config.yaml` (both scenes from rest, alternating, CPU time; {load()}).", ""] + bb.table(r) + [""]
+
+
 def _threads_part(quick: bool, echo) -> list[str]:
     import subprocess
     import sys
@@ -313,6 +336,8 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
                        f"{r['Mes_per_s']:.2f} | {r['U_mm']:.4f} | {r['F_cell_final_N']:.4g} | {r['F_cell_max_N']:.4g} | "
                        f"{'—' if err is None else f'{100 * err:.2f} %'} |")
         sec += [""] + [f"Not completed: {d}" for d in diverged] + ([""] if diverged else [])
+    if "bundle400" not in skip:
+        sec += _bundle_part(quick, echo)
     if "imaging" not in skip:
         echo("bench: imaging stages ...")
         bi = _load("bench_imaging")

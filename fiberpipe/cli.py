@@ -421,7 +421,8 @@ def yaml_value(text: str):
 def bench(quick, skip, out, reference):
     """Performance benchmarks into docs/benchmarks.md: solver element-steps/s
     (40/160/640 fibers, contact off/on), contact cost per pair, PyElastica ratio, paper-40
-    time-to-solution, imaging throughput and memory. Run it on an idle machine."""
+    time-to-solution, the 400-fiber specimen's cost against paper-40, imaging throughput and memory,
+    the reference commit, the profile and the threads. Run it on an idle machine."""
     from fiberpipe.bench import run_bench
 
     try:

@@ -53,7 +53,7 @@ def test_a_part_runs_outside_the_checkout(monkeypatch, tmp_path):
     monkeypatch.setattr(fake, "main", lambda argv: calls.append(argv) or [])
     monkeypatch.setattr(fake, "table_lines", lambda rows: ["| gap | law |", "|---|---|"])
     monkeypatch.delenv("FIBERPIPE_BENCH_REFERENCE", raising=False)
-    bench.run_bench(skip=("solver", "pyelastica", "paper40", "imaging", "profile", "threads"), echo=lambda *_: None)
+    bench.run_bench(skip=("solver", "pyelastica", "paper40", "bundle400", "imaging", "profile", "threads"), echo=lambda *_: None)
     text = (tmp_path / "benchmarks.md").read_text()
     assert bench.BEGIN in text and bench.END in text and "### Contact pass" in text
     assert "### Against the reference commit" in text and "not run: no reference checkout" in text
