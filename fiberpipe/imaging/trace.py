@@ -424,17 +424,16 @@ class _GreySlices:
     scaled so the background is 0 and the fibers 1 (their medians outside and inside the mask,
     from a strided sample)."""
 
-    def __init__(self, grey_t, mask_t, samp, *, sigma_along: float = 1.0, sigma_in: float = 0.7):
+    def __init__(self, grey_t, mask_t, samp, *, sigma_along: float = 1.0, sigma_in: float = 0.7, levels=None,
+                 k_range=None):
+        # levels: (background, fiber) grey levels measured elsewhere (a chunked trace measures them
+        # once on the whole volume, so every block is scaled alike); k_range: the slice indices the
+        # smoothing along the slices may read (a block's reach into its neighbours), default its own
         self.g, self.samp = grey_t, samp
-        n = grey_t.shape[0]
-        step = max(1, n // 16)
-        ks = range(0, n, step)
-        fg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[np.asarray(mask_t[k])] for k in ks])
-        bg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[~np.asarray(mask_t[k])] for k in ks])
-        self.lo = float(np.median(bg)) if len(bg) else 0.0
-        self.hi = float(np.median(fg)) if len(fg) else 1.0
+        self.lo, self.hi = grey_levels(grey_t, mask_t) if levels is None else (float(levels[0]), float(levels[1]))
         if not self.hi > self.lo:
             raise InputError("trace: the grey volume has no contrast between the mask and the rest")
+        self.k_range = (0, grey_t.shape[0] - 1) if k_range is None else (int(k_range[0]), int(k_range[1]))
         h = int(np.ceil(3 * sigma_along))
         self.offsets = np.arange(-h, h + 1)
         w = np.exp(-0.5 * (self.offsets / sigma_along) ** 2) if sigma_along > 0 else (self.offsets == 0) * 1.0
@@ -442,8 +441,7 @@ class _GreySlices:
         self.sigma_in = sigma_in
 
     def __getitem__(self, k: int) -> np.ndarray:
-        n = self.g.shape[0]
-        ks = np.clip(k + self.offsets, 0, n - 1)
+        ks = np.clip(k + self.offsets, *self.k_range)
         acc = np.zeros(self.g.shape[1:], dtype=np.float32)
         for kk, w in zip(ks, self.w):
             acc += np.float32(w) * np.asarray(self.g[kk], dtype=np.float32)
@@ -452,6 +450,16 @@ class _GreySlices:
         acc -= self.lo
         acc /= self.hi - self.lo
         return acc
+
+
+def grey_levels(grey_t, mask_t) -> tuple[float, float]:
+    """The background and fiber grey levels: the medians of the grey values outside and inside the
+    mask on 16 slices spread along axis 0."""
+    n = grey_t.shape[0]
+    ks = range(0, n, max(1, n // 16))
+    fg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[np.asarray(mask_t[k])] for k in ks])
+    bg = np.concatenate([np.asarray(grey_t[k], dtype=np.float32)[~np.asarray(mask_t[k])] for k in ks])
+    return (float(np.median(bg)) if len(bg) else 0.0), (float(np.median(fg)) if len(fg) else 1.0)
 
 
 def _end_fit(k: np.ndarray, p: np.ndarray, at_end: bool, n: int):
@@ -692,12 +700,18 @@ def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, m
             n = pb.n_fibers
         info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": int(n),
                           "action": "traced along its own axis" if off_axis == "trace" else "left out"}
+    return combine_region_parts(parts, info, direction_zyx=direction)
+
+
+def combine_region_parts(parts: list, info: dict, **meta) -> Polylines:
+    """The fibers of the regions of a cross ply, traced each along its own axis, as one set: the main
+    axis' part first (its ``meta`` kept), ``off_axis`` = ``info`` (per other axis: volume fraction,
+    fibers, action), ``n_fibers_main_axis``."""
     fibers = [f for p in parts for f in p]
     radii = np.concatenate([np.broadcast_to(np.asarray(p.radius_m, dtype=np.float64), (p.n_fibers,)) for p in parts])
     out = Polylines.from_list(fibers, radii if len(fibers) else 0.0)
     out.meta.update(parts[0].meta)
-    out.meta.update(direction_zyx=direction, n_fibers=len(fibers), n_fibers_main_axis=parts[0].n_fibers,
-                    off_axis=info)
+    out.meta.update(n_fibers=len(fibers), n_fibers_main_axis=parts[0].n_fibers, off_axis=info, **meta)
     return out
 
 

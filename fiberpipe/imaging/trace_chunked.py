@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
-from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, track_slices
+from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, track_slices
 
 
 class SliceSource:
@@ -118,8 +118,12 @@ class _Block:
     read ``read_ahead`` slices at a time (a chunked store decompresses each chunk once, not once
     per slice; by default 16 along axis 0, across it the store's chunk extent up to 128)."""
 
-    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int | None = None, axis: int = 0):
+    def __init__(self, arr, b0: int, b1: int, dtype=bool, read_ahead: int | None = None, axis: int = 0,
+                 halo: int = 0):
+        # halo: slices beyond the block the reads may reach (the grey smoothing along the slices)
         self.arr, self.b0, self.b1, self.dtype, self.axis = arr, int(b0), int(b1), dtype, int(axis)
+        self.lo_bound = max(0, self.b0 - int(halo))
+        self.hi_bound = min(int(arr.shape[self.axis]), self.b1 + int(halo))
         if read_ahead is None:
             chunks = getattr(arr, "chunks", None)
             read_ahead = 16 if self.axis == 0 or not chunks else min(128, max(16, int(chunks[self.axis])))
@@ -138,8 +142,8 @@ class _Block:
         i = self.b0 + int(k)
         if self._buf is None or not (self._lo <= i < self._lo + len(self._buf)):
             # the slices tracer's grey path also reads a few slices back: keep them in the window
-            lo = max(self.b0, i - 6) if self.dtype is not bool else i
-            self._lo, self._buf = lo, self._read(lo, min(self.b1, lo + self.ahead))
+            lo = max(self.lo_bound, i - 6) if self.dtype is not bool else i
+            self._lo, self._buf = lo, self._read(lo, min(self.hi_bound, max(i + 1, lo + self.ahead)))
         a = self._buf[i - self._lo]
         return a.astype(bool, copy=False) if self.dtype is bool else a
 
@@ -151,17 +155,38 @@ class _Piece:
         self.k, self.p, self.r = k, p, r
 
 
-def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, axis: int = 0):
-    """Track one block of slices across ``axis``; the pieces in compact arrays (slice indices global)."""
+def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, axis: int = 0, levels=None):
+    """Track one block of slices across ``axis``; the pieces in compact arrays (slice indices global).
+    The tracking starts ``WARM_UP`` slices before the block (the points there are dropped), so the
+    tracks enter the block established, with the predictions that separate touching fibers; the
+    grey slices are scaled by the whole volume's ``levels`` and smoothed along the slices across
+    the block's faces. A block's first slices are then detected as in the whole volume."""
     arr = src.open() if hasattr(src, "open") else src
-    block = _Block(arr, b0, b1, axis=axis)
+    w0 = max(0, int(b0) - WARM_UP)
+    block = _Block(arr, w0, b1, axis=axis)
     grey_t = None
     if grey_src is not None:
         g = grey_src.open() if hasattr(grey_src, "open") else grey_src
-        grey_t = _GreySlices(_Block(g, b0, b1, dtype=None, axis=axis), block, samp)
+        n = int(arr.shape[axis])
+        grey_t = _GreySlices(_Block(g, w0, b1, dtype=None, axis=axis, halo=GREY_HALO), block, samp, levels=levels,
+                             k_range=(-w0, n - 1 - w0))
     tracks, n_det = track_slices(block, r, samp, grey_t=grey_t, **params)
-    return [(np.asarray(t.k, dtype=np.int32) + b0, np.asarray(t.p, dtype=np.float32),
-             np.asarray(t.r, dtype=np.float32)) for t in tracks], n_det
+    out = []
+    for t in tracks:
+        k = np.asarray(t.k, dtype=np.int32) + w0
+        keep = k >= b0
+        if keep.any():
+            out.append((k[keep], np.asarray(t.p, dtype=np.float32)[keep], np.asarray(t.r, dtype=np.float32)[keep]))
+    return out, n_det
+
+
+#: Slices tracked before each block and dropped: the tracks enter the block established.
+WARM_UP = 16
+
+
+#: Slices a block's grey reads reach beyond its faces: the half-width of the smoothing along the
+#: slices (3 sigma of :class:`fiberpipe.imaging.trace._GreySlices`, plus its read-back window).
+GREY_HALO = 8
 
 
 def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, block: int = 128,
@@ -236,15 +261,21 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
                   max_skip=max_skip, momentum=momentum, refine=refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
+    levels = None
+    if grey is not None:  # one scale for every block: the whole volume's background and fiber levels
+        g = grey.open() if hasattr(grey, "open") else grey
+        levels = grey_levels(_Block(g, 0, shape[axis], dtype=None, axis=axis, read_ahead=1),
+                             _Block(arr, 0, shape[axis], axis=axis, read_ahead=1))
     client = _client(scheduler)
     results = []
     if client is None:
         for i, (b0, b1) in enumerate(jobs):
-            results.append(_track_block(src, grey, b0, b1, r, samp, params, axis))
+            results.append(_track_block(src, grey, b0, b1, r, samp, params, axis, levels))
             if progress is not None:
                 progress(i + 1, len(jobs))
     else:
-        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, axis, pure=False) for b0, b1 in jobs]
+        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, axis, levels, pure=False)
+                   for b0, b1 in jobs]
         results = client.gather(futures)
     t_track = time.perf_counter() - t0
     raw = [_Piece(k, p.astype(np.float64), rr) for res, _ in results for k, p, rr in res]

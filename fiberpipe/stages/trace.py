@@ -61,13 +61,18 @@ def run_trace(
             inputs["volume"] = Path(volume_path)
     fibers = trace(mask, **kwargs)
     off_axis = fibers.meta.get("off_axis") or {}
+    warn_off_axis(off_axis, t.off_axis)
+    return finish_trace(cfg, fibers, method, orient_mask, off_axis, inputs, out, mask, voxel_size,
+                        truth_path=truth_path, config_sha256=config_sha256)
+
+
+def warn_off_axis(off_axis: dict, mode: str) -> None:
+    """One warning line per volume axis a region of the fibers runs along besides the slicing axis."""
     for ax, info in off_axis.items():
         log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis (a cross ply or a tow "
                     "lying in the slices): %s (%d fibers); trace.off_axis: %s", 100 * info["volume_fraction"],
-                    ax, info["action"], info["fibers"], "drop leaves it out" if t.off_axis == "trace"
+                    ax, info["action"], info["fibers"], "drop leaves it out" if mode == "trace"
                     else "trace follows it")
-    return finish_trace(cfg, fibers, method, orient_mask, off_axis, inputs, out, mask, voxel_size,
-                        truth_path=truth_path, config_sha256=config_sha256)
 
 
 def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: dict, inputs: dict, out: Path, mask,
@@ -217,8 +222,9 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     across the volume axis nearest the fibers' direction, on a Dask cluster when
     ``chunks.scheduler`` is set; the same artifacts as the in-memory path.
 
-    The skeleton tracer needs the whole skeleton and is refused; fibers along a second volume axis
-    (a cross ply) are not split off as ``trace.off_axis`` does in memory: one warning line."""
+    The skeleton tracer needs the whole skeleton and is refused. Fibers along a second volume axis
+    (a cross ply) are split off by their local axis as in memory (``trace.off_axis``), slab by slab
+    (:func:`_trace_regions_chunked`)."""
     from fiberpipe.artifacts import open_checked
     from fiberpipe.imaging.orientation import axis_fractions
     from fiberpipe.imaging._dask import connect
@@ -238,13 +244,8 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
         raise InputError(f"{why}, which holds the whole skeleton in memory; the chunked trace stage runs the slices "
                          "tracer only: set trace.method: slices, or chunks.mode: off", where=str(mask_path))
     axis = {"z": 0, "y": 1, "x": 2}.get(orient_mask.get("nearest_volume_axis"), 0) if orient_mask.get("n_samples") else 0
-    off_axis = {}
     fr = axis_fractions(sample, voxel_size)
-    for b in (b for b in range(3) if b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION):
-        off_axis["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": 0, "action": "not traced (chunked)"}
-        log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis %s (a cross ply or a "
-                    "tow lying in the slices); the chunked tracer follows %s only: chunks.mode: off traces it "
-                    "region by region (trace.off_axis)", 100 * fr[b], "zyx"[b], "zyx"[axis], "zyx"[axis])
+    split = any(b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION for b in range(3))
     grey, inputs = None, {"mask": Path(mask_path)}
     if t.grey and volume_path is not None:
         grey = grey_source(cfg, volume_path, src.shape)
@@ -252,11 +253,17 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     opts = {k: getattr(t, k) for k in ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox")
             if getattr(t, k) is not None}
     join = {"join_gap_vox": t.join_gap_vox} if t.join_gap_vox is not None else {}
+    vs = voxel_size if len(set(voxel_size)) > 1 else voxel_size[0]
     with connect(cfg.chunks.scheduler) as client:
-        fibers = trace_chunked(src, voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
-                               expected_radius_m=t.expected_radius or cfg.fiber.radius, block=cfg.chunks.slices,
-                               scheduler=client, grey=grey, axis=axis, join=join, **opts)
+        kw = dict(expected_radius_m=t.expected_radius or cfg.fiber.radius, block=cfg.chunks.slices,
+                  scheduler=client, grey=grey, join=join, **opts)
+        if split:
+            fibers = _trace_regions_chunked(cfg, src, vs, axis, Path(out).with_name("trace_regions.tmp.h5"), kw)
+        else:
+            fibers = trace_chunked(src, vs, axis=axis, **kw)
+    off_axis = fibers.meta.get("off_axis") or {}
     fibers.meta["off_axis"] = off_axis
+    warn_off_axis(off_axis, t.off_axis)
     try:
         figures = finish_trace(cfg, fibers, method, orient_mask, off_axis, inputs, out, src.open(), voxel_size,
                                truth_path=truth_path, config_sha256=config_sha256)
@@ -268,9 +275,47 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     return figures
 
 
-#: Share of the fiber volume along a second volume axis above which the chunked trace stage warns
-#: (the in-memory tracer's ``off_axis_min_fraction``).
+#: Share of the fiber volume along a second volume axis above which the chunked trace stage splits
+#: the regions (the in-memory tracer's ``off_axis_min_fraction``).
 OFF_AXIS_MIN_FRACTION = 0.02
+
+
+def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Path, kw: dict):
+    """A cross ply, chunked: every fiber voxel labelled with its fibers' volume axis slab by slab into
+    the scratch file ``scratch`` (removed afterwards), then the chunked slices tracer on each region
+    of at least :data:`OFF_AXIS_MIN_FRACTION` of the fiber volume along its own axis
+    (``trace.off_axis: trace``) or the other regions left out (``drop``), the rest along ``axis``."""
+    import h5py
+
+    from fiberpipe.imaging._util import voxel_size_zyx
+    from fiberpipe.imaging.regions_chunked import RegionSource, axis_labels_chunked
+    from fiberpipe.imaging.trace import combine_region_parts
+    from fiberpipe.imaging.trace_chunked import SliceSource, trace_chunked
+    from fiberpipe.stages._chunks import create_volume_dataset
+
+    t, grey = cfg.trace, kw.get("grey")
+    r_vox = float(kw["expected_radius_m"]) / float(voxel_size_zyx(voxel_size).min())
+    try:
+        with h5py.File(scratch, "w") as f:
+            ds = create_volume_dataset(f, "labels", src.shape, np.uint8, "1")
+            fr = axis_labels_chunked(src.open(), ds, voxel_size, slab=cfg.chunks.slices, halo=cfg.chunks.halo_vox,
+                                     grey=None if grey is None else (grey.open() if hasattr(grey, "open") else grey),
+                                     radius_vox=r_vox)
+        others = [b for b in range(3) if b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION]
+        labels = SliceSource(scratch, "labels")
+        parts = [trace_chunked(RegionSource(src, labels, [c for c in range(3) if c not in others]), voxel_size,
+                               axis=axis, **kw)]
+        info = {}
+        for b in others:
+            if t.off_axis == "trace":
+                parts.append(trace_chunked(RegionSource(src, labels, [b]), voxel_size, axis=b, **kw))
+            info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4),
+                              "fibers": int(parts[-1].n_fibers) if t.off_axis == "trace" else 0,
+                              "action": "traced along its own axis" if t.off_axis == "trace" else "left out"}
+        labels.close()
+        return combine_region_parts(parts, info) if info else parts[0]
+    finally:
+        scratch.unlink(missing_ok=True)
 
 
 def grey_source(cfg: Config, volume_path: Path, shape):
