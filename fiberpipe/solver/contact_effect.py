@@ -594,7 +594,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
 
     def prepare(model_, scene):
         dt = float(scene.dt)
-        kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / dt) ** 2
+        kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / scene.penalty_dt()) ** 2
         info.k_t = kt
         check_penalty_stiffness(model_, dt, law if contact else None, kt if friction else None, float(onset_m))
         N = model_.n_nodes

@@ -17,6 +17,7 @@ from ._kernels_boundary import RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
 from ._kernels_integrate import no_contact, no_contact_forces
 from .layout import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_PLATE_FORCE, H_WALL
 from .model import Model
+from .timestep import penalty_time_step
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _RAMPS = {"linear": RAMP_LINEAR, "smooth": RAMP_SMOOTH, "smoothstep": RAMP_SMOOTHSTEP}
@@ -155,11 +156,17 @@ class SceneArrays:
         self.pl_hist_col = np.append(self.pl_hist_col, hist_col).astype(np.int64)
         self.penalty_factor = max(self.penalty_factor, penalty_factor)
 
+    def penalty_dt(self) -> float:
+        """The step [s] the step-scaled penalties are chosen against
+        (:func:`fiberpipe.solver.timestep.penalty_time_step`; the element bound without damping, so
+        it does not depend on the order the effects are set up in)."""
+        return penalty_time_step(self.model, self.dt)
+
     def k_pen(self) -> np.ndarray:
-        """Per-node plane penalty stiffness ``c_pen m_i (2/Δt)²`` (N/m)."""
+        """Per-node plane penalty stiffness ``c_pen m_i (2/Δt_pen)²`` (N/m), Δt_pen = :meth:`penalty_dt`."""
         if self.pl_axis.size == 0:
             return np.zeros(0)
-        return self.penalty_factor * self.model.mass * (2.0 / self.dt) ** 2
+        return self.penalty_factor * self.model.mass * (2.0 / self.penalty_dt()) ** 2
 
 
 #: the effects a scene may list (``scene.effects``), by config name: one class each, added by

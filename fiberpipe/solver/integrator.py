@@ -30,7 +30,7 @@ from .layout import (ACC_STORED0, H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PL
 from .model import Model
 from .state import State
 from .step_data import DriveArrays, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
-from .timestep import TimeStepReport, modal_time_step, stable_time_step
+from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
                 "kinetic_leapfrog", "total", "residual")
@@ -71,7 +71,7 @@ class SimulationSettings:
         system's (:func:`~fiberpipe.solver.timestep.modal_time_step`).
     """
 
-    dt_safety: float = 0.9
+    dt_safety: float = DEFAULT_DT_SAFETY
     dt_s: float | None = None
     force_dt: bool = False
     end_time_s: float | None = None

@@ -28,6 +28,26 @@ import numpy as np
 from .model import Model
 
 
+#: The fraction of the stable step a run uses by default (``solver.dt_safety`` of the config schema,
+#: ``SimulationSettings.dt_safety``); the step-scaled penalties are chosen against it
+#: (:func:`penalty_time_step`).
+DEFAULT_DT_SAFETY = 0.9
+
+
+def penalty_time_step(model: Model, dt_s: float, *, beta_s: float = 0.0) -> float:
+    """The step Δt_pen [s] the step-scaled penalties (plates and walls ``c m (2/Δt_pen)²``, the
+    tangential friction spring) are chosen against: the larger of the step in use and
+    :data:`DEFAULT_DT_SAFETY` × the element stable step.
+
+    Why: a penalty ``k ∝ 1/Δt²`` keeps ω Δt fixed, so the central-difference error of every contact
+    it carries stays the same fraction of the contact's energy at any step (measured on the
+    six-fibre scene at 1000 N/m: up to +4 % of the loads' work at `dt_safety` 0.45, 0.2 and 0.1
+    alike). Held at the default step's stiffness below it, a smaller step resolves the contacts
+    better (the same runs: ≤ +0.5 % at 0.2, ≤ +0.2 % at 0.1); at and above the default nothing changes.
+    """
+    return max(float(dt_s), DEFAULT_DT_SAFETY * stable_time_step(model, beta_s=beta_s).dt_stable_s)
+
+
 @dataclass(frozen=True)
 class TimeStepReport:
     """Stable time step of a model (s), the mode and element that govern it, and each mode's minimum."""
