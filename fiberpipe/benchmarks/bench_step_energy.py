@@ -10,6 +10,7 @@ fibre–fibre contact forces added to the beams', over the beams' alone.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_step_energy \\
         [--law hertz_oriented] [--load 1000] [--dt-safety 0.9 0.8 0.7 0.6 0.5 0.45] [--seeds 4]
+        [--penalty-factor 0.1 0.05 0.02]
 """
 
 from __future__ import annotations
@@ -60,23 +61,26 @@ def main(argv=None) -> None:
     ap.add_argument("--dt-safety", type=float, nargs="+", default=[0.9, 0.8, 0.7, 0.6, 0.5, 0.45])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--lift", type=float, default=1e-9, help="perturbation per seed, m")
+    ap.add_argument("--penalty-factor", type=float, nargs="+", default=[0.1],
+                    help="the plate's and walls' penalty factor(s) (scene.plates/walls.penalty_factor)")
     a = ap.parse_args(argv)
     cc = ContactConfig()
-    law = make_law(a.law, E_pa=15e9, nu=0.3, blend_length_m=float(cc.blend_length))
+    extra = {"stiffness": 1e9} if a.law == "linear" else {}  # the energy tests' linear law (N/m²)
+    law = make_law(a.law, E_pa=15e9, nu=0.3, blend_length_m=float(cc.blend_length), **extra)
     print(f"# Six fibres, {a.law}, {a.load:g} N/m, undamped ({time.strftime('%Y-%m-%d %H:%M')})\n")
-    print("| dt_safety | ω_max Δt | excess, mean over seeds | largest | ALLKE/W at the end, mean | "
-          "dt with the contact's tangent / beams' |\n|---|---|---|---|---|---|", flush=True)
-    for s in a.dt_safety:
+    print("| penalty factor | dt_safety | ω_max Δt | excess, mean over seeds | largest | ALLKE/W at the end, mean | "
+          "dt with the contact's tangent / beams' |\n|---|---|---|---|---|---|---|", flush=True)
+    for pf, s in ((pf, s) for pf in a.penalty_factor for s in a.dt_safety):
         ex, kw = [], []
         ratio = float("nan")
         for seed in range(a.seeds):
-            m, res = six_fibres_run(law, a.load, dt_safety=s, lift_m=seed * a.lift)
+            m, res = six_fibres_run(law, a.load, dt_safety=s, lift_m=seed * a.lift, penalty_factor=pf)
             e, ke = energy_excess(res)
             ex.append(e)
             kw.append(ke[-1] / np.max(np.abs(res.history["energy/external"])))
             if seed == 0:
                 ratio = contact_tangent_ratio(m, law, res.final_state.x, res.final_state.q, float(cc.onset))
-        print(f"| {s:g} | {2 * s:.2f} | {np.mean(ex):+.4f} | {np.max(ex):+.4f} | {np.mean(kw):.2f} | {ratio:.6f} |",
+        print(f"| {pf:g} | {s:g} | {2 * s:.2f} | {np.mean(ex):+.4f} | {np.max(ex):+.4f} | {np.mean(kw):.2f} | {ratio:.6f} |",
               flush=True)
 
 

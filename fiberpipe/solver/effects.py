@@ -507,7 +507,8 @@ class Plates(Effect):
         return cls(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=float(ld.displacement),
                    velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
                    lower_position_m=p.lower_position, upper_position_m=p.upper_position,
-                   path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold))
+                   path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold),
+                   penalty_factor=float(p.penalty_factor))
 
     def setup(self, model, scene):
         ax = _AXES[self.axis]
@@ -583,7 +584,8 @@ class Walls(Effect):
     @classmethod
     def from_config(cls, sc, model, cfg):
         w = sc.walls
-        return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None})
+        return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None},
+                   penalty_factor=float(w.penalty_factor))
 
     def setup(self, model, scene):
         for ax, (lo, hi) in self.planes.items():

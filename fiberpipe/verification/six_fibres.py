@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, simulate
-from ..solver.effects import LineLoad
+from ..solver.effects import DEFAULT_PENALTY_FACTOR, LineLoad
 from .case_config import contact_hook
 
 RADIUS_M = 0.25e-3
@@ -45,12 +45,14 @@ def six_fibres(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
     return build_model(np.vstack(fibres), off, R, MATERIAL), pitch
 
 
-def six_fibres_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0):
-    """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibres."""
+def six_fibres_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
+                   penalty_factor=DEFAULT_PENALTY_FACTOR):
+    """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibres
+    (``penalty_factor``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`)."""
     m, pitch = six_fibres(lift_m=lift_m)
     eff = [Loads([LineLoad(4, (0, 0, -q_n_per_m)), LineLoad(5, (0, 0, -q_n_per_m))]),
-           Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-           Walls({"y": (0.0, 4 * pitch + GAP_M)}),
+           Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, penalty_factor=penalty_factor),
+           Walls({"y": (0.0, 4 * pitch + GAP_M)}, penalty_factor=penalty_factor),
            contact_hook(m, law=law, formulation=formulation)]
     return m, simulate(m, eff, SimulationSettings(end_time_s=t_end_s, output_frames=3, history_every=100,
                                                   dt_safety=dt_safety))

@@ -44,9 +44,9 @@ def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw
 @pytest.mark.parametrize("lift_m", [0.0, 1e-9])
 @pytest.mark.parametrize("law_name,kw", LAWS)
 def test_six_fibres_create_no_energy_at_1000_n_per_m_on_a_converged_step(law_name, kw, lift_m):
-    # the sudden 1000 N/m load rattles the fibres; at dt_safety 0.9 the leapfrog's nonlinear
-    # resonances gain up to 54 % of W here (docs/contact.md), at 0.45 nothing is created (measured
-    # ≤ 0 for every law on four seeds); two seeds of the chaotic scene (lift_m: top fibres raised)
+    # the sudden 1000 N/m load rattles the fibres on the plate and walls; at dt_safety 0.9 the stiff
+    # plane penalty gains up to 54 % of W here (docs/contact.md), at 0.45 nothing is created
+    # (measured ≤ 0 for every law on four seeds); two seeds of the chaotic scene (lift_m: top fibres raised)
     _, res = six_fibres_run(_law(law_name, kw), 1000.0, dt_safety=0.45, lift_m=lift_m)
     excess, _ = energy_excess(res)
     assert excess < 0.01, excess
