@@ -216,6 +216,10 @@ class CaseSetup:
         return {ax: tuple(float(v) for v in getattr(w, ax)) for ax in "xyz" if getattr(w, ax) is not None}
 
     @property
+    def walls_penalty_factor(self) -> float:
+        return float(self._scene("walls").penalty_factor)
+
+    @property
     def drives(self):
         return self._scene("drives")
 

@@ -274,8 +274,8 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
             beta0 = math.atan2(x0[b1, 1].mean() - x0[b2, 1].mean(), x0[b1, 2].mean() - x0[b2, 2].mean())
             eff = [Gravity(g), s.loads(q / q0),
                    Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
-                          upper_position_m=p.upper_position),
-                   Walls(s.walls), contact_hook(m, law=law)]
+                          upper_position_m=p.upper_position, penalty_factor=float(p.penalty_factor)),
+                   Walls(s.walls, penalty_factor=float(s.walls_penalty_factor)), contact_hook(m, law=law)]
             if alpha > 0:
                 eff.append(Damping(alpha))
             xs = []
@@ -356,7 +356,7 @@ def rearrangement_run(velocity_m_s=None, alpha=None, *, length_m=None, setup: Ca
     m = s.model(length_m)
     p = s.plates
     eff = [Gravity(s.gravity), Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
-                                      upper_position_m=p.upper_position),
+                                      upper_position_m=p.upper_position, penalty_factor=float(p.penalty_factor)),
            Drives([Drive(d.fiber, [float(c) for c in d.displacement], v)]),
            contact_hook(m, law=s.law(), friction=True, mu=s.mu)]
     if alpha > 0:
