@@ -233,18 +233,18 @@ def _bundle_part(quick: bool, echo) -> list[str]:
     import sys
 
     head = ["## 400 fibers against paper-40", ""]
-    spec = default_paper40_config().parent / "specimens" / "bundle-400.yaml"
-    if quick or not spec.exists():
-        why = "--quick" if quick else f"no {spec} (a source checkout has it)"
+    specimen_cfg = default_paper40_config().parent / "specimens" / "bundle-400.yaml"
+    if quick or not specimen_cfg.exists():
+        why = "--quick" if quick else f"no {specimen_cfg} (a source checkout has it)"
         return head + [f"not run: {why} (`make bench-400`)", ""]
     run = Path("runs") / "specimens" / "bundle-400"
     if not (run / "config.yaml").exists():
         echo(f"bench: building the 400-fiber specimen into {run} (≈ 10 min) ...")
-        subprocess.run([sys.executable, "-m", "fiberpipe.cli", "specimen", str(spec), "--out", str(run)], check=True)
+        subprocess.run([sys.executable, "-m", "fiberpipe.cli", "specimen", str(specimen_cfg), "--out", str(run)], check=True)
     echo("bench: 400 fibers against paper-40 ...")
     bb = _load("bench_bundle_cost")
     r = bb.measure(run / "config.yaml")
-    return head + [f"`fiberpipe specimen {spec.name} --out {run}` then `python -m fiberpipe.benchmarks.bench_bundle_cost "
+    return head + [f"`fiberpipe specimen {specimen_cfg.name} --out {run}` then `python -m fiberpipe.benchmarks.bench_bundle_cost "
                    f"{run}/config.yaml` (both scenes from rest, alternating, CPU time; {load()}).", ""] + bb.table(r) + [""]
 
 

@@ -38,7 +38,7 @@ from numba.typed import List
 from ..errors import FiberpipeError
 from ._kernels_boundary import path_delta, plane_position
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
-from .contact_potential import contact_forces_pot, potential_kernels_for
+from .contact_potential import contact_forces_pot, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments,
@@ -470,7 +470,8 @@ def contact_kernel_for(law, formulation: str = "potential"):
     return _CUSTOM_KERNELS[key], None
 
 
-def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending")) -> tuple[float, float, float]:
+def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *,
+                       rep=None) -> tuple[float, float, float]:
     """``((ωΔt)², dt_ok [s], k_lim [N/m])`` of a penalty ``k`` [N/m] on the lightest node at step ``dt``.
 
     A penalty k on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two bodies
@@ -479,11 +480,12 @@ def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending")) -
     and axial too for the tangential spring, which acts along the fibre) plus this stay below
     (ωΔt)² = 4, i.e. while Δt ≤ dt_ok = 2/√(ω_beam² + 2k/m); ``k_lim`` is the penalty at that
     bound. A mode whose element bound the step already exceeds is locked in the scene (the modal
-    step checked it) and does not couple.
+    step checked it) and does not couple. ``rep``: the model's
+    :func:`~fiberpipe.solver.timestep.stable_time_step` report, when the caller holds it.
     """
     from .timestep import stable_time_step
 
-    rep = stable_time_step(model)
+    rep = stable_time_step(model) if rep is None else rep
     m_min = float(np.min(model.mass))
     used = [(2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes]
     beam = max([u for u in used if u < 4.0] or [0.0])
@@ -529,8 +531,11 @@ class ContactSlopeWatch:
     """
 
     def __init__(self, model, dt: float, law, stats, onset_m: float):
+        from .timestep import stable_time_step
+
         self.model, self.dt, self.law, self.stats, self.onset_m = model, float(dt), law, stats, float(onset_m)
         self.L_max = _max_element_length(model)
+        self.rep = stable_time_step(model)  # the beam modes the bound couples with, once per run
         self.warning: str | None = None
 
     @staticmethod
@@ -548,9 +553,10 @@ class ContactSlopeWatch:
         self.stats.delta_peak_m[0] = 0.0
         if self.warning is not None or peak <= 0.0:
             return None
-        g = peak - 0.5 * self.onset_m if peak >= self.onset_m else peak
+        # the law acts on the mapped penetration of the onset (contact_potential.onset)
+        g = float(onset(peak, self.onset_m)[0]) if self.onset_m > 0.0 else peak
         k = self.law.node_stiffness_n_per_m(self.L_max, delta_m=g)
-        total, dt_ok, _ = penalty_step_bound(self.model, self.dt, k)
+        total, dt_ok, _ = penalty_step_bound(self.model, self.dt, k, rep=self.rep)
         if total <= 4.0:
             return None
         self.warning = (f"by t = {t_s:.4g} s the contact law {self.law.name!r} reached a penetration of "
