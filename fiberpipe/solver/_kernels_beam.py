@@ -37,8 +37,13 @@ Manual 3.5):
 * strain energy ``½ L_0 (Γ·CΓ + κ·Dκ)``.
 
 All kernels take flat arrays only (structure of arrays by field, fibers joined in CSR order); the
-element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``. The step loops' beam pass writes one row of
-resultants per element (:func:`beam_resultants`) and the update gathers them per node (no scatter).
+element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``. The step loops' beam pass
+(:func:`beam_pass_nodes`) runs one branch-free loop over all nodes, the element parameters indexed
+by the element's first node (:func:`node_beams`, zero where no element starts), and writes the
+resultants by first node + 1 (:func:`new_element_forces`) for the update to gather per node (no
+scatter): LLVM vectorises that loop (``_vectorise``). :func:`beam_resultants` is the per-element
+form with the exact rotation logarithm and the stiffness-proportional damping, which the step loops
+use for a step where an element rotates by more than 0.64 rad or β > 0.
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ import math
 
 import numpy as np
 from numba import njit, prange
+
+from ._specialise import specialise
 
 
 # rest rotation per element [rad] above which the element uses the exact conjugate moments: 1e-3 rad
@@ -302,7 +309,7 @@ def beam_resultants(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, 
     beta_over_dt : float, 1 — stiffness-proportional damping β/Δt (0: off).
     strain_prev : (E, 6) float64 — previous ``(Γ, θ)`` per element (only read/written if
         ``beta_over_dt > 0``); the damping stress is ``β C Γ̇`` and ``β D κ̇`` (backward difference).
-    node_offsets : (F+1,) int64 — unused here (signature of :func:`beam_resultants_fibers`).
+    node_offsets : (F+1,) int64 — unused here.
 
     Returns
     -------
@@ -311,38 +318,6 @@ def beam_resultants(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, 
     """
     return _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
                              record, beta_over_dt, strain_prev, 0, el_n1.shape[0])
-
-
-# Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
-# compiled in another process makes that loop's own cache entry crash when it is loaded (numba
-# 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2, load it
-# in 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
-@njit(cache=False, fastmath=True, error_model="numpy", parallel=True)
-def beam_resultants_fibers(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
-                           record, beta_over_dt, strain_prev, node_offsets):
-    """:func:`beam_resultants` with one ``prange`` task per fiber (``solver.threads`` > 1).
-
-    Needs the CSR element order of :class:`~fiberpipe.solver.model.Model` (fiber ``k`` owns the
-    elements ``node_offsets[k] − k … node_offsets[k+1] − k − 2``). Each element writes its own
-    row of ``eb``, so the rows are bit-identical to the serial pass; the energies are summed per
-    fiber, then in fiber order (last bits only).
-    """
-    nf = node_offsets.shape[0] - 1
-    se_f = np.zeros(nf)
-    pd_f = np.zeros(nf)
-    for k in prange(nf):
-        e_lo = node_offsets[k] - k
-        e_hi = node_offsets[k + 1] - k - 1
-        s, d = _resultants_range(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, eb,
-                                 record, beta_over_dt, strain_prev, e_lo, e_hi)
-        se_f[k] = s
-        pd_f[k] = d
-    se = 0.0
-    pd = 0.0
-    for k in range(nf):
-        se += se_f[k]
-        pd += pd_f[k]
-    return se, pd
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -413,3 +388,178 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
             mom[a, c] += eb[e, 3 + c] + eb[e, 6 + c]
             mom[b, c] += eb[e, 6 + c] - eb[e, 3 + c]
     return se, pd
+
+
+# |v|² = sin²(|θ|/2) of an element's relative rotation (rest rotation included) below which the
+# node-wise pass's series of asin(s)/s holds: |θ| < 0.64 rad between two nodes (a 0.3 mm element on a
+# 0.5 mm radius of curvature); a step with a larger one takes the exact per-element pass
+SERIES_MAX_S2 = 0.1
+# asin(s)/s = 1 + s² Σ_{n≥1} c_n s^{2(n−1)}, c_n = (2n)!/(4ⁿ (n!)² (2n+1)): eleven terms, the first
+# omitted one below 7e-14 at s² = 0.1
+_ASIN_TAIL = tuple(math.comb(2 * n, n) / (4.0**n * (2 * n + 1)) for n in range(11, 0, -1))
+
+
+def node_beams(el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, n_nodes: int) -> np.ndarray:
+    """The element parameters indexed by their first node, (14, N), 0 where no element starts (a fiber's
+    last node): rows L0 [m], 1/L0 [1/m], C (3) [N], D/L0 (3) [N·m/rad], Γ_rest (3), θ_rest (3) [rad]."""
+    out = np.zeros((14, n_nodes))
+    out[0, el_n1] = 1.0 / np.asarray(el_invL0, dtype=float)
+    out[1, el_n1] = el_invL0
+    for c in range(3):
+        out[2 + c, el_n1] = el_C[:, c]
+        out[5 + c, el_n1] = el_Dk[:, c]
+        out[8 + c, el_n1] = gamma_rest[:, c]
+        out[11 + c, el_n1] = theta_rest[:, c]
+    return out
+
+
+def new_element_forces(n_nodes: int) -> np.ndarray:
+    """The beam pass's output, (N + 1, EB_SIZE), zeroed: row ``a + 1`` holds the element starting at node
+    ``a`` as a row of :func:`beam_resultants` (n, m, h); node ``i`` gets ``(+n, m + h)`` from row ``i + 1``
+    and ``(−n, h − m)`` from row ``i``; rows without an element stay 0."""
+    return np.zeros((n_nodes + 1, EB_SIZE))
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def beam_pass_nodes(x, q, model, work, lo, hi):
+    """Resultants of the elements starting at nodes ``lo … hi − 1`` into ``work.ef`` (row ``a + 1``),
+    from the element parameters ``model.beams`` (:func:`node_beams`).
+
+    The formulas of :func:`beam_resultants` (module docstring) without the stiffness-proportional
+    damping, in one loop without branches: the hemisphere of q2 by its sign, ``fac = 2 asin(s)/s`` by
+    its series (``_ASIN_TAIL``), the exact conjugate moments of curved elements by a select. Returns ``(strain energy
+    [J], elements whose |v|² ≥ SERIES_MAX_S2)``: the caller recomputes a step with any of the latter by
+    the exact pass. Where no element starts (``invL0 = 0``) every parameter is 0 and so is the row.
+    """
+    # Strategy: every array read and written through flat views (constant offsets 3a + c, 4a + c,
+    # 9b + c), so that LLVM's vectoriser sees affine accesses at known distances; one loop over all
+    # nodes instead of the per-fiber loops of beam_resultants (a fiber's last node simply has zero
+    # parameters), because the vector loop's run-time overlap checks cost too much per fiber.
+    xs = x.reshape(-1)
+    qs = q.reshape(-1)
+    efs = work.ef.reshape(-1)
+    P = model.beams
+    L0, IL, C0, C1, C2, D0, D1, D2 = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7]
+    G0, G1, G2, T0, T1, T2 = P[8], P[9], P[10], P[11], P[12], P[13]
+    se = 0.0
+    n_large = 0
+    for a in range(lo, hi):
+        b = a + 1
+        w1 = qs[4 * a]
+        x1 = qs[4 * a + 1]
+        y1 = qs[4 * a + 2]
+        z1 = qs[4 * a + 3]
+        sg = 1.0 if w1 * qs[4 * b] + x1 * qs[4 * b + 1] + y1 * qs[4 * b + 2] + z1 * qs[4 * b + 3] >= 0.0 else -1.0
+        w2 = sg * qs[4 * b]
+        x2 = sg * qs[4 * b + 1]
+        y2 = sg * qs[4 * b + 2]
+        z2 = sg * qs[4 * b + 3]
+        dot = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+        rx = w1 * x2 - w2 * x1 - (y1 * z2 - z1 * y2)
+        ry = w1 * y2 - w2 * y1 - (z1 * x2 - x1 * z2)
+        rz = w1 * z2 - w2 * z1 - (x1 * y2 - y1 * x2)
+        s2 = rx * rx + ry * ry + rz * rz
+        il = IL[a]
+        n_large += 1 if (s2 >= SERIES_MAX_S2 and il > 0.0) else 0
+        tail = 0.0
+        for c in _ASIN_TAIL:  # Horner, highest power first
+            tail = tail * s2 + c
+        fac = 2.0 * (1.0 + s2 * tail)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, inv1p = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
+        ex = xs[3 * b] - xs[3 * a]
+        ey = xs[3 * b + 1] - xs[3 * a + 1]
+        ez = xs[3 * b + 2] - xs[3 * a + 2]
+        bx = r00 * ex + r10 * ey + r20 * ez
+        by = r01 * ex + r11 * ey + r21 * ez
+        bz = r02 * ex + r12 * ey + r22 * ez
+        g0 = bx * il - G0[a]
+        g1 = by * il - G1[a]
+        g2 = bz * il - G2[a]
+        tr0 = T0[a]
+        tr1 = T1[a]
+        tr2 = T2[a]
+        k0 = fac * rx - tr0
+        k1 = fac * ry - tr1
+        k2 = fac * rz - tr2
+        nb0 = C0[a] * g0
+        nb1 = C1[a] * g1
+        nb2 = C2[a] * g2
+        mb0 = D0[a] * k0
+        mb1 = D1[a] * k1
+        mb2 = D2[a] * k2
+        se += 0.5 * ((nb0 * g0 + nb1 * g1 + nb2 * g2) * L0[a] + mb0 * k0 + mb1 * k1 + mb2 * k2)
+        f0 = r00 * nb0 + r01 * nb1 + r02 * nb2
+        f1 = r10 * nb0 + r11 * nb1 + r12 * nb2
+        f2 = r20 * nb0 + r21 * nb1 + r22 * nb2
+        # the exact conjugate moments of a curved element (beam_resultants), dd = −tail
+        c0 = ry * mb2 - rz * mb1
+        c1 = rz * mb0 - rx * mb2
+        c2 = rx * mb1 - ry * mb0
+        hw = 0.5 * inv1p
+        u0 = -tail * c0 - hw * (by * nb2 - bz * nb1)
+        u1 = -tail * c1 - hw * (bz * nb0 - bx * nb2)
+        u2 = -tail * c2 - hw * (bx * nb1 - by * nb0)
+        curved = tr0 * tr0 + tr1 * tr1 + tr2 * tr2 > EXACT_MIN_REST_ROTATION2
+        mm0 = mb0 + (ry * u2 - rz * u1) if curved else mb0
+        mm1 = mb1 + (rz * u0 - rx * u2) if curved else mb1
+        mm2 = mb2 + (rx * u1 - ry * u0) if curved else mb2
+        efs[9 * b] = f0
+        efs[9 * b + 1] = f1
+        efs[9 * b + 2] = f2
+        efs[9 * b + 3] = r00 * mm0 + r01 * mm1 + r02 * mm2
+        efs[9 * b + 4] = r10 * mm0 + r11 * mm1 + r12 * mm2
+        efs[9 * b + 5] = r20 * mm0 + r21 * mm1 + r22 * mm2
+        efs[9 * b + 6] = 0.5 * (ey * f2 - ez * f1)
+        efs[9 * b + 7] = 0.5 * (ez * f0 - ex * f2)
+        efs[9 * b + 8] = 0.5 * (ex * f1 - ey * f0)
+    return se, n_large
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def element_forces_exact(x, q, model, work, record, beta_over_dt):
+    """The exact per-element pass (:func:`beam_resultants`: rotation logarithm by ``atan2``,
+    stiffness-proportional damping with ``work.strain_prev``) into ``work.ef``, through the scratch
+    ``work.eb`` (E, 9); returns its two energies."""
+    se, pd = _resultants_range(x, q, model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest,
+                               model.theta_rest, work.eb, record, beta_over_dt, work.strain_prev, 0,
+                               model.el_n1.shape[0])
+    scatter_element_forces(model.el_n1, work.eb, work.ef)
+    return se, pd
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def scatter_element_forces(el_n1, eb, ef):
+    """Copy the (E, 9) rows of :func:`beam_resultants` to the node-indexed ``ef`` (row first node + 1)."""
+    for e in range(el_n1.shape[0]):
+        b = el_n1[e] + 1
+        for c in range(EB_SIZE):
+            ef[b, c] = eb[e, c]
+
+
+def _beam_pass_nodes(x, q, model, work):
+    """:func:`beam_pass_nodes` over every element: one call in the serial copy (``beam_pass_all``), one
+    ``prange`` task per fiber in the parallel one (``beam_pass_fibers``, ``solver.threads`` > 1; the
+    same rows, the energy summed per fiber, then in fiber order). Returns ``(strain energy [J],
+    elements beyond the series)``."""
+    offs = model.node_offsets
+    nf = offs.shape[0] - 1
+    if not _PARALLEL:
+        return beam_pass_nodes(x, q, model, work, 0, offs[nf] - 1)
+    se_f = np.zeros(nf)
+    nl_f = np.zeros(nf, np.int64)
+    for k in prange(nf):
+        se_f[k], nl_f[k] = beam_pass_nodes(x, q, model, work, offs[k], offs[k + 1] - 1)
+    se = 0.0
+    for k in range(nf):
+        se += se_f[k]
+    return se, nl_f.sum()
+
+
+_PARALLEL = False
+beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy")(_beam_pass_nodes)
+# Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
+# compiled in another process makes that loop's own cache entry crash when it is loaded (numba
+# 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2, load it
+# in 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
+beam_pass_fibers = specialise(_beam_pass_nodes, "beam_pass_fibers", {"_PARALLEL": True}, cache=False,
+                              fastmath=True, error_model="numpy", parallel=True)

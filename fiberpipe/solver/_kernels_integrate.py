@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._specialise import specialise
-from ._kernels_beam import beam_resultants, beam_resultants_fibers, node_resultant
+from ._kernels_beam import beam_pass_all, beam_pass_fibers, element_forces_exact
 from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
@@ -115,217 +115,166 @@ def body_moment(qw, qx, qy, qz, mx, my, mz):
 
 
 @njit(inline="always", **_FLAGS)
-def rotate_node(q, i, dt, w1x, w1y, w1z):
-    """q_{n+1} = q_n ⊗ exp(Ω_{n+½} Δt / 2), renormalised, in place."""
-    qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-    hx = 0.5 * dt * w1x
-    hy = 0.5 * dt * w1y
-    hz = 0.5 * dt * w1z
-    h2 = hx * hx + hy * hy + hz * hz
-    if h2 < 1e-8:
-        cw = 1.0 - 0.5 * h2
-        sf = 1.0 - h2 / 6.0
-    else:
-        hn = math.sqrt(h2)
-        cw = math.cos(hn)
-        sf = math.sin(hn) / hn
-    dx_ = sf * hx
-    dy_ = sf * hy
-    dz_ = sf * hz
-    nw = qw * cw - qx * dx_ - qy * dy_ - qz * dz_
-    nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
-    ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
-    nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
-    # renormalise: |q|² = 1 + ε with ε ~ 1e-16 (a product of unit quaternions), so one Newton step
-    # for 1/√(1 + ε), (3 − |q|²)/2, is exact to O(ε²): no square root, no division
-    inv = 0.5 * (3.0 - (nw * nw + nx * nx + ny * ny + nz * nz))
-    q[i, 0] = nw * inv
-    q[i, 1] = nx * inv
-    q[i, 2] = ny * inv
-    q[i, 3] = nz * inv
-
-
-@njit(inline="always", **_FLAGS)
-def prescribe_node(node_drive, drive_v, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x, v1y, v1z, fx_i, fy_i, fz_i):
-    """Impose a fixed or driven node's translations; returns the new velocity and the reaction's
-    work over the step.
-
-    The reaction is the force that imposes the motion: m (v1 − v0)/Δt − f_n + α m v̄ (the damping
-    force −α m v̄ acts on prescribed nodes too and is booked in ALLVD, so the reaction overcoming it
-    must be in ALLWK); its work over the step is R · v̄ Δt.
-    """
-    wk = 0.0
-    if mask & DRIVEN:
-        d = node_drive[i]
-        px = drive_v[d, 0]
-        py = drive_v[d, 1]
-        pz = drive_v[d, 2]
-        fx = 1
-        fy = 1
-        fz = 1
-    else:
-        px = 0.0
-        py = 0.0
-        pz = 0.0
-        fx = mask & FIX_X
-        fy = mask & FIX_Y
-        fz = mask & FIX_Z
-    if fx:
-        v1x = px
-        vb = 0.5 * (v1x + v0x)
-        wk += (m * (v1x - v0x) / dt - fx_i + alpha * m * vb) * vb * dt
-    if fy:
-        v1y = py
-        vb = 0.5 * (v1y + v0y)
-        wk += (m * (v1y - v0y) / dt - fy_i + alpha * m * vb) * vb * dt
-    if fz:
-        v1z = pz
-        vb = 0.5 * (v1z + v0z)
-        wk += (m * (v1z - v0z) / dt - fz_i + alpha * m * vb) * vb * dt
-    return v1x, v1y, v1z, wk
-
-
-@njit(inline="always", **_FLAGS)
 def damping_factors(alpha, dt):
     """``(c_keep, dt_c)`` of v_{n+½} = c_keep v_{n−½} + (dt_c / m) f with mass-proportional damping α:
-    c_keep = (1 − αΔt/2)/(1 + αΔt/2), dt_c = Δt/(1 + αΔt/2) (Δt without damping)."""
+    c_keep = (1 − αΔt/2)/(1 + αΔt/2), dt_c = Δt/(1 + αΔt/2) (1 and Δt without damping)."""
     a_half = 0.5 * alpha * dt
     c_inv = 1.0 / (1.0 + a_half)
     return (1.0 - a_half) * c_inv, dt * c_inv if alpha > 0.0 else dt
 
 
-@njit(inline="always", **_FLAGS)
-def update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib):
-    """The central-difference update of the nodes of fiber ``fib`` (module docstring), gathering
-    the beam resultants per node and adding the contact hook's force array ``fc`` (cleared here).
+# (½Δt|Ω|)² below which the update's series of cos and sin(h)/h hold to rounding (the first omitted
+# terms, h¹⁰/10! and h¹⁰/11!, are < 3e-17): a node spinning faster is rotated by the exact formula
+ROTATION_SERIES_MAX_H2 = 1e-2
 
-    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad)`` over the fiber's nodes: the kinetic
-    energy at t_n and the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½} (if ``record``),
-    Σ m|v̄|² + J|Ω̄|² for the damping dissipation, the prescribed nodes' reaction work, Σ fc·v̄
-    (the hook's power), the largest |v_{n+½}|² and its node. ``coef = (c_keep, dt_c)``: the damped
-    update's constant factors, v_{n+½} = c_keep v_{n−½} + (dt_c / m) f (:func:`damping_factors`);
-    ``prescribed = (α [1/s], fix_mask, node_drive, the drives' velocities)`` from the scene (flat: a
-    parallel loop takes no nested structure).
+
+@njit(**_FLAGS)
+def update_range(model, fixity, state, work, fc, dt, coef, alpha, lo, hi):
+    """The central-difference update (module docstring) of the nodes ``lo … hi − 1``: gathers each
+    node's beam resultants from ``work.ef``, adds the constant and plane forces ``work.f``, the moments
+    ``work.mom`` and the contact hook's forces ``fc`` (cleared here), then imposes the fixed and driven
+    degrees of freedom through ``fixity``'s factors.
+
+    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, n_large)``: the kinetic energy at t_n (the mean of the
+    half-step energies), the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² for the
+    damping dissipation, the prescribed degrees of freedom's reaction work over the step, Σ fc·v̄ (the
+    hook's power), and the nodes whose rotation increment exceeds the series (left unrotated for
+    :func:`rotate_large`). ``coef = (c_keep, dt_c)`` (:func:`damping_factors`).
     """
-    alpha, fix_mask, node_drive, drive_v = prescribed
-    x, q, v, w = state.x, state.q, state.v, state.w
-    f, mom, eb = work.f, work.mom, work.eb
-    mass, inv_mass, J, inv_J = model.mass, model.inv_mass, model.J, model.inv_J
-    node_offsets = model.node_offsets
-    N = x.shape[0]
-    use_damp = alpha > 0.0
-    has_fix = fix_mask.shape[0] == N
-    has_fc = fc.shape[0] == N
+    # Strategy: one loop without branches over flat views of the (N, 3) and (N, 4) arrays, so that
+    # LLVM vectorises it (_vectorise): fixity by 0/1 factors and a prescribed velocity, the gyroscopic
+    # term as w × (J w) with exact zeros for isotropic J, the rotation's cos and sin by their series
+    # (a select keeps q where they would not hold), every sum taken every step (a few flops).
+    xs, qs, vs, ws = state.x.reshape(-1), state.q.reshape(-1), state.v.reshape(-1), state.w.reshape(-1)
+    fs, ms, fcs = work.f.reshape(-1), work.mom.reshape(-1), fc.reshape(-1)
+    Js, iJs = model.J.reshape(-1), model.inv_J.reshape(-1)
+    mass, inv_mass = model.mass, model.inv_mass
+    ef = work.ef.reshape(-1)
+    FX, FY, FZ, FR, vps = fixity.free_x, fixity.free_y, fixity.free_z, fixity.free_rot, fixity.v_pres.reshape(-1)
     c_keep, dt_c = coef
+    inv_dt = 1.0 / dt
     ke = 0.0
     ke_lf = 0.0
     vd = 0.0
-    wk_fix = 0.0
-    pw_c = 0.0
-    vmax2 = 0.0
-    bad = -1
-    node_lo = node_offsets[fib]
-    node_end = node_offsets[fib + 1]
-    for i in range(node_lo, node_end):
-        bfx, bfy, bfz, bmx, bmy, bmz = node_resultant(eb, node_lo, node_end, fib, i)
-        fx_i = f[i, 0] + bfx
-        fy_i = f[i, 1] + bfy
-        fz_i = f[i, 2] + bfz
-        cfx = 0.0
-        cfy = 0.0
-        cfz = 0.0
-        if has_fc:
-            cfx = fc[i, 0]
-            cfy = fc[i, 1]
-            cfz = fc[i, 2]
-            fc[i, 0] = 0.0
-            fc[i, 1] = 0.0
-            fc[i, 2] = 0.0
-            fx_i += cfx
-            fy_i += cfy
-            fz_i += cfz
+    wk = 0.0
+    pw = 0.0
+    n_large = 0
+    for i in range(lo, hi):
+        j = 9 * (i + 1)  # the element starting at node i, then (k = 9 i) the one ending there
+        k = 9 * i
+        cfx = fcs[3 * i]
+        cfy = fcs[3 * i + 1]
+        cfz = fcs[3 * i + 2]
+        fcs[3 * i] = 0.0
+        fcs[3 * i + 1] = 0.0
+        fcs[3 * i + 2] = 0.0
+        fx = fs[3 * i] + (ef[j] - ef[k]) + cfx
+        fy = fs[3 * i + 1] + (ef[j + 1] - ef[k + 1]) + cfy
+        fz = fs[3 * i + 2] + (ef[j + 2] - ef[k + 2]) + cfz
+        mx = ms[3 * i] + (ef[j + 3] + ef[j + 6]) + (ef[k + 6] - ef[k + 3])
+        my = ms[3 * i + 1] + (ef[j + 4] + ef[j + 7]) + (ef[k + 7] - ef[k + 4])
+        mz = ms[3 * i + 2] + (ef[j + 5] + ef[j + 8]) + (ef[k + 8] - ef[k + 5])
         m = mass[i]
-        mask = fix_mask[i] if has_fix else 0
-        v0x = v[i, 0]
-        v0y = v[i, 1]
-        v0z = v[i, 2]
+        v0x = vs[3 * i]
+        v0y = vs[3 * i + 1]
+        v0z = vs[3 * i + 2]
         b = dt_c * inv_mass[i]
-        if use_damp:
-            v1x = c_keep * v0x + b * fx_i
-            v1y = c_keep * v0y + b * fy_i
-            v1z = c_keep * v0z + b * fz_i
-        else:
-            v1x = v0x + b * fx_i
-            v1y = v0y + b * fy_i
-            v1z = v0z + b * fz_i
-        w0x = w[i, 0]
-        w0y = w[i, 1]
-        w0z = w[i, 2]
-        mbx, mby, mbz = body_moment(q[i, 0], q[i, 1], q[i, 2], q[i, 3],
-                                    mom[i, 0] + bmx, mom[i, 1] + bmy, mom[i, 2] + bmz)
-        jx = J[i, 0]
-        jy = J[i, 1]
-        jz = J[i, 2]
-        # gyroscopic Ω × JΩ (zero for isotropic J)
-        gx = 0.0
-        gy = 0.0
-        gz = 0.0
-        if gyro:
-            gx = w0y * jz * w0z - w0z * jy * w0y
-            gy = w0z * jx * w0x - w0x * jz * w0z
-            gz = w0x * jy * w0y - w0y * jx * w0x
-        if use_damp:
-            w1x = c_keep * w0x + dt_c * (mbx - gx) * inv_J[i, 0]
-            w1y = c_keep * w0y + dt_c * (mby - gy) * inv_J[i, 1]
-            w1z = c_keep * w0z + dt_c * (mbz - gz) * inv_J[i, 2]
-        else:
-            w1x = w0x + dt * (mbx - gx) * inv_J[i, 0]
-            w1y = w0y + dt * (mby - gy) * inv_J[i, 1]
-            w1z = w0z + dt * (mbz - gz) * inv_J[i, 2]
-        if mask != 0:
-            v1x, v1y, v1z, wk = prescribe_node(node_drive, drive_v, i, mask, m, alpha, dt, v0x, v0y, v0z, v1x,
-                                               v1y, v1z, fx_i, fy_i, fz_i)
-            wk_fix += wk
-            if mask & (FIX_ROT | DRIVEN):
-                w1x = 0.0
-                w1y = 0.0
-                w1z = 0.0
-        # averages at t_n
+        ux = FX[i]
+        uy = FY[i]
+        uz = FZ[i]
+        v1x = ux * (c_keep * v0x + b * fx) + (1.0 - ux) * vps[3 * i]
+        v1y = uy * (c_keep * v0y + b * fy) + (1.0 - uy) * vps[3 * i + 1]
+        v1z = uz * (c_keep * v0z + b * fz) + (1.0 - uz) * vps[3 * i + 2]
         vax = 0.5 * (v0x + v1x)
         vay = 0.5 * (v0y + v1y)
         vaz = 0.5 * (v0z + v1z)
+        # a prescribed component's reaction m (v1 − v0)/Δt − f + α m v̄ (the damping force acts on it
+        # too and is booked in ALLVD), its work R·v̄ Δt
+        wk += ((1.0 - ux) * (m * (v1x - v0x) * inv_dt - fx + alpha * m * vax) * vax
+               + (1.0 - uy) * (m * (v1y - v0y) * inv_dt - fy + alpha * m * vay) * vay
+               + (1.0 - uz) * (m * (v1z - v0z) * inv_dt - fz + alpha * m * vaz) * vaz) * dt
+        qw = qs[4 * i]
+        qx = qs[4 * i + 1]
+        qy = qs[4 * i + 2]
+        qz = qs[4 * i + 3]
+        mbx, mby, mbz = body_moment(qw, qx, qy, qz, mx, my, mz)
+        w0x = ws[3 * i]
+        w0y = ws[3 * i + 1]
+        w0z = ws[3 * i + 2]
+        jx = Js[3 * i]
+        jy = Js[3 * i + 1]
+        jz = Js[3 * i + 2]
+        ur = FR[i]
+        w1x = ur * (c_keep * w0x + dt_c * (mbx - w0y * w0z * (jz - jy)) * iJs[3 * i])
+        w1y = ur * (c_keep * w0y + dt_c * (mby - w0z * w0x * (jx - jz)) * iJs[3 * i + 1])
+        w1z = ur * (c_keep * w0z + dt_c * (mbz - w0x * w0y * (jy - jx)) * iJs[3 * i + 2])
         wax = 0.5 * (w0x + w1x)
         way = 0.5 * (w0y + w1y)
         waz = 0.5 * (w0z + w1z)
         # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
-        pw_c += cfx * vax + cfy * vay + cfz * vaz
-        if use_damp:
-            vd += (m * (vax * vax + vay * vay + vaz * vaz)
-                   + jx * wax * wax + jy * way * way + jz * waz * waz)
-        if record:
-            v2 = v1x * v1x + v1y * v1y + v1z * v1z
-            # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
-            # K_{n+½} − K_{n−½} = Δt F_n·v̄_n exactly, so with every work booked as Δt f_n·v̄_n
-            # (plates, walls, contact, drives) the balance has no O((ωΔt)²) swing in stiff bounces
-            ke += 0.25 * (m * (v0x * v0x + v0y * v0y + v0z * v0z + v1x * v1x + v1y * v1y + v1z * v1z)
-                          + jx * (w0x * w0x + w1x * w1x) + jy * (w0y * w0y + w1y * w1y)
-                          + jz * (w0z * w0z + w1z * w1z))
-            # ½ v_{n−½}·M v_{n+½}: exactly conserved with a quadratic potential (the leapfrog's own
-            # kinetic term), it differs from the mean of the half-step energies by ¼Δt² Σ|f|²/m
-            ke_lf += 0.5 * (m * (v0x * v1x + v0y * v1y + v0z * v1z) + jx * w0x * w1x + jy * w0y * w1y
-                            + jz * w0z * w1z)
-            vmax2, bad = merge_speed(vmax2, bad, v2, i)
-        v[i, 0] = v1x
-        v[i, 1] = v1y
-        v[i, 2] = v1z
-        w[i, 0] = w1x
-        w[i, 1] = w1y
-        w[i, 2] = w1z
-        x[i, 0] += dt * v1x
-        x[i, 1] += dt * v1y
-        x[i, 2] += dt * v1z
-        rotate_node(q, i, dt, w1x, w1y, w1z)
-    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
+        pw += cfx * vax + cfy * vay + cfz * vaz
+        vd += m * (vax * vax + vay * vay + vaz * vaz) + jx * wax * wax + jy * way * way + jz * waz * waz
+        # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
+        # K_{n+½} − K_{n−½} = Δt F_n·v̄_n exactly, so with every work booked as Δt f_n·v̄_n
+        # (plates, walls, contact, drives) the balance has no O((ωΔt)²) swing in stiff bounces
+        ke += 0.25 * (m * (v0x * v0x + v0y * v0y + v0z * v0z + v1x * v1x + v1y * v1y + v1z * v1z)
+                      + jx * (w0x * w0x + w1x * w1x) + jy * (w0y * w0y + w1y * w1y) + jz * (w0z * w0z + w1z * w1z))
+        # ½ v_{n−½}·M v_{n+½}: exactly conserved with a quadratic potential (the leapfrog's own
+        # kinetic term), it differs from the mean of the half-step energies by ¼Δt² Σ|f|²/m
+        ke_lf += 0.5 * (m * (v0x * v1x + v0y * v1y + v0z * v1z) + jx * w0x * w1x + jy * w0y * w1y + jz * w0z * w1z)
+        vs[3 * i] = v1x
+        vs[3 * i + 1] = v1y
+        vs[3 * i + 2] = v1z
+        ws[3 * i] = w1x
+        ws[3 * i + 1] = w1y
+        ws[3 * i + 2] = w1z
+        xs[3 * i] += dt * v1x
+        xs[3 * i + 1] += dt * v1y
+        xs[3 * i + 2] += dt * v1z
+        # q_{n+1} = q_n ⊗ exp(Ω_{n+½} Δt / 2), renormalised by one Newton step for 1/√(1 + ε)
+        # (|q|² = 1 + O(1e-16): exact to O(ε²), no square root)
+        hx = 0.5 * dt * w1x
+        hy = 0.5 * dt * w1y
+        hz = 0.5 * dt * w1z
+        hh = hx * hx + hy * hy + hz * hz
+        small = hh < ROTATION_SERIES_MAX_H2
+        n_large += 0 if small else 1
+        cw = 1.0 - hh * (0.5 - hh * (1.0 / 24.0 - hh * (1.0 / 720.0 - hh * (1.0 / 40320.0))))
+        sf = 1.0 - hh * (1.0 / 6.0 - hh * (1.0 / 120.0 - hh * (1.0 / 5040.0 - hh * (1.0 / 362880.0))))
+        nw, nx, ny, nz = _rotated(qw, qx, qy, qz, cw, sf * hx, sf * hy, sf * hz)
+        qs[4 * i] = nw if small else qw
+        qs[4 * i + 1] = nx if small else qx
+        qs[4 * i + 2] = ny if small else qy
+        qs[4 * i + 3] = nz if small else qz
+    return ke, ke_lf, vd, wk, pw, n_large
+
+
+@njit(inline="always", **_FLAGS)
+def _rotated(qw, qx, qy, qz, cw, dx_, dy_, dz_):
+    """q ⊗ (cw, d), renormalised: |q|² = 1 + ε with ε ~ 1e-16 (a product of unit quaternions), so one
+    Newton step for 1/√(1 + ε), (3 − |q|²)/2, is exact to O(ε²)."""
+    nw = qw * cw - qx * dx_ - qy * dy_ - qz * dz_
+    nx = qw * dx_ + cw * qx + (qy * dz_ - qz * dy_)
+    ny = qw * dy_ + cw * qy + (qz * dx_ - qx * dz_)
+    nz = qw * dz_ + cw * qz + (qx * dy_ - qy * dx_)
+    inv = 0.5 * (3.0 - (nw * nw + nx * nx + ny * ny + nz * nz))
+    return nw * inv, nx * inv, ny * inv, nz * inv
+
+
+@njit(**_FLAGS)
+def rotate_large(q, w, dt, lo, hi):
+    """Rotate the nodes that :func:`update_range` left unrotated (``(½Δt|Ω|)² ≥ ROTATION_SERIES_MAX_H2``)
+    by the exact q ⊗ exp(Ω Δt / 2), ``w`` holding Ω_{n+½}."""
+    for i in range(lo, hi):
+        hx = 0.5 * dt * w[i, 0]
+        hy = 0.5 * dt * w[i, 1]
+        hz = 0.5 * dt * w[i, 2]
+        hh = hx * hx + hy * hy + hz * hz
+        if hh >= ROTATION_SERIES_MAX_H2:
+            hn = math.sqrt(hh)
+            sf = math.sin(hn) / hn
+            q[i, 0], q[i, 1], q[i, 2], q[i, 3] = _rotated(q[i, 0], q[i, 1], q[i, 2], q[i, 3], math.cos(hn),
+                                                          sf * hx, sf * hy, sf * hz)
 
 
 @njit(inline="always", **_FLAGS)
@@ -337,44 +286,45 @@ def merge_speed(vmax2, bad, v2, i):
     return vmax2, bad
 
 
-def _update_nodes(model, scene, state, work, fc, dt, coef, record, gyro):
-    """:func:`update_fiber` for every fiber (one ``prange`` task per fiber in the parallel copy,
-    ``update_nodes_fibers``; in the serial one ``prange`` is ``range``): every node is updated
-    alike, the sums are taken per fiber, then in fiber order. Returns the sums over all nodes (the
-    speed's maximum and node)."""
-    nf = model.node_offsets.shape[0] - 1
-    sums = np.empty((nf, 7))
-    prescribed = (scene.alpha_per_s, scene.fix_mask, scene.node_drive, scene.drives.v)
+@njit(**_FLAGS)
+def max_speed2(v):
+    """The largest |v_i|² (NaN: inf) and its node."""
+    vmax2 = 0.0
+    bad = -1
+    for i in range(v.shape[0]):
+        vmax2, bad = merge_speed(vmax2, bad, v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2], i)
+    return vmax2, bad
+
+
+def _update_nodes(model, fixity, state, work, fc, dt, coef, alpha):
+    """:func:`update_range` over every node: in the serial copy one call for all nodes; in the
+    parallel one (``update_nodes_fibers``) one ``prange`` task per fiber, the sums taken per fiber and
+    then in fiber order. Returns the sums of :func:`update_range`."""
+    offs = model.node_offsets
+    nf = offs.shape[0] - 1
+    if not _PARALLEL:
+        return update_range(model, fixity, state, work, fc, dt, coef, alpha, 0, offs[nf])
+    sums = np.empty((nf, 6))
     for fib in prange(nf):
-        a, b, c, d, e, v2, i = update_fiber(model, prescribed, state, work, fc, dt, coef, record, gyro, fib)
+        a, b, c, d, e, n = update_range(model, fixity, state, work, fc, dt, coef, alpha, offs[fib], offs[fib + 1])
         sums[fib, 0] = a
         sums[fib, 1] = b
         sums[fib, 2] = c
         sums[fib, 3] = d
         sums[fib, 4] = e
-        sums[fib, 5] = v2
-        sums[fib, 6] = i
-    ke = 0.0
-    ke_lf = 0.0
-    vd = 0.0
-    wk_fix = 0.0
-    pw_c = 0.0
-    vmax2 = 0.0
-    bad = -1
+        sums[fib, 5] = n
+    out = np.zeros(6)
     for fib in range(nf):
-        ke += sums[fib, 0]
-        ke_lf += sums[fib, 1]
-        vd += sums[fib, 2]
-        wk_fix += sums[fib, 3]
-        pw_c += sums[fib, 4]
-        vmax2, bad = merge_speed(vmax2, bad, sums[fib, 5], int(sums[fib, 6]))
-    return ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad
+        for c in range(6):
+            out[c] += sums[fib, c]
+    return out[0], out[1], out[2], out[3], out[4], int(out[5])
 
 
+_PARALLEL = False
 update_nodes = njit(inline="always", **_FLAGS)(_update_nodes)
-# Not cached, as beam_resultants_fibers (its comment): only the solver.threads > 1 loops use it.
-update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {}, cache=False, fastmath=True,
-                                 error_model="numpy", parallel=True)
+# Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it.
+update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {"_PARALLEL": True}, cache=False,
+                                 fastmath=True, error_model="numpy", parallel=True)
 
 
 @njit(**_FLAGS)
@@ -456,20 +406,17 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
     beta = scene.beta_s
     beta_over_dt = beta / dt if beta > 0.0 else 0.0
     vd_scale = scene.alpha_per_s * dt
-    J = model.J
-    # isotropic rotary inertia (build_model's): Ω × JΩ = 0, the gyroscopic term is skipped
-    gyro = False
-    for i in range(x.shape[0]):
-        if J[i, 0] != J[i, 1] or J[i, 0] != J[i, 2]:
-            gyro = True
-            break
+    N = x.shape[0]
     # the constant factors of the update, folded once per call
     coef = damping_factors(scene.alpha_per_s, dt)
     acc_before = np.zeros(ACC_SIZE)
     # the hook's own force array (a hook that declares one leaves its forces there; the update adds
     # them, books their work Δt f_n·v̄_n and clears the array); (0, 3) for hooks that add into f
     fc = _hook_forces(contact_data)
-    has_fc = fc.shape[0] == x.shape[0]
+    has_fc = fc.shape[0] == N
+    if not has_fc:
+        fc = np.zeros((N, 3))  # the update reads it for every node
+    fixity = scene.fixity
     status = STATUS_OK
     bad = -1
     done = 0
@@ -483,12 +430,13 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         # ---- forces at t_n ----
         acc[ACC_STORED] = 0.0  # a state at t_n: the planes and the hook add their stored energy
         eval_external(work.f, work.mom, scene.f_ext)
-        # _beam_pass: beam_resultants (serial) or beam_resultants_fibers (prange per fiber), bound per
-        # loop variant by _specialise; it fills eb, the update gathers it
-        se, vd_beta = _beam_pass(x, q, model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest,
-                                 model.theta_rest, work.eb, record, beta_over_dt, work.strain_prev,
-                                 model.node_offsets)
-        acc[ACC_VD] += vd_beta
+        # _beam_pass: beam_pass_all (serial) or beam_pass_fibers (prange per fiber), bound per loop
+        # variant by _specialise; it fills ef, the update gathers it. A step with an element rotated
+        # beyond the vector pass's series, or with stiffness-proportional damping, takes the exact pass
+        se, n_large = _beam_pass(x, q, model, work)
+        if n_large > 0 or beta_over_dt > 0.0:
+            se, vd_beta = element_forces_exact(x, q, model, work, record, beta_over_dt)
+            acc[ACC_VD] += vd_beta
         n_pen = 0
         if P > 0:
             n_pen = eval_planes(scene.planes, x, v, model.radius_node, work.f, acc, t, dt)
@@ -499,8 +447,15 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         if acc[ACC_STORED0] < 0.0:  # −1: the run's first step; the hook's stored energy at t_0 (≥ 0)
             acc[ACC_STORED0] = acc[ACC_STORED] - stored_planes
         eval_drives(scene.drives, t, dt)
+        for k in range(fixity.driven.shape[0]):
+            i = fixity.driven[k]
+            for c in range(3):
+                fixity.v_pres[i, c] = scene.drives.v[scene.node_drive[i], c]
         # ---- update ----
-        ke, ke_lf, vd, wk_fix, pw_c, vmax2, bad = _update_pass(model, scene, state, work, fc, dt, coef, record, gyro)
+        # (the fixity apart from the scene: a parallel loop takes no structure nested in another)
+        ke, ke_lf, vd, wk_fix, pw_c, n_spin = _update_pass(model, fixity, state, work, fc, dt, coef, scene.alpha_per_s)
+        if n_spin > 0:
+            rotate_large(q, w, dt, 0, N)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         if n_pen > 0:
@@ -510,6 +465,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         done = it + 1
         # ---- history and checks ----
         if record:
+            vmax2, bad = max_speed2(v)
             write_history(model, scene, state, work, h_row, acc_before, t, dt, (ke, ke_lf, se), n_contacts)
             h_row += 1
             status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, ctl)
@@ -538,7 +494,7 @@ _update_pass = update_nodes
 def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False):
     return specialise(_advance_template, name, {
         "_hook": hook, "_hook_forces": forces_of,
-        "_beam_pass": beam_resultants_fibers if parallel else beam_resultants,
+        "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
         "_update_pass": update_nodes_fibers if parallel else update_nodes,
     }, cache=cache, fastmath=True, error_model="numpy")
 
@@ -553,7 +509,7 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
     forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
         adds into ``f``). cache_name : a built-in hook's name for the on-disk cache (None: compiled
         in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
-        fiber; compiled in every process (see ``_kernels_beam.beam_resultants_fibers``).
+        fiber; compiled in every process (see ``_kernels_beam.beam_pass_fibers``).
     """
     parallel = threads > 1
     if hook is no_contact and not parallel:

@@ -21,15 +21,15 @@ import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
 from ._kernels_integrate import step_loop_for
-from ._kernels_beam import EB_SIZE, beam_forces
+from ._kernels_beam import EB_SIZE, beam_forces, new_element_forces, node_beams
 from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
-from .layout import (ACC_STORED0, H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
-from .step_data import DriveArrays, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
+from .step_data import DriveArrays, Fixity, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
 from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
@@ -194,6 +194,19 @@ def _initial_energies(model: Model, state: State) -> tuple[float, float]:
     return ke, float(se)
 
 
+def fixity_of(fix_mask: np.ndarray, n_nodes: int) -> Fixity:
+    """The update's factors of the ``layout.FIX_*`` / ``DRIVEN`` bits (:class:`Fixity`; all free for an
+    empty mask)."""
+    m = fix_mask.astype(np.int64) if fix_mask.shape[0] == n_nodes else np.zeros(n_nodes, np.int64)
+    driven = (m & DRIVEN) != 0
+
+    def free(bits):
+        return np.where(((m & bits) != 0) | driven, 0.0, 1.0)
+
+    return Fixity(free(FIX_X), free(FIX_Y), free(FIX_Z), free(FIX_ROT), np.zeros((n_nodes, 3)),
+                  np.flatnonzero(driven).astype(np.int64))
+
+
 class Integrator:
     """Holds the model, the effects' kernel arrays and the work buffers for repeated :meth:`advance`."""
 
@@ -244,13 +257,15 @@ class Integrator:
             raise FiberpipeError("the model's elements are not in the CSR order of build_model "
                                  "(fiber k: nodes node_offsets[k]…, elements node − k)")
         self.eb = np.zeros((model.n_elements, EB_SIZE))
+        self.ef = new_element_forces(n)
         # solver.threads > 1: the beam pass runs one prange task per fiber
         self.threads = max(1, int(threads))
         self._loop = step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
         self.model_arrays = ModelArrays(
             m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
             m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),
-            m_(model.radius_node), m_(model.nodes_m), self.node_offsets)
+            m_(model.radius_node), m_(model.nodes_m), self.node_offsets,
+            node_beams(model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest, n))
 
     def _kernel_args(self):
         """The scene and work structures of the step loop (views of this integrator's arrays)."""
@@ -258,8 +273,9 @@ class Integrator:
         planes = PlaneArrays(sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode,
                              sc.pl_hist_col, self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f)
         drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
-        scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes)
-        work = WorkArrays(self.f, self.mom, self.eb, self.strain_prev, self.hist)
+        scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes,
+                            fixity_of(sc.fix_mask, self.model.n_nodes))
+        work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist)
         return scene, work
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:

@@ -31,6 +31,7 @@ class ModelArrays(NamedTuple):
     radius_node: np.ndarray   # (N,) m, fiber radius at each node
     x0: np.ndarray            # (N, 3) m, rest positions (the constant loads' work reference)
     node_offsets: np.ndarray  # (F+1,) int64, CSR offsets of the fibers' nodes
+    beams: np.ndarray         # (14, N) the element parameters by first node (_kernels_beam.node_beams)
 
 
 class PlaneArrays(NamedTuple):
@@ -63,6 +64,17 @@ class DriveArrays(NamedTuple):
     v: np.ndarray      # (D, 3) m/s, out: this step's prescribed velocity
 
 
+class Fixity(NamedTuple):
+    """Fixed and driven degrees of freedom as factors of the node update (1 free, 0 prescribed)."""
+
+    free_x: np.ndarray      # (N,) 0 where x is fixed or driven
+    free_y: np.ndarray      # (N,)
+    free_z: np.ndarray      # (N,)
+    free_rot: np.ndarray    # (N,) 0 where the rotation is fixed (FIX_ROT or driven)
+    v_pres: np.ndarray      # (N, 3) m/s, the prescribed velocity of the driven nodes this step (else 0)
+    driven: np.ndarray      # (D_n,) int64, the driven nodes
+
+
 class SceneKernel(NamedTuple):
     """The effects' arrays the step loop reads (size 0 where an effect is absent)."""
 
@@ -73,6 +85,7 @@ class SceneKernel(NamedTuple):
     node_drive: np.ndarray    # (N,) int64, drive of each driven node (-1: none)
     drives: DriveArrays
     planes: PlaneArrays
+    fixity: Fixity
 
 
 class StepState(NamedTuple):
@@ -90,7 +103,8 @@ class WorkArrays(NamedTuple):
 
     f: np.ndarray            # (N, 3) N, forces of everything but the beams at t_n
     mom: np.ndarray          # (N, 3) N·m, spatial moments of everything but the beams
-    eb: np.ndarray           # (E, EB_SIZE) the beams' element resultants, gathered per node
+    ef: np.ndarray           # (N + 1, 9) the beams' element resultants by first node + 1 (_kernels_beam)
+    eb: np.ndarray           # (E, EB_SIZE) scratch of the exact element pass (large rotations, β > 0)
     strain_prev: np.ndarray  # (E, 6) last step's strains (stiffness-proportional damping) or (0, 6)
     hist: np.ndarray         # (rows, layout.H_WALL + walls) history rows
 

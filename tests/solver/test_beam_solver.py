@@ -265,34 +265,103 @@ def test_stiffness_proportional_damping_dissipates_and_balances():
     assert np.max(np.abs(h["energy/residual"][len(h["time"]) // 10:])) < 1e-2
 
 
-def test_threads_beam_pass_is_bit_identical():
-    """solver.threads > 1: the per-fiber prange beam pass gives the serial resultants bit for bit,
-    and gathering them per node gives the scatter of beam_forces."""
-    from fiberpipe.solver._kernels_beam import beam_resultants, beam_resultants_fibers, gather_resultants
-    fibers = [helix(21) + [3e-3 * k, 0, 0] for k in range(5)]
+def _perturbed_helices(n_fibers=5, amp_q=1e-3):
+    fibers = [helix(21) + [3e-3 * k, 0, 0] for k in range(n_fibers)]
     x = np.vstack(fibers)
     offs = np.cumsum([0] + [len(f) for f in fibers])
     m = build_model(x, offs, R, MAT)
     rng = np.random.default_rng(1)
     xs = m.nodes_m + 1e-6 * rng.standard_normal(m.nodes_m.shape)
-    qs = m.quats0 + 1e-3 * rng.standard_normal(m.quats0.shape)
+    qs = m.quats0 + amp_q * rng.standard_normal(m.quats0.shape)
     qs /= np.linalg.norm(qs, axis=1)[:, None]
+    return m, xs, qs
+
+
+def _node_pass(m, xs, qs, threads=1):
+    """The step loop's beam pass on (xs, qs): (ElementForces, strain energy, elements beyond the series)."""
+    from fiberpipe.solver._kernels_beam import beam_pass_all, beam_pass_fibers
+
+    integ = Integrator(m, [], 1e-9)
+    work = integ._kernel_args()[1]
+    se, n_large = (beam_pass_fibers if threads > 1 else beam_pass_all)(xs, qs, integ.model_arrays, work)
+    return work.ef.copy(), se, n_large
+
+
+def test_node_beam_pass_matches_the_exact_element_pass():
+    """The vectorised node-wise pass (series of the rotation logarithm, selects) gives the per-element
+    pass's resultants of curved, perturbed fibers (0.36 rad of rest rotation per element) to 1e-10 of
+    each component's largest (the series holds to 7e-14; the moments are differences of larger terms), the per-fiber prange copy gives the same rows
+    bit for bit, and gathering them per node gives the scatter of beam_forces."""
+    from fiberpipe.solver._kernels_beam import (beam_resultants, gather_resultants, new_element_forces,
+                                                scatter_element_forces)
+    m, xs, qs = _perturbed_helices()
     f1, m1, se1 = internal_forces(m, xs, qs)
-    args = (xs, qs, m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest)
+    ef, se, n_large = _node_pass(m, xs, qs)
+    ef2, se2, _ = _node_pass(m, xs, qs, threads=2)
+    assert n_large == 0
+    assert np.array_equal(ef, ef2)
+    assert se == pytest.approx(se1, rel=1e-12) and se2 == pytest.approx(se1, rel=1e-12)
     offs64 = np.asarray(m.node_offsets, np.int64)
-    eb1 = np.zeros((m.n_elements, 9))
-    eb2 = np.zeros((m.n_elements, 9))
-    se_s, _ = beam_resultants(*args, eb1, True, 0.0, np.zeros((0, 6)), offs64)
-    se2, _ = beam_resultants_fibers(*args, eb2, True, 0.0, np.zeros((0, 6)), offs64)
-    assert np.array_equal(eb1, eb2)
-    assert se2 == pytest.approx(se1, rel=1e-12) and se_s == pytest.approx(se1, rel=1e-12)
+    eb = np.zeros((m.n_elements, 9))
+    beam_resultants(xs, qs, m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest, eb, True, 0.0,
+                    np.zeros((0, 6)), offs64)
+    exact = new_element_forces(m.n_nodes)
+    scatter_element_forces(np.asarray(m.el_n1, np.int64), eb, exact)
+    for c in range(9):
+        assert np.abs(ef[:, c] - exact[:, c]).max() <= 1e-10 * np.abs(exact[:, c]).max()
     f2 = np.zeros_like(f1)
     m2 = np.zeros_like(m1)
-    gather_resultants(eb1, offs64, f2, m2)
-    scale_f = np.abs(f1).max()
-    scale_m = np.abs(m1).max()
-    assert np.abs(f2 - f1).max() <= 1e-12 * scale_f and np.abs(m2 - m1).max() <= 1e-12 * scale_m
-    # the step loop with threads = 2 follows the serial run bit for bit (positions, rotations)
+    gather_resultants(eb, offs64, f2, m2)
+    assert np.abs(f2 - f1).max() <= 1e-12 * np.abs(f1).max() and np.abs(m2 - m1).max() <= 1e-12 * np.abs(m1).max()
+
+
+def test_node_beam_pass_flags_elements_beyond_its_series_and_the_step_takes_the_exact_pass():
+    """An element rotated by more than 0.64 rad is counted, and the step loop's first step from rest
+    then moves every node by the exact forces: v_{1/2} = Δt f / m (no damping)."""
+    m, xs, qs = _perturbed_helices(n_fibers=2)
+    i = 10  # twist node 10 by 1.2 rad about its own d3: its two elements pass the series' 0.64 rad
+    half = 0.6
+    rot = np.array([np.cos(half), 0.0, 0.0, np.sin(half)])
+    w0, x0, y0, z0 = qs[i]
+    a, b, c, d = rot
+    qs[i] = [w0 * a - z0 * d, x0 * a + y0 * d, y0 * a - x0 * d, z0 * a + w0 * d]
+    assert _node_pass(m, xs, qs)[2] == 2
+    f, _mom, _ = internal_forces(m, xs, qs)
+    dt = 1e-9
+    integ = Integrator(m, [], dt)
+    s = State.at_rest(m)
+    s.x[:] = xs
+    s.q[:] = qs
+    integ.advance(s, 1)
+    v_exact = dt * f / m.mass[:, None]
+    assert np.abs(s.v - v_exact).max() <= 1e-12 * np.abs(v_exact).max()
+
+
+def test_update_rotates_fast_spinning_nodes_exactly():
+    """A node whose rotation increment ½Δt|Ω| exceeds the update's series is rotated by the exact
+    q ⊗ exp(ΩΔt/2)."""
+    m, xs, qs = _perturbed_helices(n_fibers=1, amp_q=0.0)
+    dt = 1e-6
+    integ = Integrator(m, [], dt)
+    s = State.at_rest(m)
+    s.w[5] = [4e5, -1e5, 2e5]  # ½Δt|Ω| ≈ 0.23 rad: (…)² = 0.053 > 1e-2
+    q0 = s.q[5].copy()
+    integ.advance(s, 1)
+    h = 0.5 * dt * s.w[5]
+    hn = np.linalg.norm(h)
+    e = np.concatenate([[np.cos(hn)], np.sin(hn) / hn * h])
+    w0, x0, y0, z0 = q0
+    ew, ex, ey, ez = e
+    expect = np.array([w0 * ew - x0 * ex - y0 * ey - z0 * ez, w0 * ex + ew * x0 + (y0 * ez - z0 * ey),
+                       w0 * ey + ew * y0 + (z0 * ex - x0 * ez), w0 * ez + ew * z0 + (x0 * ey - y0 * ex)])
+    assert np.abs(s.q[5] - expect).max() < 1e-14
+
+
+def test_threads_step_loop_follows_the_serial_run_to_rounding():
+    """solver.threads > 1 (the per-fiber prange beam pass and update) follows the serial run to rounding:
+    every node takes the same formulas, but a fiber's chunk puts other nodes in the vector loop's scalar
+    remainder than the one loop over all nodes, whose contractions may differ in the last bit."""
+    m, xs, qs = _perturbed_helices()
     st = []
     for th in (1, 2):
         integ = Integrator(m, [Gravity([0, 0, -9.81]), Damping(1e3)], 1e-8, history_rows=4, history_every=50,
@@ -302,4 +371,6 @@ def test_threads_beam_pass_is_bit_identical():
         s.q[:] = qs
         integ.advance(s, 100)
         st.append(s)
-    assert np.array_equal(st[0].x, st[1].x) and np.array_equal(st[0].q, st[1].q)
+    assert np.abs(st[0].x - st[1].x).max() <= 1e-15 * np.abs(st[0].x).max()
+    assert np.abs(st[0].q - st[1].q).max() <= 1e-14
+    assert np.abs(st[0].v - st[1].v).max() <= 1e-10 * np.abs(st[0].v).max()

@@ -25,11 +25,11 @@ def test_threaded_loops_are_separate_and_not_cached():
     """The prange beam pass is only in the solver.threads > 1 variants, which are never cached."""
     from fiberpipe.solver import _kernels_beam as B
 
-    assert type(B.beam_resultants_fibers._cache).__name__ == "NullCache"
+    assert type(B.beam_pass_fibers._cache).__name__ == "NullCache"
     par = K.step_loop_for(K.no_contact, threads=2)
     assert par is not K.advance_plain and par is K.step_loop_for(K.no_contact, threads=2)
-    assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_resultants
-    assert par.py_func.__globals__["_beam_pass"] is B.beam_resultants_fibers
+    assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_pass_all
+    assert par.py_func.__globals__["_beam_pass"] is B.beam_pass_fibers
 
 
 _PLAIN = """
