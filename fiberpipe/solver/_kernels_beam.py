@@ -40,8 +40,8 @@ All kernels take flat arrays only (structure of arrays by field, fibers joined i
 element ``e`` joins nodes ``el_n1[e]`` and ``el_n1[e] + 1``. The step loops' beam pass
 (:func:`beam_pass_nodes`) runs one branch-free loop over all nodes, the element parameters indexed
 by the element's first node (:func:`node_beams`, zero where no element starts), and writes the
-resultants by first node + 1 (:func:`new_element_forces`) for the update to gather per node (no
-scatter): LLVM vectorises that loop (``_vectorise``). :func:`beam_resultants` is the per-element
+resultants by first node + 1 to nine arrays (:class:`~fiberpipe.solver.step_data.ElementForces`)
+for the update to gather per node (no scatter): LLVM vectorises that loop (``_vectorise``). :func:`beam_resultants` is the per-element
 form with the exact rotation logarithm and the stiffness-proportional damping, which the step loops
 use for a step where an element rotates by more than 0.64 rad or β > 0.
 """
@@ -54,6 +54,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._specialise import specialise
+from .step_data import ElementForces
 
 
 # rest rotation per element [rad] above which the element uses the exact conjugate moments: 1e-3 rad
@@ -394,9 +395,24 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
 # node-wise pass's series of asin(s)/s holds: |θ| < 0.64 rad between two nodes (a 0.3 mm element on a
 # 0.5 mm radius of curvature); a step with a larger one takes the exact per-element pass
 SERIES_MAX_S2 = 0.1
-# asin(s)/s = 1 + s² Σ_{n≥1} c_n s^{2(n−1)}, c_n = (2n)!/(4ⁿ (n!)² (2n+1)): eleven terms, the first
-# omitted one below 7e-14 at s² = 0.1
-_ASIN_TAIL = tuple(math.comb(2 * n, n) / (4.0**n * (2 * n + 1)) for n in range(11, 0, -1))
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _asin_tail(s2):
+    """(asin(s)/s − 1)/s² = Σ_{n≥1} c_n s^{2(n−1)}, c_n = (2n)!/(4ⁿ (n!)² (2n+1)): eleven terms, the
+    first omitted one below 7e-14 of the sum at s² = 0.1 (Horner, written out: a loop over the
+    coefficients would keep the caller's loop from vectorising)."""
+    t = 88179.0 / 12058624.0
+    t = t * s2 + 46189.0 / 5505024.0
+    t = t * s2 + 12155.0 / 1245184.0
+    t = t * s2 + 6435.0 / 557056.0
+    t = t * s2 + 143.0 / 10240.0
+    t = t * s2 + 231.0 / 13312.0
+    t = t * s2 + 63.0 / 2816.0
+    t = t * s2 + 35.0 / 1152.0
+    t = t * s2 + 5.0 / 112.0
+    t = t * s2 + 3.0 / 40.0
+    return t * s2 + 1.0 / 6.0
 
 
 def node_beams(el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, n_nodes: int) -> np.ndarray:
@@ -413,37 +429,40 @@ def node_beams(el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, n_nodes: in
     return out
 
 
-def new_element_forces(n_nodes: int) -> np.ndarray:
-    """The beam pass's output, (N + 1, EB_SIZE), zeroed: row ``a + 1`` holds the element starting at node
-    ``a`` as a row of :func:`beam_resultants` (n, m, h); node ``i`` gets ``(+n, m + h)`` from row ``i + 1``
-    and ``(−n, h − m)`` from row ``i``; rows without an element stay 0."""
-    return np.zeros((n_nodes + 1, EB_SIZE))
+def new_element_forces(n_nodes: int) -> ElementForces:
+    """The beam pass's output (:class:`~fiberpipe.solver.step_data.ElementForces`), zeroed."""
+    return ElementForces(*(np.zeros(n_nodes + 1) for _ in range(EB_SIZE)))
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def beam_pass_nodes(x, q, model, work, lo, hi):
-    """Resultants of the elements starting at nodes ``lo … hi − 1`` into ``work.ef`` (row ``a + 1``),
-    from the element parameters ``model.beams`` (:func:`node_beams`).
+def beam_pass_nodes(x, q, beams, ef, lo, hi):
+    """Resultants of the elements starting at nodes ``lo … hi − 1`` into ``ef`` (:class:`ElementForces`,
+    entry ``a + 1``), from the element parameters ``beams`` (:func:`node_beams`).
 
     The formulas of :func:`beam_resultants` (module docstring) without the stiffness-proportional
     damping, in one loop without branches: the hemisphere of q2 by its sign, ``fac = 2 asin(s)/s`` by
-    its series (``_ASIN_TAIL``), the exact conjugate moments of curved elements by a select. Returns ``(strain energy
+    its series (:func:`_asin_tail`), the exact conjugate moments of curved elements by a select. Returns ``(strain energy
     [J], elements whose |v|² ≥ SERIES_MAX_S2)``: the caller recomputes a step with any of the latter by
     the exact pass. Where no element starts (``invL0 = 0``) every parameter is 0 and so is the row.
     """
-    # Strategy: every array read and written through flat views (constant offsets 3a + c, 4a + c,
-    # 9b + c), so that LLVM's vectoriser sees affine accesses at known distances; one loop over all
+    # Strategy: the state read through flat views (constant offsets 3a + c, 4a + c) and one write array
+    # per resultant component, so that LLVM's vectoriser sees affine accesses at known distances and
+    # distinct write targets it can check once per call for overlap; one loop over all
     # nodes instead of the per-fiber loops of beam_resultants (a fiber's last node simply has zero
     # parameters), because the vector loop's run-time overlap checks cost too much per fiber.
-    xs = x.reshape(-1)
-    qs = q.reshape(-1)
-    efs = work.ef.reshape(-1)
-    P = model.beams
-    L0, IL, C0, C1, C2, D0, D1, D2 = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7]
-    G0, G1, G2, T0, T1, T2 = P[8], P[9], P[10], P[11], P[12], P[13]
+    # The views start at node lo and the loop counts from 0: an index the compiler knows is ≥ 0 needs
+    # no negative-index wrap-around, which would make the accesses non-affine and the loop scalar.
+    xs = x.reshape(-1)[3 * lo:]
+    qs = q.reshape(-1)[4 * lo:]
+    n0, n1, n2, m0, m1, m2, h0, h1, h2 = ef
+    n0, n1, n2, m0, m1, m2 = n0[lo:], n1[lo:], n2[lo:], m0[lo:], m1[lo:], m2[lo:]
+    h0, h1, h2 = h0[lo:], h1[lo:], h2[lo:]
+    P = beams
+    L0, IL, C0, C1, C2, D0, D1, D2 = P[0, lo:], P[1, lo:], P[2, lo:], P[3, lo:], P[4, lo:], P[5, lo:], P[6, lo:], P[7, lo:]
+    G0, G1, G2, T0, T1, T2 = P[8, lo:], P[9, lo:], P[10, lo:], P[11, lo:], P[12, lo:], P[13, lo:]
     se = 0.0
     n_large = 0
-    for a in range(lo, hi):
+    for a in range(hi - lo):
         b = a + 1
         w1 = qs[4 * a]
         x1 = qs[4 * a + 1]
@@ -460,10 +479,8 @@ def beam_pass_nodes(x, q, model, work, lo, hi):
         rz = w1 * z2 - w2 * z1 - (x1 * y2 - y1 * x2)
         s2 = rx * rx + ry * ry + rz * rz
         il = IL[a]
-        n_large += 1 if (s2 >= SERIES_MAX_S2 and il > 0.0) else 0
-        tail = 0.0
-        for c in _ASIN_TAIL:  # Horner, highest power first
-            tail = tail * s2 + c
+        n_large += 1 if (s2 >= SERIES_MAX_S2) & (il > 0.0) else 0  # & not and: a select, no branch
+        tail = _asin_tail(s2)
         fac = 2.0 * (1.0 + s2 * tail)
         r00, r01, r02, r10, r11, r12, r20, r21, r22, inv1p = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
         ex = xs[3 * b] - xs[3 * a]
@@ -503,15 +520,15 @@ def beam_pass_nodes(x, q, model, work, lo, hi):
         mm0 = mb0 + (ry * u2 - rz * u1) if curved else mb0
         mm1 = mb1 + (rz * u0 - rx * u2) if curved else mb1
         mm2 = mb2 + (rx * u1 - ry * u0) if curved else mb2
-        efs[9 * b] = f0
-        efs[9 * b + 1] = f1
-        efs[9 * b + 2] = f2
-        efs[9 * b + 3] = r00 * mm0 + r01 * mm1 + r02 * mm2
-        efs[9 * b + 4] = r10 * mm0 + r11 * mm1 + r12 * mm2
-        efs[9 * b + 5] = r20 * mm0 + r21 * mm1 + r22 * mm2
-        efs[9 * b + 6] = 0.5 * (ey * f2 - ez * f1)
-        efs[9 * b + 7] = 0.5 * (ez * f0 - ex * f2)
-        efs[9 * b + 8] = 0.5 * (ex * f1 - ey * f0)
+        n0[b] = f0
+        n1[b] = f1
+        n2[b] = f2
+        m0[b] = r00 * mm0 + r01 * mm1 + r02 * mm2
+        m1[b] = r10 * mm0 + r11 * mm1 + r12 * mm2
+        m2[b] = r20 * mm0 + r21 * mm1 + r22 * mm2
+        h0[b] = 0.5 * (ey * f2 - ez * f1)
+        h1[b] = 0.5 * (ez * f0 - ex * f2)
+        h2[b] = 0.5 * (ex * f1 - ey * f0)
     return se, n_large
 
 
@@ -529,11 +546,11 @@ def element_forces_exact(x, q, model, work, record, beta_over_dt):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def scatter_element_forces(el_n1, eb, ef):
-    """Copy the (E, 9) rows of :func:`beam_resultants` to the node-indexed ``ef`` (row first node + 1)."""
+    """Copy the (E, 9) rows of :func:`beam_resultants` to :class:`ElementForces` (entry first node + 1)."""
     for e in range(el_n1.shape[0]):
         b = el_n1[e] + 1
         for c in range(EB_SIZE):
-            ef[b, c] = eb[e, c]
+            ef[c][b] = eb[e, c]
 
 
 def _beam_pass_nodes(x, q, model, work):
@@ -544,11 +561,15 @@ def _beam_pass_nodes(x, q, model, work):
     offs = model.node_offsets
     nf = offs.shape[0] - 1
     if not _PARALLEL:
-        return beam_pass_nodes(x, q, model, work, 0, offs[nf] - 1)
+        return beam_pass_nodes(x, q, model.beams, work.ef, 0, offs[nf] - 1)
+    # a parallel loop takes a tuple built in this function, not one nested in another structure
+    n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
+    ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
+    beams = model.beams
     se_f = np.zeros(nf)
     nl_f = np.zeros(nf, np.int64)
     for k in prange(nf):
-        se_f[k], nl_f[k] = beam_pass_nodes(x, q, model, work, offs[k], offs[k + 1] - 1)
+        se_f[k], nl_f[k] = beam_pass_nodes(x, q, beams, ef, offs[k], offs[k + 1] - 1)
     se = 0.0
     for k in range(nf):
         se += se_f[k]

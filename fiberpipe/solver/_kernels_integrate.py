@@ -129,11 +129,11 @@ ROTATION_SERIES_MAX_H2 = 1e-2
 
 
 @njit(**_FLAGS)
-def update_range(model, fixity, state, work, fc, dt, coef, alpha, lo, hi):
+def update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, lo, hi):
     """The central-difference update (module docstring) of the nodes ``lo … hi − 1``: gathers each
-    node's beam resultants from ``work.ef``, adds the constant and plane forces ``work.f``, the moments
-    ``work.mom`` and the contact hook's forces ``fc`` (cleared here), then imposes the fixed and driven
-    degrees of freedom through ``fixity``'s factors.
+    node's beam resultants from ``ef`` (:class:`~fiberpipe.solver.step_data.ElementForces`), adds the
+    constant and plane forces ``f``, the moments ``mom`` and the contact hook's forces ``fc`` (cleared
+    here), then imposes the fixed and driven degrees of freedom through ``fixity``'s factors.
 
     Returns ``(ke, ke_lf, vd, wk_fix, pw_c, n_large)``: the kinetic energy at t_n (the mean of the
     half-step energies), the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² for the
@@ -145,12 +145,17 @@ def update_range(model, fixity, state, work, fc, dt, coef, alpha, lo, hi):
     # LLVM vectorises it (_vectorise): fixity by 0/1 factors and a prescribed velocity, the gyroscopic
     # term as w × (J w) with exact zeros for isotropic J, the rotation's cos and sin by their series
     # (a select keeps q where they would not hold), every sum taken every step (a few flops).
-    xs, qs, vs, ws = state.x.reshape(-1), state.q.reshape(-1), state.v.reshape(-1), state.w.reshape(-1)
-    fs, ms, fcs = work.f.reshape(-1), work.mom.reshape(-1), fc.reshape(-1)
-    Js, iJs = model.J.reshape(-1), model.inv_J.reshape(-1)
-    mass, inv_mass = model.mass, model.inv_mass
-    ef = work.ef.reshape(-1)
-    FX, FY, FZ, FR, vps = fixity.free_x, fixity.free_y, fixity.free_z, fixity.free_rot, fixity.v_pres.reshape(-1)
+    # every array through a flat view starting at node lo, the loop counting from 0 (beam_pass_nodes)
+    xs, qs = state.x.reshape(-1)[3 * lo:], state.q.reshape(-1)[4 * lo:]
+    vs, ws = state.v.reshape(-1)[3 * lo:], state.w.reshape(-1)[3 * lo:]
+    fs, ms, fcs = f.reshape(-1)[3 * lo:], mom.reshape(-1)[3 * lo:], fc.reshape(-1)[3 * lo:]
+    Js, iJs = model.J.reshape(-1)[3 * lo:], model.inv_J.reshape(-1)[3 * lo:]
+    mass, inv_mass = model.mass[lo:], model.inv_mass[lo:]
+    n0, n1, n2, m0, m1, m2, h0, h1, h2 = ef
+    n0, n1, n2, m0, m1, m2 = n0[lo:], n1[lo:], n2[lo:], m0[lo:], m1[lo:], m2[lo:]
+    h0, h1, h2 = h0[lo:], h1[lo:], h2[lo:]
+    FX, FY, FZ, FR = fixity.free_x[lo:], fixity.free_y[lo:], fixity.free_z[lo:], fixity.free_rot[lo:]
+    vps = fixity.v_pres.reshape(-1)[3 * lo:]
     c_keep, dt_c = coef
     inv_dt = 1.0 / dt
     ke = 0.0
@@ -159,21 +164,20 @@ def update_range(model, fixity, state, work, fc, dt, coef, alpha, lo, hi):
     wk = 0.0
     pw = 0.0
     n_large = 0
-    for i in range(lo, hi):
-        j = 9 * (i + 1)  # the element starting at node i, then (k = 9 i) the one ending there
-        k = 9 * i
+    for i in range(hi - lo):
+        j = i + 1  # the element starting at node i; entry i: the one ending there
         cfx = fcs[3 * i]
         cfy = fcs[3 * i + 1]
         cfz = fcs[3 * i + 2]
         fcs[3 * i] = 0.0
         fcs[3 * i + 1] = 0.0
         fcs[3 * i + 2] = 0.0
-        fx = fs[3 * i] + (ef[j] - ef[k]) + cfx
-        fy = fs[3 * i + 1] + (ef[j + 1] - ef[k + 1]) + cfy
-        fz = fs[3 * i + 2] + (ef[j + 2] - ef[k + 2]) + cfz
-        mx = ms[3 * i] + (ef[j + 3] + ef[j + 6]) + (ef[k + 6] - ef[k + 3])
-        my = ms[3 * i + 1] + (ef[j + 4] + ef[j + 7]) + (ef[k + 7] - ef[k + 4])
-        mz = ms[3 * i + 2] + (ef[j + 5] + ef[j + 8]) + (ef[k + 8] - ef[k + 5])
+        fx = fs[3 * i] + (n0[j] - n0[i]) + cfx
+        fy = fs[3 * i + 1] + (n1[j] - n1[i]) + cfy
+        fz = fs[3 * i + 2] + (n2[j] - n2[i]) + cfz
+        mx = ms[3 * i] + (m0[j] + h0[j]) + (h0[i] - m0[i])
+        my = ms[3 * i + 1] + (m1[j] + h1[j]) + (h1[i] - m1[i])
+        mz = ms[3 * i + 2] + (m2[j] + h2[j]) + (h2[i] - m2[i])
         m = mass[i]
         v0x = vs[3 * i]
         v0y = vs[3 * i + 1]
@@ -302,11 +306,16 @@ def _update_nodes(model, fixity, state, work, fc, dt, coef, alpha):
     then in fiber order. Returns the sums of :func:`update_range`."""
     offs = model.node_offsets
     nf = offs.shape[0] - 1
+    f, mom = work.f, work.mom
     if not _PARALLEL:
-        return update_range(model, fixity, state, work, fc, dt, coef, alpha, 0, offs[nf])
+        return update_range(model, fixity, state, f, mom, work.ef, fc, dt, coef, alpha, 0, offs[nf])
+    # a parallel loop takes a tuple built in this function, not one nested in another structure
+    n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
+    ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
     sums = np.empty((nf, 6))
     for fib in prange(nf):
-        a, b, c, d, e, n = update_range(model, fixity, state, work, fc, dt, coef, alpha, offs[fib], offs[fib + 1])
+        a, b, c, d, e, n = update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, offs[fib],
+                                        offs[fib + 1])
         sums[fib, 0] = a
         sums[fib, 1] = b
         sums[fib, 2] = c

@@ -15,6 +15,24 @@ from typing import NamedTuple
 import numpy as np
 
 
+class ElementForces(NamedTuple):
+    """The beam pass's resultants per element at index first node + 1, (N + 1,) each: ``n`` the spatial
+    force (N), ``m`` the moment (N·m), ``h = ½ (x_2 − x_1) × n`` (N·m). Node ``i`` gets ``(+n, m + h)``
+    from entry ``i + 1`` and ``(−n, h − m)`` from entry ``i``; entries without an element stay 0. Nine
+    separate arrays: the vectorised loops need their writes and strided reads in distinct arrays
+    (``fiberpipe.solver._vectorise``)."""
+
+    n0: np.ndarray
+    n1: np.ndarray
+    n2: np.ndarray
+    m0: np.ndarray
+    m1: np.ndarray
+    m2: np.ndarray
+    h0: np.ndarray
+    h1: np.ndarray
+    h2: np.ndarray
+
+
 class ModelArrays(NamedTuple):
     """Static arrays of a :class:`fiberpipe.solver.model.Model` (per element E, per node N)."""
 
@@ -103,7 +121,7 @@ class WorkArrays(NamedTuple):
 
     f: np.ndarray            # (N, 3) N, forces of everything but the beams at t_n
     mom: np.ndarray          # (N, 3) N·m, spatial moments of everything but the beams
-    ef: np.ndarray           # (N + 1, 9) the beams' element resultants by first node + 1 (_kernels_beam)
+    ef: ElementForces        # the beams' element resultants, gathered per node by the update
     eb: np.ndarray           # (E, EB_SIZE) scratch of the exact element pass (large rotations, β > 0)
     strain_prev: np.ndarray  # (E, 6) last step's strains (stiffness-proportional damping) or (0, 6)
     hist: np.ndarray         # (rows, layout.H_WALL + walls) history rows
