@@ -72,7 +72,7 @@ def step_variants(state_path, steps: int, warmup: int, repeats: int) -> list[dic
 
 def kernel_times(state_path) -> dict:
     """µs per call of the kernels of one step, alone, on the state's positions."""
-    from fiberpipe.solver._kernels_beam import EB_SIZE, beam_resultants
+    from fiberpipe.solver._kernels_beam import EB_SIZE, beam_pass_all, beam_resultants
     from fiberpipe.solver._kernels_boundary import plane_contacts
     from fiberpipe.solver.contact import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
@@ -89,7 +89,9 @@ def kernel_times(state_path) -> dict:
     eb = np.zeros((model.n_elements, EB_SIZE))
     sp = np.zeros((0, 6))
     out = {}
-    out["beam pass (beam_resultants)"] = _best(lambda: beam_resultants(
+    work = integ._kernel_args()[1]
+    out["beam pass, vectorised (beam_pass_all, the step loop's)"] = _best(lambda: beam_pass_all(x, q, m, work), 2000)
+    out["beam pass, per element (beam_resultants, large rotations and β > 0)"] = _best(lambda: beam_resultants(
         x, q, m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest, eb, False, 0.0, sp, m.node_offsets), 2000)
     sc = integ.scene
     n, P = x.shape[0], sc.pl_axis.size
