@@ -54,6 +54,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._specialise import specialise
+from .geometry import asin_tail
 from .step_data import ElementForces
 
 
@@ -397,24 +398,6 @@ def beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, m
 SERIES_MAX_S2 = 0.1
 
 
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _asin_tail(s2):
-    """(asin(s)/s − 1)/s² = Σ_{n≥1} c_n s^{2(n−1)}, c_n = (2n)!/(4ⁿ (n!)² (2n+1)): eleven terms, the
-    first omitted one below 7e-14 of the sum at s² = 0.1 (Horner, written out: a loop over the
-    coefficients would keep the caller's loop from vectorising)."""
-    t = 88179.0 / 12058624.0
-    t = t * s2 + 46189.0 / 5505024.0
-    t = t * s2 + 12155.0 / 1245184.0
-    t = t * s2 + 6435.0 / 557056.0
-    t = t * s2 + 143.0 / 10240.0
-    t = t * s2 + 231.0 / 13312.0
-    t = t * s2 + 63.0 / 2816.0
-    t = t * s2 + 35.0 / 1152.0
-    t = t * s2 + 5.0 / 112.0
-    t = t * s2 + 3.0 / 40.0
-    return t * s2 + 1.0 / 6.0
-
-
 def node_beams(el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, n_nodes: int) -> np.ndarray:
     """The element parameters indexed by their first node, (14, N), 0 where no element starts (a fiber's
     last node): rows L0 [m], 1/L0 [1/m], C (3) [N], D/L0 (3) [N·m/rad], Γ_rest (3), θ_rest (3) [rad]."""
@@ -441,7 +424,7 @@ def beam_pass_nodes(x, q, beams, ef, lo, hi):
 
     The formulas of :func:`beam_resultants` (module docstring) without the stiffness-proportional
     damping, in one loop without branches: the hemisphere of q2 by its sign, ``fac = 2 asin(s)/s`` by
-    its series (:func:`_asin_tail`), the exact conjugate moments of curved elements by a select. Returns ``(strain energy
+    its series (:func:`fiberpipe.solver.geometry.asin_tail`), the exact conjugate moments of curved elements by a select. Returns ``(strain energy
     [J], elements whose |v|² ≥ SERIES_MAX_S2)``: the caller recomputes a step with any of the latter by
     the exact pass. Where no element starts (``invL0 = 0``) every parameter is 0 and so is the row.
     """
@@ -480,7 +463,7 @@ def beam_pass_nodes(x, q, beams, ef, lo, hi):
         s2 = rx * rx + ry * ry + rz * rz
         il = IL[a]
         n_large += 1 if (s2 >= SERIES_MAX_S2) & (il > 0.0) else 0  # & not and: a select, no branch
-        tail = _asin_tail(s2)
+        tail = asin_tail(s2)
         fac = 2.0 * (1.0 + s2 * tail)
         r00, r01, r02, r10, r11, r12, r20, r21, r22, inv1p = _midpoint_matrix(w1, x1, y1, z1, w2, x2, y2, z2, dot)
         ex = xs[3 * b] - xs[3 * a]
