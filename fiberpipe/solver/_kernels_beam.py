@@ -537,9 +537,9 @@ def scatter_element_forces(el_n1, eb, ef):
 
 
 def _beam_pass_nodes(x, q, model, work):
-    """:func:`beam_pass_nodes` over every element: one call in the serial copy (``beam_pass_all``), one
-    ``prange`` task per fiber in the parallel one (``beam_pass_fibers``, ``solver.threads`` > 1; the
-    same rows, the energy summed per fiber, then in fiber order). Returns ``(strain energy [J],
+    """:func:`beam_pass_nodes` over every element: one call in the serial copy (``beam_pass_all``),
+    ``PARALLEL_CHUNKS`` ``prange`` tasks of contiguous nodes in the parallel one (``beam_pass_fibers``,
+    ``solver.threads`` > 1; the same formulas per element, the energy summed per task, then in order). Returns ``(strain energy [J],
     elements beyond the series)``."""
     offs = model.node_offsets
     nf = offs.shape[0] - 1
@@ -549,16 +549,21 @@ def _beam_pass_nodes(x, q, model, work):
     n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
     ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
     beams = model.beams
-    se_f = np.zeros(nf)
-    nl_f = np.zeros(nf, np.int64)
-    for k in prange(nf):
-        se_f[k], nl_f[k] = beam_pass_nodes(x, q, beams, ef, offs[k], offs[k + 1] - 1)
+    # contiguous node ranges, not fibers: each task's vector loop runs long (its overlap checks once)
+    n_el = offs[nf] - 1
+    nch = PARALLEL_CHUNKS
+    se_f = np.zeros(nch)
+    nl_f = np.zeros(nch, np.int64)
+    for k in prange(nch):
+        se_f[k], nl_f[k] = beam_pass_nodes(x, q, beams, ef, k * n_el // nch, (k + 1) * n_el // nch)
     se = 0.0
-    for k in range(nf):
+    for k in range(nch):
         se += se_f[k]
     return se, nl_f.sum()
 
 
+# tasks of the parallel node-wise passes (solver.threads > 1): contiguous node ranges
+PARALLEL_CHUNKS = 16
 _PARALLEL = False
 beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy")(_beam_pass_nodes)
 # Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop

@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._specialise import specialise
-from ._kernels_beam import beam_pass_all, beam_pass_fibers, element_forces_exact
+from ._kernels_beam import PARALLEL_CHUNKS, beam_pass_all, beam_pass_fibers, element_forces_exact
 from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
@@ -302,8 +302,8 @@ def max_speed2(v):
 
 def _update_nodes(model, fixity, state, work, fc, dt, coef, alpha):
     """:func:`update_range` over every node: in the serial copy one call for all nodes; in the
-    parallel one (``update_nodes_fibers``) one ``prange`` task per fiber, the sums taken per fiber and
-    then in fiber order. Returns the sums of :func:`update_range`."""
+    parallel one (``update_nodes_fibers``) ``PARALLEL_CHUNKS`` ``prange`` tasks of contiguous nodes, the
+    sums taken per task and then in order. Returns the sums of :func:`update_range`."""
     offs = model.node_offsets
     nf = offs.shape[0] - 1
     f, mom = work.f, work.mom
@@ -312,20 +312,22 @@ def _update_nodes(model, fixity, state, work, fc, dt, coef, alpha):
     # a parallel loop takes a tuple built in this function, not one nested in another structure
     n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
     ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
-    sums = np.empty((nf, 6))
-    for fib in prange(nf):
-        a, b, c, d, e, n = update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, offs[fib],
-                                        offs[fib + 1])
-        sums[fib, 0] = a
-        sums[fib, 1] = b
-        sums[fib, 2] = c
-        sums[fib, 3] = d
-        sums[fib, 4] = e
-        sums[fib, 5] = n
+    n = offs[nf]
+    nch = PARALLEL_CHUNKS
+    sums = np.empty((nch, 6))
+    for k in prange(nch):  # contiguous node ranges (beam_pass_fibers)
+        a, b, c, d, e, nl = update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, k * n // nch,
+                                         (k + 1) * n // nch)
+        sums[k, 0] = a
+        sums[k, 1] = b
+        sums[k, 2] = c
+        sums[k, 3] = d
+        sums[k, 4] = e
+        sums[k, 5] = nl
     out = np.zeros(6)
-    for fib in range(nf):
+    for k in range(nch):
         for c in range(6):
-            out[c] += sums[fib, c]
+            out[c] += sums[k, c]
     return out[0], out[1], out[2], out[3], out[4], int(out[5])
 
 

@@ -258,7 +258,7 @@ class Integrator:
                                  "(fiber k: nodes node_offsets[k]…, elements node − k)")
         self.eb = np.zeros((model.n_elements, EB_SIZE))
         self.ef = new_element_forces(n)
-        # solver.threads > 1: the beam pass runs one prange task per fiber
+        # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
         self.threads = max(1, int(threads))
         self._loop = step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
         self.model_arrays = ModelArrays(

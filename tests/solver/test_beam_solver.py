@@ -358,9 +358,9 @@ def test_update_rotates_fast_spinning_nodes_exactly():
 
 
 def test_threads_step_loop_follows_the_serial_run_to_rounding():
-    """solver.threads > 1 (the per-fiber prange beam pass and update) follows the serial run to rounding:
-    every node takes the same formulas, but a fiber's chunk puts other nodes in the vector loop's scalar
-    remainder than the one loop over all nodes, whose contractions may differ in the last bit."""
+    """solver.threads > 1 (the prange beam pass and update over contiguous node ranges) follows the serial
+    run to rounding: every node takes the same formulas, but a task's range puts other nodes in the vector
+    loop's scalar remainder than the one loop over all nodes, whose contractions may differ in the last bit."""
     m, xs, qs = _perturbed_helices()
     st = []
     for th in (1, 2):
