@@ -217,9 +217,12 @@ _EM2 = math.exp(-2.0)
 # Tabulated inverse of Johnson's line-contact relation, for the kernels (the Halley iteration of
 # ``lambertw_m1`` with an exp per step cost ~90 ns per Gauss point). With ``x = P/C`` and
 # ``u = δ/(4(R1+R2))``: ``u = x(−ln x − 1)`` on the branch ln x < −2, i.e. ``g = ln x`` solves
-# ``g + ln(−g − 1) = λ``, ``λ = ln u``, with ``dg/dλ = (−g − 1)/(−g − 2)``. The table holds g and
-# dg/dλ on a uniform grid in λ; cubic Hermite interpolation between its nodes has a relative error
-# in P and e below 1e-10 (checked in tests/solver/test_laws.py). Outside [λ₀, λ₁] the exact iteration runs.
+# ``g + ln(−g − 1) = λ``, ``λ = ln u``, with ``dg/dλ = (−g − 1)/(−g − 2)``. The table holds
+# ``r = x/u = 1/(−g − 1)``, a slowly varying function of λ (from ≈ 1/(−λ) at small u to 1 at the branch
+# point), and ``dr/dλ = r² dg/dλ`` on a uniform grid in λ; cubic Hermite interpolation between its
+# nodes has a relative error in P and e below 1e-10 (7e-11 at most; tests/solver/test_laws.py).
+# From r alone: ``P = C u r`` and, with ``ln x = −1 − 1/r``, ``e = C (R1 + R2) u² (2r − r²)``: one log
+# (for λ), no exp, no division. Outside [λ₀, λ₁] the exact iteration runs.
 _LT_LAM0 = math.log(1e-14)               # δ ≈ 2e-17 m for our fibres
 _LT_LAM1 = math.log(0.5 * math.exp(-2.0))  # half the range of the law (δ ≈ 0.14 mm)
 _LT_N = 4097
@@ -228,6 +231,7 @@ _LT_INVH = 1.0 / _LT_H
 
 
 def _line_table():
+    """(N, 2) rows ``(r, h dr/dλ)`` at ``λ_k = λ₀ + k h`` (Newton on ``f(g) = g + ln(−g − 1) − λ``)."""
     lam = _LT_LAM0 + _LT_H * np.arange(_LT_N)
     g = lam - np.log(-lam)  # start below the root; Newton on f(g) = g + ln(−g − 1) − λ (monotone, convex)
     g = np.minimum(g, -2.0 - 1e-3)
@@ -240,41 +244,36 @@ def _line_table():
             break
         g = g_new
     dg = (-g - 1.0) / (-g - 2.0)
-    # x = P/C beside g = ln x, both with their λ-slopes times the step (dx/dλ = x dg/dλ): one row
-    # holds what the force and the energy x²(−g/2 − 3/4) need, without an exp
-    x = np.exp(g)
-    return np.ascontiguousarray(np.column_stack([g, dg * _LT_H])), np.ascontiguousarray(
-        np.column_stack([x, x * dg * _LT_H, g, dg * _LT_H]))
+    r = 1.0 / (-g - 1.0)
+    return np.ascontiguousarray(np.column_stack([r, r * r * dg * _LT_H]))
 
 
-_LINE_TABLE, _LINE_TABLE_XG = _line_table()
-# the x column's interpolation holds 1e-10 up to λ = −6 (δ ≈ 5 µm for our fibres); above, where
-# dg/dλ grows towards the branch point g = −2, x comes from the exp of the interpolated ln x
-_LT_V_X = float(min(_LT_N - 1, int((-6.0 - _LT_LAM0) * _LT_INVH)))
+_LINE_TABLE_R = _line_table()
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _line_lnx(u):
-    """ln x with u = x(−ln x − 1), ln x < −2 (table + cubic Hermite; exact iteration outside it)."""
-    lam = math.log(u)
-    v = (lam - _LT_LAM0) * _LT_INVH
-    if v >= 0.0 and v < _LT_N - 1:
-        # the integer clamp keeps the read inside the table even for a NaN v: under fastmath the
-        # compiler may assume no NaN and let it through the float test above
-        i = min(max(int(v), 0), _LT_N - 2)
-        t = v - i
-        g0 = _LINE_TABLE[i, 0]
-        m0 = _LINE_TABLE[i, 1]
-        g1 = _LINE_TABLE[i + 1, 0]
-        m1 = _LINE_TABLE[i + 1, 1]
-        t2 = t * t
-        t3 = t2 * t
-        return ((2.0 * t3 - 3.0 * t2 + 1.0) * g0 + (t3 - 2.0 * t2 + t) * m0
-                + (-2.0 * t3 + 3.0 * t2) * g1 + (t3 - t2) * m1)
-    return lambertw_m1(-math.e * u) - 1.0
+def _hertz_parallel_line_outside(delta, e_star, r1, r2):
+    """:func:`hertz_parallel_line` outside its table: the Lambert W iteration, and beyond 0.99 of the
+    law's range the linear continuation with the secant stiffness there (a separate function, so the
+    table path stays small enough to inline)."""
+    sr = r1 + r2
+    c = 4.0 * math.pi * e_star * sr
+    umax = 0.99 * _EM2
+    u = delta / (4.0 * sr)
+    if u <= umax:
+        y = lambertw_m1(-math.e * u)
+        x = math.exp(y - 1.0)
+        return c * x, c * 4.0 * sr * (-0.5 * x * x * (y - 1.0) - 0.75 * x * x)
+    y = lambertw_m1(-math.e * umax)
+    x = math.exp(y - 1.0)
+    dm = umax * 4.0 * sr
+    pm = c * x
+    em = c * 4.0 * sr * (-0.5 * x * x * (y - 1.0) - 0.75 * x * x)
+    ks = pm / dm
+    return ks * delta, em + 0.5 * ks * (delta * delta - dm * dm)
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def hertz_parallel_line(delta, e_star, r1, r2):
     """Line load p [N/m] and energy per length [J/m] of two parallel cylinders (Johnson 1985, line contact).
 
@@ -284,43 +283,27 @@ def hertz_parallel_line(delta, e_star, r1, r2):
     ``y = W₋₁(−e u)``, ``u = δ/(4(R1+R2))``: ``P = C e^{y−1}`` (equal radii:
     ``P = −πE*δ/W₋₁(−eδ/8R)``). Stored energy ``∫P dδ = C·4(R1+R2)·(−x² ln x /2 − 3x²/4)``.
     Valid for ``u < e⁻²`` (δ < 4(R1+R2)/e², 0.27 mm for our fibres); beyond 0.99 of that the law
-    continues linearly with its secant stiffness there. ``x`` and ``ln x`` come from a table uniform in
-    ``ln u`` with cubic Hermite interpolation (relative error < 1e-10; outside the table ``ln x``
-    from ``_line_lnx``).
+    continues linearly with its secant stiffness there. ``x/u`` comes from a table uniform in
+    ``ln u`` with cubic Hermite interpolation (relative error < 1e-10; outside the table
+    :func:`_hertz_parallel_line_outside`).
     """
     if delta <= 0.0:
         return 0.0, 0.0
     sr = r1 + r2
     c = 4.0 * math.pi * e_star * sr
     u = delta / (4.0 * sr)
-    umax = 0.99 * _EM2
-    if u <= umax:
-        v = (math.log(u) - _LT_LAM0) * _LT_INVH
-        if v >= 0.0 and v < _LT_V_X:
-            # x and ln x straight from their table (cubic Hermite in λ): no exp; the integer clamp keeps
-            # the read inside the table even for a NaN v (fastmath may drop the float test)
-            i = min(max(int(v), 0), _LT_N - 2)
-            t = v - i
-            t2 = t * t
-            h00 = (2.0 * t - 3.0) * t2 + 1.0
-            h10 = (t2 - 2.0 * t + 1.0) * t
-            h01 = (3.0 - 2.0 * t) * t2
-            h11 = (t - 1.0) * t2
-            tb = _LINE_TABLE_XG
-            x = h00 * tb[i, 0] + h10 * tb[i, 1] + h01 * tb[i + 1, 0] + h11 * tb[i + 1, 1]
-            g = h00 * tb[i, 2] + h10 * tb[i, 3] + h01 * tb[i + 1, 2] + h11 * tb[i + 1, 3]
-            return c * x, c * 4.0 * sr * x * x * (-0.5 * g - 0.75)
-        lx = _line_lnx(u)
-        x = math.exp(lx)
-        e = c * 4.0 * sr * x * x * (-0.5 * lx - 0.75)
-        return c * x, e
-    y = lambertw_m1(-math.e * umax)
-    x = math.exp(y - 1.0)
-    dm = umax * 4.0 * sr
-    pm = c * x
-    em = c * 4.0 * sr * (-0.5 * x * x * math.log(x) - 0.75 * x * x)
-    ks = pm / dm
-    return ks * delta, em + 0.5 * ks * (delta * delta - dm * dm)
+    v = (math.log(u) - _LT_LAM0) * _LT_INVH
+    if v >= 0.0 and v < _LT_N - 1:
+        # the integer clamp keeps the read inside the table even for a NaN v (fastmath may drop the
+        # float test)
+        i = min(max(int(v), 0), _LT_N - 2)
+        t = v - i
+        t2 = t * t
+        tb = _LINE_TABLE_R
+        r = (((2.0 * t - 3.0) * t2 + 1.0) * tb[i, 0] + ((t2 - 2.0 * t + 1.0) * t) * tb[i, 1]
+             + ((3.0 - 2.0 * t) * t2) * tb[i + 1, 0] + ((t - 1.0) * t2) * tb[i + 1, 1])
+        return c * u * r, c * sr * u * u * r * (2.0 - r)
+    return _hertz_parallel_line_outside(delta, e_star, r1, r2)
 
 
 def hertz_parallel_line_exact(delta, e_star, r1, r2):
@@ -454,9 +437,12 @@ def _native(law_id, params, delta, r1, r2, phi):
     return hertz_parallel_line(delta, params[P_ESTAR], r1, r2)
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def law_line(law_id, params, delta, r1, r2):
-    """Distributed line load p [N/m] and energy per unit length [J/m] at penetration δ [m]."""
+    """Distributed line load p [N/m] and energy per unit length [J/m] at penetration δ [m].
+
+    Inlined into the Gauss-point loop (its Hertz path is a few dozen instructions; as a call, with
+    the other laws' branches, it cost ≈ 50 ns per contact pair in paper-40)."""
     if delta <= 0.0:
         return 0.0, 0.0
     if law_id == LAW_HERTZ_PARALLEL or law_id == LAW_HERTZ_ORIENTED:
