@@ -84,20 +84,26 @@ def _point_segment_distance2(p0, p1, p2, x, n0, n1):
     return r0 * r0 + r1 * r1 + r2 * r2
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds, f_out, rec, sign, off):
-    """Gauss points fixed on A, projected on segment B; weight ``scale``·w_g·L0_A. Returns the energy
-    (with the weight). Forces are minus its gradient. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``:
-    the segments' nodes and the far nodes of the segments before and after B on its fibre (−1: B ends
-    there, its clamped point is the end cap)."""
+# columns of the line part's Gauss-point buffer (one row per Gauss point in contact)
+_G_XI, _G_T, _G_D0, _G_D1, _G_D2, _G_D, _G_DELTA, _G_WL, _G_SHARE, _G_P, _G_E = range(11)
+N_GP_COLUMNS = 11
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _line_half_points(x, nodes, rr, la0, gxi, gw, scale, off, gbuf, n0):
+    """Stage 1 of a line half: the Gauss points fixed on A, projected on segment B, that touch B and
+    belong to it, written to ``gbuf`` rows from ``n0`` on; returns the new row count.
+
+    Weight ``scale``·w_g·L0_A. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``: the segments' nodes and
+    the far nodes of the segments before and after B on its fibre (−1: B ends there, its clamped
+    point is the end cap)."""
     na0, na1, nb0, nb1, b_prev, b_next = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
     inv_lb2 = 1.0 / (tb0 * tb0 + tb1 * tb1 + tb2 * tb2)
-    rr = ra + rb
     reach2 = (rr - off) * (rr - off) if rr > off else 0.0
-    energy = 0.0
+    n = n0
     for g in range(gxi.shape[0]):
         xi = gxi[g]
         p0 = x[na0, 0] + xi * (x[na1, 0] - x[na0, 0])
@@ -127,18 +133,72 @@ def _line_half_pot(x, nodes, ra, rb, la0, law_id, law_params, gxi, gw, scale, ds
                 continue
         elif b_prev >= 0 and _point_segment_distance2(p0, p1, p2, x, b_prev, nb0) < dd2:
             continue
-        gg, gp = onset(delta, ds)
+        row = gbuf[n]
+        row[_G_XI] = xi
+        row[_G_T] = t
+        row[_G_D0] = d0
+        row[_G_D1] = d1
+        row[_G_D2] = d2
+        row[_G_D] = d
+        row[_G_DELTA] = delta
+        row[_G_WL] = scale * gw[g] * la0
+        row[_G_SHARE] = scale * gw[g]
+        n += 1
+    return n
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _line_loads(gbuf, n0, n1, law_id, law_params, ra, rb, ds):
+    """Stage 2: the line law at rows ``n0:n1`` of ``gbuf`` (A's radius ``ra``, B's ``rb``): the
+    Gauss point's force magnitude and weighted energy. No row depends on another, so the law's
+    evaluations (a logarithm and a table read each) overlap in the pipeline instead of waiting on
+    each other's geometry."""
+    for n in range(n0, n1):
+        row = gbuf[n]
+        gg, gp = onset(row[_G_DELTA], ds)
         pl, el = law_line(law_id, law_params, gg, ra, rb)
-        wl = scale * gw[g] * la0
-        rec[7] += scale * gw[g]
-        fm = pl * gp * wl
-        energy += el * wl
-        inv = fm / d
-        f0 = d0 * inv
-        f1 = d1 * inv
-        f2 = d2 * inv
-        apply_line_point(f_out, (na0, na1, nb0, nb1), xi, t, f0, f1, f2, fm, delta, rec, sign)
+        row[_G_P] = pl * gp * row[_G_WL]
+        row[_G_E] = el * row[_G_WL]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _line_half_apply(gbuf, n0, n1, nodes4, f_out, rec, sign):
+    """Stage 3: rows ``n0:n1`` of ``gbuf`` as forces on the nodes ``nodes4`` (A's two, B's two) and
+    into the pair's accumulator ``rec``; returns the half's energy."""
+    energy = 0.0
+    for n in range(n0, n1):
+        row = gbuf[n]
+        rec[7] += row[_G_SHARE]
+        fm = row[_G_P]
+        energy += row[_G_E]
+        inv = fm / row[_G_D]
+        apply_line_point(f_out, nodes4, row[_G_XI], row[_G_T], row[_G_D0] * inv, row[_G_D1] * inv,
+                         row[_G_D2] * inv, fm, row[_G_DELTA], rec, sign)
     return energy
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _line_part(x, seg_nodes, seg_arc, i, j, ra, rb, law_id, law_params, gxi, gw, scale, ds, off, gbuf, f_out, rec):
+    """The line part of pair (i, j), both ways (A on B, then B on A), each with weight ``scale``:
+    forces into ``f_out``, accumulator ``rec``; returns Π_line × 2 ``scale`` (the weighted energy).
+
+    # Strategy: the Gauss points are found first (geometry), then the law runs on all of them, then
+    # the forces are applied: the same arithmetic in the same order as one loop per point, but the
+    # law's latency (log, table) no longer chains behind each point's square root and projection."""
+    na0 = seg_nodes[i, 0]
+    na1 = seg_nodes[i, 1]
+    nb0 = seg_nodes[j, 0]
+    nb1 = seg_nodes[j, 1]
+    rr = ra + rb
+    n_a = _line_half_points(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), rr,
+                            seg_arc[i, 1] - seg_arc[i, 0], gxi, gw, scale, off, gbuf, 0)
+    n_b = _line_half_points(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rr,
+                            seg_arc[j, 1] - seg_arc[j, 0], gxi, gw, scale, off, gbuf, n_a)
+    _line_loads(gbuf, 0, n_a, law_id, law_params, ra, rb, ds)
+    _line_loads(gbuf, n_a, n_b, law_id, law_params, rb, ra, ds)
+    el = _line_half_apply(gbuf, 0, n_a, (na0, na1, nb0, nb1), f_out, rec, 1.0)
+    el += _line_half_apply(gbuf, n_a, n_b, (nb0, nb1, na0, na1), f_out, rec, -1.0)
+    return el
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -274,6 +334,7 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
     b0 = np.empty(3)
     ta = np.empty(3)
     tb = np.empty(3)
+    gbuf = np.empty((2 * gxi.shape[0], N_GP_COLUMNS))
     for k in range(n_pairs):
         c_fn[k] = 0.0
         if use_gap and c_gap[k] > reach:
@@ -347,12 +408,8 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         e_line = 0.0  # Π_line (unweighted by 1 − w)
         if w < 1.0:
             half = 0.5 * (1.0 - w)
-            el = _line_half_pot(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), ra, rb,
-                                seg_arc[i, 1] - seg_arc[i, 0], law_id, law_params, gxi, gw, half, ds, f_out, rec,
-                                1.0, off)
-            el += _line_half_pot(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rb, ra,
-                                 seg_arc[j, 1] - seg_arc[j, 0], law_id, law_params, gxi, gw, half, ds, f_out, rec,
-                                 -1.0, off)
+            el = _line_part(x, seg_nodes, seg_arc, i, j, ra, rb, law_id, law_params, gxi, gw, half, ds, off,
+                            gbuf, f_out, rec)
             e_line = el / (1.0 - w)
         energy += (1.0 - w) * e_line + w * e_point
         _blend_forces(f_out, (na0, na1, nb0, nb1), a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
@@ -376,9 +433,10 @@ def potential_kernels_for(law):
         line, point, weight_point = law.kernels
         tag = type(law).__name__
         flags = dict(fastmath=True, error_model="numpy")
-        lh = specialise(_line_half_pot, f"_line_half_pot_{tag}", {"law_line": line}, cache=False, **flags)
+        loads = specialise(_line_loads, f"_line_loads_{tag}", {"law_line": line}, cache=False, **flags)
+        lh = specialise(_line_part, f"_line_part_{tag}", {"_line_loads": loads}, cache=False, **flags)
         blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
                            {"law_weight_point": weight_point, "law_point": point}, cache=False, **flags)
         _LAW_KERNELS[key] = specialise(contact_forces_pot, f"contact_forces_pot_{tag}",
-                                       {"_line_half_pot": lh, "_pair_blend_point": blend}, cache=False, **flags)
+                                       {"_line_part": lh, "_pair_blend_point": blend}, cache=False, **flags)
     return _LAW_KERNELS[key]
