@@ -85,18 +85,17 @@ def _point_segment_distance2(p0, p1, p2, x, n0, n1):
 
 
 # columns of the line part's Gauss-point buffer (one row per Gauss point in contact)
-_G_XI, _G_T, _G_D0, _G_D1, _G_D2, _G_D, _G_DELTA, _G_GW, _G_LA0, _G_P, _G_E = range(11)
-N_GP_COLUMNS = 11
+_G_XI, _G_T, _G_D0, _G_D1, _G_D2, _G_D, _G_DELTA, _G_GW, _G_P, _G_E = range(10)
+N_GP_COLUMNS = 10
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _line_half_points(x, nodes, rr, la0, gxi, gw, off, gbuf, n0):
+def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
     """Stage 1 of a line half: the Gauss points fixed on A, projected on segment B, that touch B and
-    belong to it, written to ``gbuf`` rows from ``n0`` on; returns the new row count.
-
-    Each row keeps w_g and L0_A for its weight. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``: the segments' nodes and
-    the far nodes of the segments before and after B on its fibre (−1: B ends there, its clamped
-    point is the end cap)."""
+    belong to it, written to ``gbuf`` rows from ``n0`` on (with their weight w_g); returns the new
+    row count. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``: the segments' nodes and the far nodes of
+    the segments before and after B on its fibre (−1: B ends there, its clamped point is the end
+    cap)."""
     na0, na1, nb0, nb1, b_prev, b_next = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
@@ -142,22 +141,21 @@ def _line_half_points(x, nodes, rr, la0, gxi, gw, off, gbuf, n0):
         row[_G_D] = d
         row[_G_DELTA] = delta
         row[_G_GW] = gw[g]
-        row[_G_LA0] = la0
         n += 1
     return n
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _line_loads(gbuf, n0, n1, law_id, law_params, ra, rb, ds, scale):
-    """Stage 2: the line law at rows ``n0:n1`` of ``gbuf`` (A's radius ``ra``, B's ``rb``): the
-    Gauss point's force magnitude and energy, weighted by ``scale``·w_g·L0_A. No row depends on another, so the law's
-    evaluations (a logarithm and a table read each) overlap in the pipeline instead of waiting on
-    each other's geometry."""
+def _line_loads(gbuf, n0, n1, law_id, law_params, ra, rb, ds, scale, la0):
+    """Stage 2: the line law at rows ``n0:n1`` of ``gbuf`` (A's radius ``ra``, B's ``rb``, A's
+    reference length ``la0``): each Gauss point's force magnitude and energy, weighted by
+    ``scale``·w_g·L0_A. No row depends on another, so the law's evaluations (a logarithm and a table
+    read each) overlap in the pipeline instead of waiting on each other's geometry."""
     for n in range(n0, n1):
         row = gbuf[n]
         gg, gp = onset(row[_G_DELTA], ds)
         pl, el = law_line(law_id, law_params, gg, ra, rb)
-        wl = scale * row[_G_GW] * row[_G_LA0]
+        wl = scale * row[_G_GW] * la0
         row[_G_P] = pl * gp * wl
         row[_G_E] = el * wl
 
@@ -179,32 +177,32 @@ def _line_half_apply(gbuf, n0, n1, nodes4, f_out, rec, sign, scale):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _line_points(x, seg_nodes, seg_arc, i, j, rr, gxi, gw, off, gbuf):
+def _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf):
     """Stage 1 of pair (i, j)'s line part, both ways (A on B, then B on A): ``(n_a, n_b)``, the rows
     of ``gbuf`` that end each way's Gauss points."""
     na0 = seg_nodes[i, 0]
     na1 = seg_nodes[i, 1]
     nb0 = seg_nodes[j, 0]
     nb1 = seg_nodes[j, 1]
-    n_a = _line_half_points(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), rr,
-                            seg_arc[i, 1] - seg_arc[i, 0], gxi, gw, off, gbuf, 0)
-    n_b = _line_half_points(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rr,
-                            seg_arc[j, 1] - seg_arc[j, 0], gxi, gw, off, gbuf, n_a)
+    n_a = _line_half_points(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), rr, gxi,
+                            gw, off, gbuf, 0)
+    n_b = _line_half_points(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rr, gxi,
+                            gw, off, gbuf, n_a)
     return n_a, n_b
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _line_part(gbuf, n_a, n_b, nodes4, ra, rb, law_id, law_params, scale, ds, f_out, rec):
+def _line_part(gbuf, n_a, n_b, nodes4, lengths, ra, rb, law_id, law_params, scale, ds, f_out, rec):
     """Stages 2 and 3 of the line part on the Gauss points of :func:`_line_points`, each way with
-    weight ``scale``: forces into ``f_out``, accumulator ``rec``; returns the weighted energy.
-
+    weight ``scale`` (``lengths``: the two segments' reference lengths L0_A, L0_B): forces into
+    ``f_out``, accumulator ``rec``; returns the weighted energy."""
     # Strategy: the Gauss points are found first (geometry, before the pair's blend, so it overlaps
     # the point part's), then the law runs on all of them, then the forces are applied: the same
     # arithmetic in the same order as one loop per point, but the law's latency (log, table) no
-    # longer chains behind each point's square root and projection."""
+    # longer chains behind each point's square root and projection.
     na0, na1, nb0, nb1 = nodes4
-    _line_loads(gbuf, 0, n_a, law_id, law_params, ra, rb, ds, scale)
-    _line_loads(gbuf, n_a, n_b, law_id, law_params, rb, ra, ds, scale)
+    _line_loads(gbuf, 0, n_a, law_id, law_params, ra, rb, ds, scale, lengths[0])
+    _line_loads(gbuf, n_a, n_b, law_id, law_params, rb, ra, ds, scale, lengths[1])
     el = _line_half_apply(gbuf, 0, n_a, (na0, na1, nb0, nb1), f_out, rec, 1.0, scale)
     el += _line_half_apply(gbuf, n_a, n_b, (nb0, nb1, na0, na1), f_out, rec, -1.0, scale)
     return el
@@ -377,7 +375,7 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
         d_own = math.sqrt(dist2)
         delta = rr - d_own - off
-        n_a, n_b = _line_points(x, seg_nodes, seg_arc, i, j, rr, gxi, gw, off, gbuf)
+        n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
         w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
         e_point = 0.0   # s_joint Π_point (unweighted by w)
         de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
@@ -418,8 +416,8 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
         e_line = 0.0  # Π_line (unweighted by 1 − w)
         if w < 1.0:
             half = 0.5 * (1.0 - w)
-            el = _line_part(gbuf, n_a, n_b, (na0, na1, nb0, nb1), ra, rb, law_id, law_params, half, ds, f_out,
-                            rec)
+            el = _line_part(gbuf, n_a, n_b, (na0, na1, nb0, nb1), (seg_arc[i, 1] - seg_arc[i, 0],
+                            seg_arc[j, 1] - seg_arc[j, 0]), ra, rb, law_id, law_params, half, ds, f_out, rec)
             e_line = el / (1.0 - w)
         energy += (1.0 - w) * e_line + w * e_point
         _blend_forces(f_out, (na0, na1, nb0, nb1), a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),

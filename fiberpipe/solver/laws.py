@@ -251,7 +251,16 @@ def _line_table():
 _LINE_TABLE_R = _line_table()
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
+def _line_lambert(u, c, sr):
+    """Johnson's line law from the Lambert W iteration at ``u = δ/(4(R1+R2))``, ``c = 4πE*(R1+R2)``,
+    ``sr = R1 + R2``: ``(P [N/m], e [J/m])`` with ``x = e^{y−1}``, ``y = W₋₁(−e u)``, ``ln x = y − 1``."""
+    y = lambertw_m1(-math.e * u)
+    x = math.exp(y - 1.0)
+    return c * x, c * 4.0 * sr * (-0.5 * x * x * (y - 1.0) - 0.75 * x * x)
+
+
+@njit(cache=True, error_model="numpy")
 def _hertz_parallel_line_outside(delta, e_star, r1, r2):
     """:func:`hertz_parallel_line` outside its table: the Lambert W iteration, and beyond 0.99 of the
     law's range the linear continuation with the secant stiffness there (a separate function, so the
@@ -261,14 +270,9 @@ def _hertz_parallel_line_outside(delta, e_star, r1, r2):
     umax = 0.99 * _EM2
     u = delta / (4.0 * sr)
     if u <= umax:
-        y = lambertw_m1(-math.e * u)
-        x = math.exp(y - 1.0)
-        return c * x, c * 4.0 * sr * (-0.5 * x * x * (y - 1.0) - 0.75 * x * x)
-    y = lambertw_m1(-math.e * umax)
-    x = math.exp(y - 1.0)
+        return _line_lambert(u, c, sr)
+    pm, em = _line_lambert(umax, c, sr)
     dm = umax * 4.0 * sr
-    pm = c * x
-    em = c * 4.0 * sr * (-0.5 * x * x * (y - 1.0) - 0.75 * x * x)
     ks = pm / dm
     return ks * delta, em + 0.5 * ks * (delta * delta - dm * dm)
 
@@ -309,11 +313,7 @@ def hertz_parallel_line(delta, e_star, r1, r2):
 def hertz_parallel_line_exact(delta, e_star, r1, r2):
     """Reference of :func:`hertz_parallel_line` with the Lambert W iteration (no table); for tests."""
     sr = r1 + r2
-    c = 4.0 * math.pi * e_star * sr
-    u = delta / (4.0 * sr)
-    y = lambertw_m1(-math.e * u)
-    x = math.exp(y - 1.0)
-    return c * x, c * 4.0 * sr * (-0.5 * x * x * math.log(x) - 0.75 * x * x)
+    return _line_lambert(delta / (4.0 * sr), 4.0 * math.pi * e_star * sr, sr)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
