@@ -91,7 +91,7 @@ bench: setup
 
 # paper-40's solver profile, against a reference checkout (REFERENCE=path with its own .venv), the
 # largest stable step and the threads (docs/benchmarks.md); minutes each, behind these targets only
-.PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy
+.PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy three-beam-energy
 REFERENCE ?= ../wt-base
 profile-paper40: setup
 	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
@@ -112,6 +112,10 @@ step-energy: setup
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --dt-safety 0.9 --penalty-factor 0.05 0.02 --seeds 4
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_parallel --dt-safety 0.9 0.8 0.7 0.6 0.45 --seeds 4
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law linear --dt-safety 0.9 0.8 0.7 0.6 0.45 --penalty-factor 0.1 0.05 --seeds 4
+
+# where the undamped 3-beam case's energy goes, against dt_safety and the law (docs/verification.md)
+three-beam-energy: setup
+	$(PY) -m fiberpipe.benchmarks.bench_three_beam_energy --dt-safety 0.9 0.45 0.225
 
 bench-threads: setup
 	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.bench_threads --fibers 160 640

@@ -224,6 +224,21 @@ def contact_pair_crossed(phi_deg: float, quick: bool = False) -> Row:
 # Case 6: the study's static 3-beam case (Fig. 11, appendix Eqs. 6-7)
 # ---------------------------------------------------------------------------------------------
 
+def three_beam_effects(s: CaseSetup, model, q_over_config: float, alpha: float, law=None) -> list:
+    """The effects of the 3-beam static scene (configs/verify/three-beam-static.yaml) on ``model``:
+    gravity, the config's line load × ``q_over_config``, the fixed plate, the walls, the contact
+    (``law``, default the config's) and, for ``alpha`` > 0, mass damping α [1/s]."""
+    p = s.plates
+    eff = [Gravity(s.gravity), s.loads(q_over_config),
+           Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
+                  upper_position_m=p.upper_position, penalty_factor=float(p.penalty_factor)),
+           Walls(s.walls, penalty_factor=float(s.walls_penalty_factor)),
+           contact_hook(model, law=s.law() if law is None else law)]
+    if alpha > 0:
+        eff.append(Damping(alpha))
+    return eff
+
+
 def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
     """The study's static 3-beam case (Fig. 11, appendix Eqs. 6–7), β from the set-up geometry.
 
@@ -263,7 +278,6 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
     if abs(g[0]) + abs(g[1]) > 0 or s.plates.axis != "z" or set(s.walls) != {"y"}:
         raise ValueError(f"{s.path}: the case needs gravity along z, plates normal to z and walls normal to y")
     w_line = s.rho * s.A * -g[2]
-    p = s.plates
     rows = []
     for alpha in alphas:
         err = {"NF": [], "RF": []}
@@ -272,12 +286,7 @@ def three_beam_static(quick: bool = False, alphas=None) -> list[Row]:
             b1, b2 = m.node_fiber == 0, m.node_fiber == 1
             x0 = m.nodes_m
             beta0 = math.atan2(x0[b1, 1].mean() - x0[b2, 1].mean(), x0[b1, 2].mean() - x0[b2, 2].mean())
-            eff = [Gravity(g), s.loads(q / q0),
-                   Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
-                          upper_position_m=p.upper_position, penalty_factor=float(p.penalty_factor)),
-                   Walls(s.walls, penalty_factor=float(s.walls_penalty_factor)), contact_hook(m, law=law)]
-            if alpha > 0:
-                eff.append(Damping(alpha))
+            eff = three_beam_effects(s, m, q / q0, alpha, law)
             xs = []
             n_frames = frames if alpha > 0 else 10 * frames
             res = simulate(m, eff, s.settings(output_frames=n_frames), on_frame=lambda k, t, x: xs.append(x.copy()))
