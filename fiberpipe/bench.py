@@ -258,8 +258,11 @@ def _threads_part(quick: bool, echo) -> list[str]:
     # without contact: the share of the step that runs in parallel (the contact pass is serial)
     for extra in ([[]] if quick else [[], ["--no-contact"]]):
         out = subprocess.run(args + extra, capture_output=True, text=True, env=env)
-        rows = [l for l in out.stdout.splitlines() if l.startswith("|")] or [f"failed: {out.stderr.strip()[-300:]}"]
-        body += rows if not body else rows[2:]
+        rows = [l for l in out.stdout.splitlines() if l.startswith("|")]
+        if not rows:
+            body.append(f"failed{' ' + extra[0] if extra else ''}: {out.stderr.strip()[-300:]}")
+        else:
+            body += rows[2:] if any(b.startswith("|") for b in body) else rows  # one header
     return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 {' '.join(args[1:])} [--no-contact]` (wall time, alternating rounds in one "
             "process; the ratio holds only on an idle machine).", ""] + body + [""]
 

@@ -53,7 +53,7 @@ def table(rows) -> list[str]:
     out = ["| fibers | elements | contact and friction | steps × rounds | 1 thread (s, best) | n threads (s, best) | 1 / n, best | 1 / n, median of rounds | load average |",
            "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| {r['fibers']} | {r['elements']} | {'on' if r.get('contact', True) else 'off'} | "
+        out.append(f"| {r['fibers']} | {r['elements']} | {'on' if r['contact'] else 'off'} | "
                    f"{r['steps']} × {r['rounds']} | {r['s_1']:.3f} | "
                    f"{r['s_n']:.3f} ({r['threads']}) | **{r['ratio_best']:.2f}×** | {r['ratio_median']:.2f}× | "
                    f"{r['load_min']:.1f}–{r['load_max']:.1f} |")

@@ -13,8 +13,8 @@ a contact that creates or loses energy from the time step's error on the fastest
   column grows with it.
 - With the linear law (a quadratic potential) the modes hardly exchange energy; with Johnson's
   line law they do.
-- A residual that shrinks faster than Δt² as the step is halved is the step's error, not the
-  law's (a force that is not the gradient of Π would leave a residual that does not vanish).
+- A residual that vanishes as the step is halved is the step's error, not the law's (a force
+  that is not the gradient of Π would leave a residual that does not vanish).
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_three_beam_energy \\
         [--dt-safety 0.9 0.45 0.225] [--law config linear] [--quick]
