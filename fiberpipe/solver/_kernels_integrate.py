@@ -35,7 +35,7 @@ from numba import njit, prange
 from ._specialise import specialise
 from ._kernels_beam import PARALLEL_CHUNKS, beam_pass_all, beam_pass_fibers, element_forces_exact
 from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
-from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
@@ -129,17 +129,20 @@ ROTATION_SERIES_MAX_H2 = 1e-2
 
 
 @njit(**_FLAGS)
-def update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, lo, hi):
+def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, lo, hi):
     """The central-difference update (module docstring) of the nodes ``lo … hi − 1``: gathers each
     node's beam resultants from ``ef`` (:class:`~fiberpipe.solver.step_data.ElementForces`), adds the
     constant and plane forces ``f``, the moments ``mom`` and the contact hook's forces ``fc`` (cleared
-    here), then imposes the fixed and driven degrees of freedom through ``fixity``'s factors.
+    here), then imposes the fixed and driven degrees of freedom through ``fixity``'s factors. It
+    leaves ``f`` and ``mom`` ready for the next step: ``f`` = the constant loads ``f_ext`` (N, 3),
+    ``mom`` = 0 (what :func:`eval_external` sets).
 
-    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, n_large)``: the kinetic energy at t_n (the mean of the
-    half-step energies), the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² for the
+    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, n_large, v2_max)``: the kinetic energy at t_n (the mean of
+    the half-step energies), the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² for the
     damping dissipation, the prescribed degrees of freedom's reaction work over the step, Σ fc·v̄ (the
-    hook's power), and the nodes whose rotation increment exceeds the series (left unrotated for
-    :func:`rotate_large`). ``coef = (c_keep, dt_c)`` (:func:`damping_factors`).
+    hook's power), the nodes whose rotation increment exceeds the series (left unrotated for
+    :func:`rotate_large`) and the largest |v_{n+½}|² [m²/s²]. ``coef = (c_keep, dt_c)``
+    (:func:`damping_factors`).
     """
     # Strategy: one loop without branches over flat views of the (N, 3) and (N, 4) arrays, so that
     # LLVM vectorises it (_vectorise): fixity by 0/1 factors and a prescribed velocity, the gyroscopic
@@ -149,6 +152,7 @@ def update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, lo, hi):
     xs, qs = state.x.reshape(-1)[3 * lo:], state.q.reshape(-1)[4 * lo:]
     vs, ws = state.v.reshape(-1)[3 * lo:], state.w.reshape(-1)[3 * lo:]
     fs, ms, fcs = f.reshape(-1)[3 * lo:], mom.reshape(-1)[3 * lo:], fc.reshape(-1)[3 * lo:]
+    fes = f_ext.reshape(-1)[3 * lo:]
     Js, iJs = model.J.reshape(-1)[3 * lo:], model.inv_J.reshape(-1)[3 * lo:]
     mass, inv_mass = model.mass[lo:], model.inv_mass[lo:]
     n0, n1, n2, m0, m1, m2, h0, h1, h2 = ef
@@ -178,6 +182,14 @@ def update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, lo, hi):
         mx = ms[3 * i] + (m0[j] + h0[j]) + (h0[i] - m0[i])
         my = ms[3 * i + 1] + (m1[j] + h1[j]) + (h1[i] - m1[i])
         mz = ms[3 * i + 2] + (m2[j] + h2[j]) + (h2[i] - m2[i])
+        # the next step's force starts from the constant loads, its moment from 0 (one pass less
+        # over the node arrays than resetting them at the start of the step)
+        fs[3 * i] = fes[3 * i]
+        fs[3 * i + 1] = fes[3 * i + 1]
+        fs[3 * i + 2] = fes[3 * i + 2]
+        ms[3 * i] = 0.0
+        ms[3 * i + 1] = 0.0
+        ms[3 * i + 2] = 0.0
         m = mass[i]
         v0x = vs[3 * i]
         v0y = vs[3 * i + 1]
@@ -250,7 +262,13 @@ def update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, lo, hi):
         qs[4 * i + 1] = nx if small else qx
         qs[4 * i + 2] = ny if small else qy
         qs[4 * i + 3] = nz if small else qz
-    return ke, ke_lf, vd, wk, pw, n_large
+    # the largest speed, for the contact hook's path bound (layout.ACC_V2_MAX), in a loop of its own
+    # over the velocities just written: a max in the loop above keeps LLVM from vectorising it
+    v2_max = 0.0
+    for i in range(hi - lo):
+        v2 = vs[3 * i] * vs[3 * i] + vs[3 * i + 1] * vs[3 * i + 1] + vs[3 * i + 2] * vs[3 * i + 2]
+        v2_max = max(v2_max, v2)
+    return ke, ke_lf, vd, wk, pw, n_large, v2_max
 
 
 @njit(inline="always", **_FLAGS)
@@ -300,35 +318,39 @@ def max_speed2(v):
     return vmax2, bad
 
 
-def _update_nodes(model, fixity, state, work, fc, dt, coef, alpha):
+def _update_nodes(model, fixity, state, work, f_ext, fc, dt, coef, alpha):
     """:func:`update_range` over every node: in the serial copy one call for all nodes; in the
     parallel one (``update_nodes_fibers``) ``PARALLEL_CHUNKS`` ``prange`` tasks of contiguous nodes, the
-    sums taken per task and then in order. Returns the sums of :func:`update_range`."""
+    sums taken per task and then in order. Returns the sums of :func:`update_range` (its largest speed²,
+    the largest over the tasks)."""
     offs = model.node_offsets
     nf = offs.shape[0] - 1
     f, mom = work.f, work.mom
     if not _PARALLEL:
-        return update_range(model, fixity, state, f, mom, work.ef, fc, dt, coef, alpha, 0, offs[nf])
+        return update_range(model, fixity, state, f, mom, f_ext, work.ef, fc, dt, coef, alpha, 0, offs[nf])
     # a parallel loop takes a tuple built in this function, not one nested in another structure
     n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
     ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
     n = offs[nf]
     nch = PARALLEL_CHUNKS
-    sums = np.empty((nch, 6))
+    sums = np.empty((nch, 7))
     for k in prange(nch):  # contiguous node ranges (beam_pass_fibers)
-        a, b, c, d, e, nl = update_range(model, fixity, state, f, mom, ef, fc, dt, coef, alpha, k * n // nch,
-                                         (k + 1) * n // nch)
+        a, b, c, d, e, nl, v2 = update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha,
+                                             k * n // nch, (k + 1) * n // nch)
         sums[k, 0] = a
         sums[k, 1] = b
         sums[k, 2] = c
         sums[k, 3] = d
         sums[k, 4] = e
         sums[k, 5] = nl
+        sums[k, 6] = v2
     out = np.zeros(6)
+    v2_max = 0.0
     for k in range(nch):
         for c in range(6):
             out[c] += sums[k, c]
-    return out[0], out[1], out[2], out[3], out[4], int(out[5])
+        v2_max = max(v2_max, sums[k, 6])
+    return out[0], out[1], out[2], out[3], out[4], int(out[5]), v2_max
 
 
 _PARALLEL = False
@@ -428,6 +450,14 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
     if not has_fc:
         fc = np.zeros((N, 3))  # the update reads it for every node
     fixity = scene.fixity
+    f_ext = scene.f_ext
+    if f_ext.shape[0] != N:
+        f_ext = np.zeros((N, 3))  # the update resets f to it for every node
+    # the forces of the first step; the update resets f and mom for each next one
+    eval_external(work.f, work.mom, f_ext)
+    # the largest node speed is not known until the first update (the state may have been set
+    # between calls): the contact hook takes it from v itself then
+    acc[ACC_V2_MAX] = -1.0
     status = STATUS_OK
     bad = -1
     done = 0
@@ -440,7 +470,7 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
                 acc_before[k] = acc[k]
         # ---- forces at t_n ----
         acc[ACC_STORED] = 0.0  # a state at t_n: the planes and the hook add their stored energy
-        eval_external(work.f, work.mom, scene.f_ext)
+        # work.f holds the constant loads and work.mom zeros here (the previous update set them)
         # _beam_pass: beam_pass_all (serial) or beam_pass_fibers (prange per fiber), bound per loop
         # variant by _specialise; it fills ef, the update gathers it. A step with an element rotated
         # beyond the vector pass's series, or with stiffness-proportional damping, takes the exact pass
@@ -464,7 +494,9 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
                 fixity.v_pres[i, c] = scene.drives.v[scene.node_drive[i], c]
         # ---- update ----
         # (the fixity apart from the scene: a parallel loop takes no structure nested in another)
-        ke, ke_lf, vd, wk_fix, pw_c, n_spin = _update_pass(model, fixity, state, work, fc, dt, coef, scene.alpha_per_s)
+        ke, ke_lf, vd, wk_fix, pw_c, n_spin, v2_max = _update_pass(model, fixity, state, work, f_ext, fc, dt, coef,
+                                                                   scene.alpha_per_s)
+        acc[ACC_V2_MAX] = v2_max
         if n_spin > 0:
             rotate_large(q, w, dt, 0, N)
         acc[ACC_VD] += vd_scale * vd

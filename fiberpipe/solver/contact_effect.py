@@ -45,8 +45,8 @@ from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFrict
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
 from .geometry import pair_gap
-from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_WF, ACC_WK
-from .neighbours import build_pairs, max_displacement2_speed2
+from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WF, ACC_WK
+from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -86,9 +86,12 @@ def _rebuild(x, data):
     data.x_ref[:, :] = x
     # each pair's gap at this build (clamped segment distance − r_i − r_j): the contact pass skips
     # a pair while the gap exceeds twice the path bound since (and refreshes it when it looks)
-    gap = data.records[0].gap
+    # (the potential kernel leaves fn alone for the pairs it skips: every pair starts at fn = 0)
+    rec = data.records[0]
+    gap = rec.gap
     for k in range(n):
         gap[k] = pair_gap(x, segs.nodes, segs.radius, spare.pairs, k)
+        rec.fn[k] = 0.0
 
 
 @njit(inline="always", **_FLAGS)
@@ -109,18 +112,30 @@ def _move_planes(planes, t, dt):
 
 
 @njit(inline="always", **_FLAGS)
-def _update_neighbours(x, v, dt, data):
-    """Rebuild the Verlet list when needed (step 1 of the module docstring); returns whether it was."""
+def _update_neighbours(x, v, dt, acc, data):
+    """Rebuild the Verlet list when needed (step 1 of the module docstring); returns whether it was.
+
+    ``acc[ACC_V2_MAX]`` ≥ 0 is the largest |v|² of ``v``, as the step loop's update left it; < 0
+    (the first step of a step-loop call, whose state may have been set from outside) takes it and
+    the displacement test from ``v`` and ``x`` here."""
     st = data.stats
-    dm2, vm2 = max_displacement2_speed2(x, data.x_ref, v)
+    half_skin = 0.5 * data.params.skin_m
+    vm2 = acc[ACC_V2_MAX]
+    known = vm2 >= 0.0
+    if not known:
+        dm2, vm2 = max_displacement2_speed2(x, data.x_ref, v)
     # v holds v_{n−½}, the velocity that moved every node from x_{n−1} to x_n
     st.path_m[0] += dt * math.sqrt(vm2)
-    half_skin = 0.5 * data.params.skin_m
     # the path bound holds only while positions change through the velocities (x_n = x_{n−1} + Δt v);
     # a node farther from its build position than the bound allows was moved from outside (a new or
     # edited state): rebuild, which restarts every bound from the positions as they are
     path = st.path_m[0]
-    moved_outside = dm2 > (path * (1.0 + 1e-12) + 1e-15) ** 2
+    bound = path * (1.0 + 1e-12) + 1e-15
+    if known:
+        # within a call x moved only through v, so no node is farther than the bound from its build
+        # position: the pass over the nodes is needed only once the bound exceeds half the skin
+        dm2 = max_displacement2(x, data.x_ref) if bound > half_skin else 0.0
+    moved_outside = dm2 > bound * bound
     rebuild = st.n_builds[0] == 0 or dm2 > half_skin * half_skin or moved_outside
     if rebuild:
         _rebuild(x, data)
@@ -303,7 +318,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     P = data.planes.axis.shape[0]
     plane_fric = prm.plane_friction_on and P > 0
     plane_moved = _move_planes(data.planes, t, dt) if plane_fric else 0.0
-    rebuild = _update_neighbours(x, v, dt, data)
+    rebuild = _update_neighbours(x, v, dt, acc, data)
     # the nodes near each plane, for its friction: a node touching now was within 1.5 skin of the
     # plane when the list was made (it moved < skin since: ≤ skin/2 since the neighbour-list build
     # before it and ≤ skin/2 after; the plane moved ≤ skin/2), so the list is remade with every

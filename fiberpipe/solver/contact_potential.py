@@ -342,7 +342,20 @@ def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id
     ta = np.empty(3)
     tb = np.empty(3)
     gbuf = np.empty((2 * gxi.shape[0], N_GP_COLUMNS))
-    for k in range(n_pairs):
+    # Strategy: with both a gap and an active list, one branch-free pass lists the pairs within reach
+    # at the front of ``active`` and the main loop visits only those (most candidates of a bundle are
+    # beyond reach; their fn stays 0 from their last look, or from the neighbour-list build); each
+    # pair listed as in contact is written at a slot the loop has already read (n_active ≤ kk)
+    compact = use_gap and use_list
+    n_look = n_pairs
+    if compact:
+        n_look = 0
+        look = out.active
+        for k in range(n_pairs):
+            look[n_look] = k
+            n_look += 1 if c_gap[k] <= reach else 0
+    for kk in range(n_look):
+        k = out.active[kk] if compact else kk
         c_fn[k] = 0.0
         if use_gap and c_gap[k] > reach:
             continue

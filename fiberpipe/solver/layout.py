@@ -14,6 +14,9 @@ ACC_FD = 3   # friction dissipation (contact hook)
 ACC_WF = 4   # work of the friction forces on the fibers (contact hook; part of ACC_PW)
 ACC_STORED = 5  # stored contact energy at t_n (plane penalties + the hook's potential and springs): a state
 ACC_STORED0 = 6  # the hook's stored energy at the first step a run evaluates (−1 until then; a sentinel fastmath keeps, unlike NaN): the residual's start
+# not an energy: the largest |v_{n+½}|² of the nodes [m²/s²] after the step loop's last update, −1
+# until the first update of each step-loop call; the contact hook's path bound reads it
+ACC_V2_MAX = 7
 ACC_SIZE = 8
 
 # history columns (one row per recorded step)

@@ -11,7 +11,7 @@ from fiberpipe.solver import (Clamp, Clamps, ContactHook, Damping, Drive, Drives
                               Material, Plates, PointLoad, SimulationSettings, State, Walls, build_model,
                               simulate, stable_time_step)
 from fiberpipe.solver._kernels_beam import beam_forces
-from fiberpipe.solver.layout import ACC_PW
+from fiberpipe.solver.layout import ACC_PW, ACC_V2_MAX
 from fiberpipe.solver.integrator import Integrator
 
 MAT = Material(15e9, 1380.0, 0.3)
@@ -374,3 +374,28 @@ def test_threads_step_loop_follows_the_serial_run_to_rounding():
     assert np.abs(st[0].x - st[1].x).max() <= 1e-15 * np.abs(st[0].x).max()
     assert np.abs(st[0].q - st[1].q).max() <= 1e-14
     assert np.abs(st[0].v - st[1].v).max() <= 1e-10 * np.abs(st[0].v).max()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_update_leaves_the_constant_loads_and_the_largest_speed_for_the_next_step(threads):
+    """The update resets the force array to the constant loads and the moments to zero for the next
+    step (no separate pass at the start of a step), and leaves the largest |v_{n+½}|² in
+    acc[ACC_V2_MAX] for the contact hook's path bound; a run cut into calls of one step each
+    follows the run in one call bit for bit."""
+    m, xs, qs = _perturbed_helices()
+    load = LineLoad(0, [0.0, 3.0, 0.0])
+    runs = []
+    for calls in (1, 60):
+        # no history rows: the perturbed helices would trip the blow-up checks (strain energy, no work)
+        integ = Integrator(m, [Gravity([0, 0, -9.81]), Loads([load]), Damping(1e3)], 1e-8,
+                           history_every=10**9, threads=threads)
+        s = State.at_rest(m)
+        s.x[:] = xs
+        s.q[:] = qs
+        for _ in range(calls):
+            assert integ.advance(s, 60 // calls)[:2] == (0, 60 // calls)
+        assert np.array_equal(integ.f, integ.scene.f_ext) and not integ.mom.any()
+        v2 = np.einsum("ij,ij->i", s.v, s.v).max()
+        assert v2 > 0 and s.acc[ACC_V2_MAX] == pytest.approx(v2, rel=1e-14)
+        runs.append(s)
+    assert np.array_equal(runs[0].x, runs[1].x) and np.array_equal(runs[0].v, runs[1].v)

@@ -73,6 +73,48 @@ def test_path_bound_skip_is_exact_and_refreshes():
     assert skipped_total > 10 * n  # and the skip did skip (most pairs, most steps)
 
 
+def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records():
+    """The potential kernel lists the pairs within reach first and visits only those: with records
+    kept from step to step (as the hook keeps them; fn = 0 at the build), forces, energies, normal
+    forces and the list of pairs in contact equal a pass that evaluates every pair with fresh records."""
+    from fiberpipe.solver.contact_potential import contact_forces_pot
+    from fiberpipe.solver.contact_state import new_records
+
+    rng = np.random.default_rng(5)
+    x, seg, rad, pairs = _bundle(rng)
+    arc = np.zeros((len(seg), 2))
+    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
+    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    n = len(pairs)
+    gxi, gw = gauss_points(2)
+    kept = new_records(n)
+    kept.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]  # the build
+    path = 0.0
+    visited_less = 0
+    for step in range(60):
+        d = 1.5e-6
+        move = rng.normal(size=x.shape)
+        move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
+        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))
+        move *= d / max(np.linalg.norm(move, axis=1).max(), d)
+        x = x + move
+        path += np.linalg.norm(move, axis=1).max()
+        reach = 2.0 * path
+        visited_less += int(np.sum(kept.gap[:n] > reach))
+        f_skip = np.zeros_like(x)
+        e_skip, na_skip = contact_forces_pot(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 1e-9,
+                                             f_skip, kept, np.zeros(0), reach)
+        fresh = new_records(n)
+        fresh = fresh._replace(gap=np.zeros(0))
+        f_all = np.zeros_like(x)
+        e_all, na_all = contact_forces_pot(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 1e-9,
+                                           f_all, fresh, np.zeros(0), 0.0)
+        assert np.array_equal(f_skip, f_all) and e_skip == e_all and na_skip == na_all
+        assert np.array_equal(kept.fn[:n], fresh.fn[:n])
+        assert np.array_equal(kept.active[:na_skip], np.flatnonzero(fresh.fn[:n] > 0))
+    assert na_all > 0 and visited_less > 10 * n
+
+
 def _pair_in_contact(delta):
     xa = fiber([0, 0, 2 * R - delta], [1, 0, 0], 1)
     xb = fiber([0.15e-3, -0.15e-3, 0], [0, 1, 0], 1)
