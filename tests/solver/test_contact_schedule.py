@@ -30,6 +30,15 @@ def _bundle(rng):
     return x, seg, rad, pairs
 
 
+def _squeeze(rng, x, d=1.5e-6):
+    """One step of motion: every node moves by at most d (the bundle squeezed together, with noise)."""
+    move = rng.normal(size=x.shape)
+    move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
+    move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
+    move *= d / max(np.linalg.norm(move, axis=1).max(), d)
+    return x + move, move
+
+
 def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
     n = len(pairs)
     gxi, gw = gauss_points(2)
@@ -51,13 +60,7 @@ def test_path_bound_skip_is_exact_and_refreshes():
     path = 0.0
     skipped_total = 0
     for step in range(60):
-        # every node moves by at most d this step (the bundle is squeezed together, with noise)
-        d = 1.5e-6
-        move = rng.normal(size=x.shape)
-        move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
-        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
-        move *= d / max(np.linalg.norm(move, axis=1).max(), d)
-        x = x + move
+        x, move = _squeeze(rng, x)
         path += np.linalg.norm(move, axis=1).max()
         reach = 2.0 * path
         skipped_total += int(np.sum(c_gap > reach))
@@ -92,12 +95,7 @@ def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records()
     path = 0.0
     visited_less = 0
     for step in range(60):
-        d = 1.5e-6
-        move = rng.normal(size=x.shape)
-        move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
-        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))
-        move *= d / max(np.linalg.norm(move, axis=1).max(), d)
-        x = x + move
+        x, move = _squeeze(rng, x)
         path += np.linalg.norm(move, axis=1).max()
         reach = 2.0 * path
         visited_less += int(np.sum(kept.gap[:n] > reach))
