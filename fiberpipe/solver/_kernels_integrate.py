@@ -59,15 +59,9 @@ def no_contact_forces(data):
 
 @njit(inline="always", **_FLAGS)
 def eval_external(f, mom, f_ext):
-    """Reset the step's force and moment arrays to the constant loads (gravity, point and line loads)."""
-    N = f.shape[0]
-    if f_ext.shape[0] == N:
-        for i in range(N):
-            f[i, 0] = f_ext[i, 0]
-            f[i, 1] = f_ext[i, 1]
-            f[i, 2] = f_ext[i, 2]
-    else:
-        f[:, :] = 0.0
+    """Reset the force and moment arrays to the constant loads ``f_ext`` (N, 3) (gravity, point and
+    line loads) and zero."""
+    f[:, :] = f_ext
     mom[:, :] = 0.0
 
 

@@ -30,13 +30,18 @@ def _bundle(rng):
     return x, seg, rad, pairs
 
 
-def _squeeze(rng, x, d=1.5e-6):
-    """One step of motion: every node moves by at most d (the bundle squeezed together, with noise)."""
-    move = rng.normal(size=x.shape)
-    move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
-    move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
-    move *= d / max(np.linalg.norm(move, axis=1).max(), d)
-    return x + move, move
+def _squeezed(rng, x, steps=60, d=1.5e-6):
+    """``steps`` steps of motion, each node moving by at most d per step (the bundle squeezed
+    together, with noise): yields the positions and the reach 2D (D the path bound since the build)."""
+    path = 0.0
+    for _ in range(steps):
+        move = rng.normal(size=x.shape)
+        move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
+        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
+        move *= d / max(np.linalg.norm(move, axis=1).max(), d)
+        x = x + move
+        path += np.linalg.norm(move, axis=1).max()
+        yield x, 2.0 * path
 
 
 def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
@@ -57,12 +62,8 @@ def test_path_bound_skip_is_exact_and_refreshes():
     n = len(pairs)
     c_gap = np.array([pair_gap(x, seg, rad, pairs, k) for k in range(n)])  # the build
     c_active = np.zeros(n, np.int64)
-    path = 0.0
     skipped_total = 0
-    for step in range(60):
-        x, move = _squeeze(rng, x)
-        path += np.linalg.norm(move, axis=1).max()
-        reach = 2.0 * path
+    for x, reach in _squeezed(rng, x):
         skipped_total += int(np.sum(c_gap > reach))
         f_skip, fn_skip, na_skip = _pass(x, seg, rad, pairs, law, c_gap, reach, c_active)
         f_all, fn_all, na_all = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, np.zeros(0, np.int64))
@@ -92,12 +93,8 @@ def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records()
     gxi, gw = gauss_points(2)
     kept = new_records(n)
     kept.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]  # the build
-    path = 0.0
     visited_less = 0
-    for step in range(60):
-        x, move = _squeeze(rng, x)
-        path += np.linalg.norm(move, axis=1).max()
-        reach = 2.0 * path
+    for x, reach in _squeezed(rng, x):
         visited_less += int(np.sum(kept.gap[:n] > reach))
         f_skip = np.zeros_like(x)
         e_skip, na_skip = contact_forces_pot(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 1e-9,
