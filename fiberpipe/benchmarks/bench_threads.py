@@ -7,6 +7,10 @@ call (threads share the wall clock, not the CPU clock). The load average is reco
 means something only on an idle machine (each thread needs a core).
 
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads [--fibers 160 640]
+    NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --state runs/bench/p40_708000.npz
+
+``--state``: paper-40 at the study's settings from states saved by
+:mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40``) instead of the bench bundle.
 """
 
 from __future__ import annotations
@@ -17,23 +21,40 @@ import statistics
 import time
 
 
-def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True) -> dict:
+def _bench_scene(n_fibers: int, contact: bool):
+    """The bench bundle of ``n_fibers``: (model, effects, dt, state at rest)."""
     from fiberpipe.benchmarks.bench_solver import bundle
     from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, State
-    from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step
+    from fiberpipe.solver.integrator import SimulationSettings, choose_time_step
+
+    m = bundle(n_fibers)
+    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
+    if contact:
+        from fiberpipe.verification.case_config import contact_hook
+        eff.append(contact_hook(m, friction=True))
+    dt, _ = choose_time_step(m, eff, SimulationSettings())
+    return m, eff, dt, State.at_rest(m)
+
+
+def _state_scene(path: str):
+    """paper-40 at the study's settings from a saved state (:mod:`paper40_states`)."""
+    from fiberpipe.benchmarks.paper40_states import load_state, scene
+
+    m, eff, _, dt = scene()
+    return m, eff, dt, load_state(path)
+
+
+def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True,
+            state: str | None = None) -> dict:
+    from fiberpipe.solver.integrator import Integrator
 
     runs = {}
     for th in (1, threads):
-        m = bundle(n_fibers)
-        eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
-        if contact:
-            from fiberpipe.verification.case_config import contact_hook
-            eff.append(contact_hook(m, friction=True))
-        dt, _ = choose_time_step(m, eff, SimulationSettings())
+        m, eff, dt, st = _state_scene(state) if state else _bench_scene(n_fibers, contact)
         integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
-        st = State.at_rest(m)
         integ.advance(st, 10)  # compile
         runs[th] = (integ, st, m.n_elements)
+    n_fibers = m.n_fibers if state else n_fibers
     t = {1: [], threads: []}
     load = [os.getloadavg()[0]]
     for r in range(rounds):
@@ -44,7 +65,8 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
             t[th].append(time.perf_counter() - t0)
         load.append(os.getloadavg()[0])
     per = [a / b for a, b in zip(t[1], t[threads])]
-    return {"fibers": n_fibers, "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
+    return {"fibers": n_fibers if not state else f"{n_fibers} (paper-40 state {os.path.basename(state)})",
+            "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
             "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
             "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
 
@@ -68,8 +90,13 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-contact", action="store_true",
                     help="beams, clamps, damping and gravity only: the part that runs in parallel")
+    ap.add_argument("--state", nargs="+", default=[],
+                    help="paper-40 states saved by paper40_states (instead of the bench bundle)")
     a = ap.parse_args(argv)
-    rows = [measure(n, a.steps, a.rounds, a.threads, contact=not a.no_contact) for n in a.fibers]
+    if a.state:
+        rows = [measure(0, a.steps, a.rounds, a.threads, state=p) for p in a.state]
+    else:
+        rows = [measure(n, a.steps, a.rounds, a.threads, contact=not a.no_contact) for n in a.fibers]
     print("\n".join(table(rows)))
     return rows
 

@@ -38,7 +38,7 @@ from numba.typed import List
 from ..errors import FiberpipeError
 from ._kernels_boundary import path_delta, plane_position
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
-from .contact_potential import contact_forces_pot, onset, potential_kernels_for
+from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments,
@@ -454,13 +454,38 @@ contact_step_potential = specialise(
     cache=True, fastmath=True, error_model="numpy")
 
 
-def contact_kernel_for(law, formulation: str = "potential"):
+def _threads_step(normal_forces, tag: str):
+    """A copy of :func:`contact_step` whose normal pass is ``normal_forces`` with its pairs in
+    ``prange`` tasks (not cached: a parfor kernel, see ``_kernels_beam.beam_pass_fibers``)."""
+    flags = dict(fastmath=True, error_model="numpy")
+    nf = specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": normal_forces},
+                    cache=False, inline="always", **flags)
+    return specialise(contact_step, f"contact_step_{tag}",
+                      {"_normal_forces": nf, "_record_initial_overlaps": _record_initial_overlaps_potential},
+                      cache=False, **flags)
+
+
+# solver.threads > 1 with the built-in laws and the potential formulation
+contact_step_potential_threads = _threads_step(contact_forces_pot_threads, "potential_threads")
+
+
+def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
     """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
     (``legacy`` or ``potential``): the built-in kernels (cached on disk) for a law without
     ``kernels``; else copies of the contact kernels specialised on the law's own jitted
-    ``(line, point, weight_point)`` functions (compiled once per process, law class and formulation)."""
+    ``(line, point, weight_point)`` functions (compiled once per process, law class and formulation).
+    ``threads``: the variant for ``solver.threads`` > 1, whose potential normal pass evaluates its
+    pairs in parallel tasks (same result bit for bit; not cached); the legacy pass stays serial."""
     if formulation not in FORMULATIONS:
         raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
+    if threads and formulation == "potential":
+        if law.kernels is None:
+            return contact_step_potential_threads, None
+        key = (type(law), "potential_threads")
+        if key not in _CUSTOM_KERNELS:
+            _CUSTOM_KERNELS[key] = _threads_step(potential_kernels_for(law, threads=True),
+                                                 f"{type(law).__name__}_potential_threads")
+        return _CUSTOM_KERNELS[key], None
     if law.kernels is None:
         if formulation == "potential":
             return contact_step_potential, "advance_contact_potential"
@@ -633,7 +658,8 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         info.data = data
         return data
 
-    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name)
+    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name,
+                       kernel_threads=contact_kernel_for(law, formulation, threads=True)[0])
     hook.setup_info = info
     hook.make_watch = lambda model_, dt: ContactSlopeWatch.for_hook(model_, dt, hook)
     if not contact:

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._specialise import specialise
 from .contact import _joint_share, record_pair
@@ -321,135 +321,226 @@ def _blend_forces(f_out, nodes4, a0, b0, ta, tb, geo, gd, G):
                 f_out[nb0, c] -= gb
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
-                       out, c_off, reach):
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _look_list(out, n_pairs, reach):
+    """The pairs to evaluate this step: ``(n_look, compact)``. With both a gap and an active list
+    (``compact``), one branch-free pass lists the pairs within reach at the front of ``out.active``
+    (most candidates of a bundle are beyond reach; their fn stays 0 from their last look, or from the
+    neighbour-list build); otherwise every candidate, in order."""
+    c_gap = out.gap
+    if not (c_gap.shape[0] > 0 and out.active.shape[0] > 0):
+        return n_pairs, False
+    n_look = 0
+    look = out.active
+    for k in range(n_pairs):
+        look[n_look] = k
+        n_look += 1 if c_gap[k] <= reach else 0
+    return n_look, True
+
+
+# columns of a pair's result row in the contact pass (:func:`_contact_forces_pot`): its force block (rows a0, a1, b0, b1 of
+# the pair's nodes, 3 components each), its accumulator (:func:`fiberpipe.solver.contact.record_pair`),
+# its crossing angle and its new skip threshold
+_R_BLOCK, _R_REC, _R_PHI, _R_GAP = 0, 12, 20, 21
+N_ROW = 22
+# what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
+# row), within touch but no force, in contact
+_SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _merge_pair(f_out, seg_nodes, pairs, out, k, row, outcome, n_active, use_list, use_share):
+    """Pair ``k``'s result row into the records ``out`` and its force block onto its four nodes (the
+    pair's fn is reset first: 0 unless in contact); returns the count of pairs in contact."""
+    out.fn[k] = 0.0
+    if outcome == _APART:
+        if out.gap.shape[0] > 0:
+            out.gap[k] = row[_R_GAP]
+        return n_active
+    if outcome != _TOUCHING:
+        return n_active
+    i = pairs[k, 0]
+    j = pairs[k, 1]
+    for c in range(3):
+        f_out[seg_nodes[i, 0], c] += row[_R_BLOCK + c]
+        f_out[seg_nodes[i, 1], c] += row[_R_BLOCK + 3 + c]
+        f_out[seg_nodes[j, 0], c] += row[_R_BLOCK + 6 + c]
+        f_out[seg_nodes[j, 1], c] += row[_R_BLOCK + 9 + c]
+    return record_pair(out, k, row[_R_REC:_R_REC + 8], row[_R_PHI], n_active, use_list, use_share)
+
+
+# pairs per task of the threaded pass, at least: a task costs its start and its scratch arrays
+PAIR_TASK_MIN = 32
+# tasks of the threaded pass: more than the threads, so a task that meets many contacts is
+# balanced by the others
+_PAIR_TASKS = 8
+
+
+def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
+                        out, c_off, reach):
     """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
     ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
     [m], the arc length of each segment's ends along its fibre (their difference, the reference
     length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
-    ``(energy, n_active)``; ``energy`` is the potential itself."""
-    c_fn, c_gap = out.fn, out.gap
-    use_gap = c_gap.shape[0] > 0
+    ``(energy, n_active)``; ``energy`` is the potential itself.
+
+    ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
+    (``solver.threads`` > 1) in ``prange`` tasks, with the same forces, records and energy bit for bit."""
+    # Strategy: each pair writes only its own result row (its forces summed in a 4-node block, its
+    # records, its new skip threshold); one serial pass then merges the rows in the order of the
+    # pairs, so the sums are the same whichever task evaluated a pair. The records are written in
+    # that pass: an array reached through a structure passed into a prange body, or through a
+    # tuple holding it, loses the body's writes (numba 0.68). A pair listed as in contact is
+    # written at a slot of the look list the merge has already read (n_active ≤ kk).
+    n_look, compact = _look_list(out, n_pairs, reach)
     use_list = out.active.shape[0] > 0
-    use_off = c_off.shape[0] > 0
     use_share = out.share.shape[0] > 0
+    look = out.active
+    c_gap = out.gap
+    use_gap = c_gap.shape[0] > 0
+    use_off = c_off.shape[0] > 0
+    m = max(n_look, 1) if _THREADS else 1  # rows kept for the merge after the tasks (threads) or one reused
+    rows = np.empty((m, N_ROW))
+    e_pair = np.zeros(m)
+    outcomes = np.zeros(m, np.int64)
     energy = 0.0
     n_active = 0
-    rec = np.zeros(8)
-    a0 = np.empty(3)
-    b0 = np.empty(3)
-    ta = np.empty(3)
-    tb = np.empty(3)
-    gbuf = np.empty((2 * gxi.shape[0], N_GP_COLUMNS))
-    # Strategy: with both a gap and an active list, one branch-free pass lists the pairs within reach
-    # at the front of ``active`` and the main loop visits only those (most candidates of a bundle are
-    # beyond reach; their fn stays 0 from their last look, or from the neighbour-list build); each
-    # pair listed as in contact is written at a slot the loop has already read (n_active ≤ kk)
-    compact = use_gap and use_list
-    n_look = n_pairs
-    if compact:
-        n_look = 0
-        look = out.active
-        for k in range(n_pairs):
-            look[n_look] = k
-            n_look += 1 if c_gap[k] <= reach else 0
-    for kk in range(n_look):
-        k = out.active[kk] if compact else kk
-        c_fn[k] = 0.0
-        if use_gap and c_gap[k] > reach:
-            continue
-        i = pairs[k, 0]
-        j = pairs[k, 1]
-        na0 = seg_nodes[i, 0]
-        na1 = seg_nodes[i, 1]
-        nb0 = seg_nodes[j, 0]
-        nb1 = seg_nodes[j, 1]
-        ra = seg_radius[i]
-        rb = seg_radius[j]
-        rr = ra + rb
-        off = c_off[k] if use_off else 0.0
-        for c in range(3):
-            a0[c] = x[na0, c]
-            b0[c] = x[nb0, c]
-            ta[c] = x[na1, c] - a0[c]
-            tb[c] = x[nb1, c] - b0[c]
-        dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
-                                             ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
-        if dist2 >= rr * rr:
-            if use_gap:
-                c_gap[k] = reach + math.sqrt(dist2) - rr
-            continue
-        for c in range(8):
-            rec[c] = 0.0
-        aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
-        bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
-        ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
-        phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
-        d_own = math.sqrt(dist2)
-        delta = rr - d_own - off
-        n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
-        w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
-        e_point = 0.0   # s_joint Π_point (unweighted by w)
-        de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
-        if w > 0.0:
-            wst = 1.0
-            den = aa * bb - ab * ab
-            if den > 1e-10 * aa * bb:
-                r0 = a0[0] - b0[0]
-                r1 = a0[1] - b0[1]
-                r2 = a0[2] - b0[2]
-                ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-                br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-                s_l = (ab * br - ar * bb) / den
-                t_l = (aa * br - ab * ar) / den
-                wst = _joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr) * _joint_share(x, seg_nodes, j, t_l,
-                                                                                           d_own, a0, ta, rr)
-            if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
-                gp = onset(delta, ds)[1]
-                e_point = wst * ep
-                de_point = wst * dep
-                rec[7] += w * wst
-                fm = w * wst * fp * gp
-                inv = 1.0 / d_own
-                d0 = (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv
-                d1 = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
-                d2 = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
-                f0 = fm * d0
-                f1 = fm * d1
-                f2 = fm * d2
-                apply_pair_force(f_out, (na0, na1, nb0, nb1), sc, tc, f0, f1, f2)
-                rec[0] += fm
-                rec[1] += f0
-                rec[2] += f1
-                rec[3] += f2
-                rec[4] += fm * sc
-                rec[5] += fm * tc
-                rec[6] = max(rec[6], delta)
-        e_line = 0.0  # Π_line (unweighted by 1 − w)
-        if w < 1.0:
-            half = 0.5 * (1.0 - w)
-            el = _line_part(gbuf, n_a, n_b, (na0, na1, nb0, nb1), (seg_arc[i, 1] - seg_arc[i, 0],
-                            seg_arc[j, 1] - seg_arc[j, 0]), ra, rb, law_id, law_params, half, ds, f_out, rec)
-            e_line = el / (1.0 - w)
-        energy += (1.0 - w) * e_line + w * e_point
-        _blend_forces(f_out, (na0, na1, nb0, nb1), a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
-                      dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
-        n_active = record_pair(out, k, rec, phi, n_active, use_list, use_share)
+    n_gauss = gxi.shape[0]
+    n_tasks = max(1, min(_PAIR_TASKS, n_look // PAIR_TASK_MIN)) if _THREADS else 1
+    for task in prange(n_tasks):
+        rec = np.zeros(8)
+        a0 = np.empty(3)
+        b0 = np.empty(3)
+        ta = np.empty(3)
+        tb = np.empty(3)
+        blk = np.empty((4, 3))
+        gbuf = np.empty((2 * n_gauss, N_GP_COLUMNS))
+        loc = (0, 1, 2, 3)  # the block's rows: the pair's nodes a0, a1, b0, b1
+        for kk in range(task * n_look // n_tasks, (task + 1) * n_look // n_tasks):
+            k = look[kk] if compact else kk
+            row = rows[kk if _THREADS else 0]
+            outcome = _SKIPPED
+            e = 0.0
+            for _ in range(1):  # one pass; a break ends the pair's evaluation at its outcome
+                if use_gap and c_gap[k] > reach:
+                    break
+                i = pairs[k, 0]
+                j = pairs[k, 1]
+                ra = seg_radius[i]
+                rb = seg_radius[j]
+                rr = ra + rb
+                off = c_off[k] if use_off else 0.0
+                for c in range(3):
+                    a0[c] = x[seg_nodes[i, 0], c]
+                    b0[c] = x[seg_nodes[j, 0], c]
+                    ta[c] = x[seg_nodes[i, 1], c] - a0[c]
+                    tb[c] = x[seg_nodes[j, 1], c] - b0[c]
+                dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
+                                                     ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
+                if dist2 >= rr * rr:
+                    row[_R_GAP] = reach + math.sqrt(dist2) - rr
+                    outcome = _APART
+                    break
+                for c in range(8):
+                    rec[c] = 0.0
+                for r in range(4):
+                    for c in range(3):
+                        blk[r, c] = 0.0
+                aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+                bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+                ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+                phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
+                d_own = math.sqrt(dist2)
+                delta = rr - d_own - off
+                n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
+                w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
+                e_point = 0.0   # s_joint Π_point (unweighted by w)
+                de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
+                if w > 0.0:
+                    wst = 1.0
+                    den = aa * bb - ab * ab
+                    if den > 1e-10 * aa * bb:
+                        r0 = a0[0] - b0[0]
+                        r1 = a0[1] - b0[1]
+                        r2 = a0[2] - b0[2]
+                        ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+                        br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+                        s_l = (ab * br - ar * bb) / den
+                        t_l = (aa * br - ab * ar) / den
+                        wst = (_joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr)
+                               * _joint_share(x, seg_nodes, j, t_l, d_own, a0, ta, rr))
+                    if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
+                        gp = onset(delta, ds)[1]
+                        e_point = wst * ep
+                        de_point = wst * dep
+                        rec[7] += w * wst
+                        fm = w * wst * fp * gp
+                        inv = 1.0 / d_own
+                        f0 = fm * ((a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv)
+                        f1 = fm * ((a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv)
+                        f2 = fm * ((a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv)
+                        apply_pair_force(blk, loc, sc, tc, f0, f1, f2)
+                        rec[0] += fm
+                        rec[1] += f0
+                        rec[2] += f1
+                        rec[3] += f2
+                        rec[4] += fm * sc
+                        rec[5] += fm * tc
+                        rec[6] = max(rec[6], delta)
+                e_line = 0.0  # Π_line (unweighted by 1 − w)
+                if w < 1.0:
+                    half = 0.5 * (1.0 - w)
+                    el = _line_part(gbuf, n_a, n_b, loc, (seg_arc[i, 1] - seg_arc[i, 0], seg_arc[j, 1] - seg_arc[j, 0]),
+                                    ra, rb, law_id, law_params, half, ds, blk, rec)
+                    e_line = el / (1.0 - w)
+                _blend_forces(blk, loc, a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
+                              dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
+                e = (1.0 - w) * e_line + w * e_point
+                if not rec[0] > 0.0:  # record_pair's test: no contact point carries a force
+                    outcome = _CLOSE
+                    break
+                outcome = _TOUCHING
+                for r in range(4):
+                    for c in range(3):
+                        row[_R_BLOCK + 3 * r + c] = blk[r, c]
+                for c in range(8):
+                    row[_R_REC + c] = rec[c]
+                row[_R_PHI] = phi
+            if _THREADS:
+                outcomes[kk] = outcome
+                e_pair[kk] = e
+            else:  # one task: merged at once, in the same order
+                n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, row, outcome, n_active, use_list, use_share)
+                energy += e
+    if _THREADS:
+        for kk in range(n_look):
+            k = look[kk] if compact else kk
+            n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows[kk], outcomes[kk], n_active, use_list,
+                                   use_share)
+            energy += e_pair[kk]
     return energy, n_active
+
+
+_THREADS = False
+contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy")(_contact_forces_pot)
+# Not cached (a parfor kernel linked into a step loop compiled in another process: see
+# _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it
+contact_forces_pot_threads = specialise(_contact_forces_pot, "contact_forces_pot_threads", {"_THREADS": True},
+                                        cache=False, fastmath=True, error_model="numpy", parallel=True)
 
 
 _LAW_KERNELS: dict = {}
 
 
-def potential_kernels_for(law):
-    """:func:`contact_forces_pot` for ``law``: the built-in kernel for a law without ``kernels``; else a
-    copy specialised on the law's own jitted ``line``, ``point`` and ``weight_point`` functions (the
-    derivatives of its point share and of its point energy in Φ by central differences; compiled once
-    per process and law class, see ``_specialise``)."""
+def potential_kernels_for(law, threads: bool = False):
+    """:func:`contact_forces_pot` (``threads``: :func:`contact_forces_pot_threads`) for ``law``: the
+    built-in kernel for a law without ``kernels``; else a copy specialised on the law's own jitted
+    ``line``, ``point`` and ``weight_point`` functions (the derivatives of its point share and of its
+    point energy in Φ by central differences; compiled once per process and law class, see
+    ``_specialise``)."""
     if law.kernels is None:
-        return contact_forces_pot
-    key = type(law)
+        return contact_forces_pot_threads if threads else contact_forces_pot
+    key = (type(law), bool(threads))
     if key not in _LAW_KERNELS:
         line, point, weight_point = law.kernels
         tag = type(law).__name__
@@ -458,6 +549,7 @@ def potential_kernels_for(law):
         lh = specialise(_line_part, f"_line_part_{tag}", {"_line_loads": loads}, cache=False, **flags)
         blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
                            {"law_weight_point": weight_point, "law_point": point}, cache=False, **flags)
-        _LAW_KERNELS[key] = specialise(contact_forces_pot, f"contact_forces_pot_{tag}",
-                                       {"_line_part": lh, "_pair_blend_point": blend}, cache=False, **flags)
+        calls = {"_line_part": lh, "_pair_blend_point": blend, "_THREADS": bool(threads)}
+        _LAW_KERNELS[key] = specialise(_contact_forces_pot, f"contact_forces_pot{'_threads' if threads else ''}_{tag}",
+                                       calls, cache=False, parallel=bool(threads), **flags)
     return _LAW_KERNELS[key]

@@ -128,6 +128,7 @@ class SceneArrays:
         self.contact_fn = no_contact
         self.contact_forces_of = no_contact_forces
         self.contact_cache_name = None
+        self.contact_fn_threads = None  # the hook's variant for solver.threads > 1 (None: contact_fn)
         self.contact_hook_name = ""
         self.contact_data = (np.zeros(0),)
         self.end_time_hint = 0.0
@@ -680,6 +681,8 @@ class ContactHook(Effect):
         work ``Δt f_n·v̄_n`` to ALLPW and clears the array (one pass over the nodes instead of three).
     cache_name : a built-in hook's name for the on-disk compilation cache (None: the step loop
         specialised for this kernel is compiled once per process).
+    kernel_threads : optional variant of ``kernel`` for ``solver.threads`` > 1 (parallel ``prange``
+        tasks inside; same signature and results). None: ``kernel`` runs with any number of threads.
 
     A scene runs one hook: a second one is refused (combine the passes in one kernel).
     """
@@ -689,6 +692,7 @@ class ContactHook(Effect):
     prepare: Callable | None = None
     forces_of: Callable | None = None
     cache_name: str | None = None
+    kernel_threads: Callable | None = None
     name = "contact"
 
     def setup(self, model, scene):
@@ -700,4 +704,5 @@ class ContactHook(Effect):
         scene.contact_fn = self.kernel
         scene.contact_forces_of = self.forces_of if self.forces_of is not None else no_contact_forces
         scene.contact_cache_name = self.cache_name
+        scene.contact_fn_threads = self.kernel_threads
         scene.contact_data = self.prepare(model, scene) if self.prepare is not None else self.data

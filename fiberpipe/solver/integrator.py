@@ -260,7 +260,10 @@ class Integrator:
         self.ef = new_element_forces(n)
         # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
         self.threads = max(1, int(threads))
-        self._loop = step_loop_for(sc.contact_fn, sc.contact_forces_of, self.threads, sc.contact_cache_name)
+        hook = sc.contact_fn
+        if self.threads > 1 and sc.contact_fn_threads is not None:
+            hook = sc.contact_fn_threads
+        self._loop = step_loop_for(hook, sc.contact_forces_of, self.threads, sc.contact_cache_name)
         self.model_arrays = ModelArrays(
             m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
             m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),

@@ -110,6 +110,41 @@ def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records()
     assert na_all > 0 and visited_less > 10 * n
 
 
+def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
+    """solver.threads > 1: the potential pass evaluates its pairs in prange tasks and adds their force
+    blocks in the serial order, so forces, energy, records and the list of pairs in contact equal the
+    serial pass's bit for bit at every step of a squeezed bundle (records kept from step to step)."""
+    from fiberpipe.solver.contact_potential import PAIR_TASK_MIN, contact_forces_pot, contact_forces_pot_threads
+    from fiberpipe.solver.contact_state import new_records
+
+    rng = np.random.default_rng(7)
+    x, seg, rad, pairs = _bundle(rng)
+    arc = np.zeros((len(seg), 2))
+    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
+    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    n = len(pairs)
+    gxi, gw = gauss_points(2)
+    kept = [new_records(n), new_records(n)]
+    for r in kept:
+        r.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]
+    most_looked = 0
+    for x, reach in _squeezed(rng, x, steps=40, d=2.5e-6):
+        most_looked = max(most_looked, int(np.sum(kept[0].gap[:n] <= reach)))
+        res = []
+        for kernel, r in zip((contact_forces_pot, contact_forces_pot_threads), kept):
+            f = np.zeros_like(x)
+            e, na = kernel(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 1e-9, f, r, np.zeros(0),
+                           reach)
+            res.append((f, e, na))
+        (f1, e1, na1), (f2, e2, na2) = res
+        assert np.array_equal(f1, f2) and e1 == e2 and na1 == na2
+        for name in ("fn", "normal", "s", "t", "phi", "delta", "share", "fsum", "gap"):
+            assert np.array_equal(getattr(kept[0], name), getattr(kept[1], name)), name
+        assert np.array_equal(kept[0].active[:na1], kept[1].active[:na2])
+    assert na1 > 0
+    assert most_looked >= 2 * PAIR_TASK_MIN  # two tasks or more ran
+
+
 def _pair_in_contact(delta):
     xa = fiber([0, 0, 2 * R - delta], [1, 0, 0], 1)
     xb = fiber([0.15e-3, -0.15e-3, 0], [0, 1, 0], 1)
