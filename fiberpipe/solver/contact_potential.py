@@ -338,9 +338,9 @@ def _look_list(out, n_pairs, reach):
     return n_look, True
 
 
-# columns of a pair's result row in the contact pass (:func:`_contact_forces_pot`): its force block (rows a0, a1, b0, b1 of
-# the pair's nodes, 3 components each), its accumulator (:func:`fiberpipe.solver.contact.record_pair`),
-# its crossing angle and its new skip threshold
+# columns of a pair's result row in the contact pass (:func:`_pairs_pass`): its force block (rows
+# a0, a1, b0, b1 of the pair's nodes, 3 components each), its accumulator
+# (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle and its new skip threshold
 _R_BLOCK, _R_REC, _R_PHI, _R_GAP = 0, 12, 20, 21
 N_ROW = 22
 # what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
@@ -376,23 +376,16 @@ PAIR_TASK_MIN = 32
 _PAIR_TASKS = 8
 
 
-def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
-                        out, c_off, reach):
-    """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
-    ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
-    [m], the arc length of each segment's ends along its fibre (their difference, the reference
-    length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
-    ``(energy, n_active)``; ``energy`` is the potential itself.
-
-    ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
-    (``solver.threads`` > 1) in ``prange`` tasks, with the same forces, records and energy bit for bit."""
+def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off, reach,
+                n_look, compact):
+    """The pairs of the look list (:func:`_look_list`) of :func:`contact_forces_pot`: one task
+    (``_THREADS`` False), or ``prange`` tasks of consecutive pairs, merged after them in order."""
     # Strategy: each pair writes only its own result row (its forces summed in a 4-node block, its
-    # records, its new skip threshold); one serial pass then merges the rows in the order of the
-    # pairs, so the sums are the same whichever task evaluated a pair. The records are written in
-    # that pass: an array reached through a structure passed into a prange body, or through a
-    # tuple holding it, loses the body's writes (numba 0.68). A pair listed as in contact is
-    # written at a slot of the look list the merge has already read (n_active ≤ kk).
-    n_look, compact = _look_list(out, n_pairs, reach)
+    # records, its new skip threshold) and the rows are merged in the order of the pairs, at once
+    # (one task) or after the tasks, so the sums are the same whichever task evaluated a pair. The
+    # records are written in the merge: an array reached through a structure passed into a prange
+    # body, or through a tuple holding it, loses the body's writes (numba 0.68). A pair listed as in
+    # contact is written at a slot of the look list the merge has already read (n_active ≤ kk).
     use_list = out.active.shape[0] > 0
     use_share = out.share.shape[0] > 0
     look = out.active
@@ -521,12 +514,34 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
     return energy, n_active
 
 
+def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
+                        out, c_off, reach):
+    """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
+    ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
+    [m], the arc length of each segment's ends along its fibre (their difference, the reference
+    length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
+    ``(energy, n_active)``; ``energy`` is the potential itself.
+
+    ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
+    (``solver.threads`` > 1) in ``prange`` tasks once there are pairs for two, with the same
+    forces, records and energy bit for bit."""
+    n_look, compact = _look_list(out, n_pairs, reach)
+    if _THREADS and n_look >= 2 * PAIR_TASK_MIN:
+        return _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
+                            c_off, reach, n_look, compact)
+    return _pairs_serial(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
+                         reach, n_look, compact)
+
+
 _THREADS = False
-contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy")(_contact_forces_pot)
+_pairs_serial = njit(cache=True, fastmath=True, error_model="numpy")(_pairs_pass)
 # Not cached (a parfor kernel linked into a step loop compiled in another process: see
 # _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it
+_pairs_tasks = specialise(_pairs_pass, "_pairs_tasks", {"_THREADS": True}, cache=False, fastmath=True,
+                          error_model="numpy", parallel=True)
+contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy")(_contact_forces_pot)
 contact_forces_pot_threads = specialise(_contact_forces_pot, "contact_forces_pot_threads", {"_THREADS": True},
-                                        cache=False, fastmath=True, error_model="numpy", parallel=True)
+                                        cache=False, fastmath=True, error_model="numpy")
 
 
 _LAW_KERNELS: dict = {}
@@ -549,7 +564,11 @@ def potential_kernels_for(law, threads: bool = False):
         lh = specialise(_line_part, f"_line_part_{tag}", {"_line_loads": loads}, cache=False, **flags)
         blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
                            {"law_weight_point": weight_point, "law_point": point}, cache=False, **flags)
-        calls = {"_line_part": lh, "_pair_blend_point": blend, "_THREADS": bool(threads)}
+        calls = {"_line_part": lh, "_pair_blend_point": blend}
+        passes = {"_pairs_serial": specialise(_pairs_pass, f"_pairs_serial_{tag}", calls, cache=False, **flags)}
+        if threads:
+            passes["_pairs_tasks"] = specialise(_pairs_pass, f"_pairs_tasks_{tag}", {**calls, "_THREADS": True},
+                                                cache=False, parallel=True, **flags)
         _LAW_KERNELS[key] = specialise(_contact_forces_pot, f"contact_forces_pot{'_threads' if threads else ''}_{tag}",
-                                       calls, cache=False, parallel=bool(threads), **flags)
+                                       {**passes, "_THREADS": bool(threads)}, cache=False, **flags)
     return _LAW_KERNELS[key]
