@@ -640,9 +640,11 @@ class SolverConfig(Section):
     checkpoint_every: Optional[int] = Field(None, ge=1, description="steps between checkpoints")
     rotational_inertia_scaling: float = 1.0
     mass_scaling: float = 1.0
-    threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (16 prange tasks "
-                         "of contiguous nodes; contact and friction stay serial); > 1 uses a step loop compiled in every process "
-                         "(not cached); pays on an idle machine with a core per thread (docs/benchmarks.md)")
+    threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (4 prange tasks "
+                         "of contiguous nodes) and for the potential contact pass's pairs (up to 8 tasks once 64 pairs are "
+                         "within reach; the same forces bit for bit); the legacy contact pass and the friction stay serial; "
+                         "> 1 uses a step loop compiled in every process (not cached); pays on an idle machine with a core "
+                         "per thread (docs/benchmarks.md)")
     settle_time: Time = 0.0
     stable_step: Literal["element", "modes"] = Field(
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "

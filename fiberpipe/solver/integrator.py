@@ -63,9 +63,11 @@ class SimulationSettings:
     penetration_limit : float — a node deeper than this fraction of its radius into a plate or wall
         is a runaway penetration (default 0.5); more than 2 radii (centre a radius beyond the
         plane) is a fiber leaving the box.
-    threads : int — ``solver.threads``: > 1 runs the beam pass and the node update with one
-        ``prange`` task per fiber on up to this many numba threads (bit-identical to the serial run;
-        default 1, serial). The contact and friction passes stay serial.
+    threads : int — ``solver.threads``: > 1 runs the beam pass and the node update as ``prange``
+        tasks of contiguous nodes on up to this many numba threads (equal to the serial run to
+        rounding; default 1, serial), and the contact hook's ``kernel_threads`` if it has one (the
+        built-in hook's: the potential pass's pairs in tasks, bit for bit the serial forces). The
+        friction pass stays serial.
     stable_step : str — ``solver.stable_step``: ``"element"`` (default) the element-by-element bound
         of :func:`~fiberpipe.solver.timestep.stable_time_step`; ``"modes"`` the constrained assembled
         system's (:func:`~fiberpipe.solver.timestep.modal_time_step`).

@@ -54,3 +54,22 @@ def test_a_second_hook_is_refused():
     two.name = "second"
     with pytest.raises(FiberpipeError, match="two contact hooks"):
         simulate(m, [one, two], SimulationSettings(end_time_s=1e-5, output_frames=2))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_threads_pick_the_hooks_threaded_kernel(threads):
+    """solver.threads > 1 runs the hook's ``kernel_threads`` (the built-in hook's: the potential pass
+    with its pairs in tasks); one thread, or a hook without one, its ``kernel``."""
+    from fiberpipe.solver._kernels_integrate import step_loop_for
+    from fiberpipe.solver.contact_effect import contact_forces_of, contact_step_potential, contact_step_potential_threads
+    from fiberpipe.solver.integrator import Integrator
+    from fiberpipe.verification.case_config import contact_hook
+
+    m = _model()
+    hook = contact_hook(m)
+    assert hook.kernel is contact_step_potential and hook.kernel_threads is contact_step_potential_threads
+    integ = Integrator(m, [hook], 1e-8, threads=threads)
+    expect = contact_step_potential_threads if threads > 1 else contact_step_potential
+    assert integ._loop is step_loop_for(expect, contact_forces_of, threads, hook.cache_name)
+    plain = Integrator(m, [ContactHook(_lift, (np.array([1e-4]),))], 1e-8, threads=threads)
+    assert plain._loop is step_loop_for(_lift, threads=threads)
