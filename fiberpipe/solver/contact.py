@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import apply_line_point, apply_pair_force, crossing_angle, segment_distance2_s
+from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from ._specialise import specialise
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
@@ -277,14 +277,7 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
     f0 = fm * n0
     f1 = fm * n1
     f2 = fm * n2
-    apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
-    rec[0] += fm
-    rec[1] += f0
-    rec[2] += f1
-    rec[3] += f2
-    rec[4] += fm * s
-    rec[5] += fm * t
-    rec[6] = max(rec[6], delta)
+    apply_line_point(f_out, nodes4, s, t, f0, f1, f2, fm, delta, rec, 1.0)
     return w * wst * ep
 
 

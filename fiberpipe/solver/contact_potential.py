@@ -39,7 +39,7 @@ from numba import njit, prange
 
 from ._specialise import specialise
 from .contact import _joint_share, record_pair
-from .geometry import apply_line_point, apply_pair_force, crossing_angle, segment_distance2_s
+from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
 
@@ -469,17 +469,9 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                         rec[7] += w * wst
                         fm = w * wst * fp * gp
                         inv = 1.0 / d_own
-                        f0 = fm * ((a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv)
-                        f1 = fm * ((a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv)
-                        f2 = fm * ((a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv)
-                        apply_pair_force(blk, loc, sc, tc, f0, f1, f2)
-                        rec[0] += fm
-                        rec[1] += f0
-                        rec[2] += f1
-                        rec[3] += f2
-                        rec[4] += fm * sc
-                        rec[5] += fm * tc
-                        rec[6] = max(rec[6], delta)
+                        apply_line_point(blk, loc, sc, tc, fm * ((a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv),
+                                         fm * ((a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv),
+                                         fm * ((a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv), fm, delta, rec, 1.0)
                 e_line = 0.0  # Π_line (unweighted by 1 − w)
                 if w < 1.0:
                     half = 0.5 * (1.0 - w)

@@ -130,9 +130,10 @@ def apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def apply_line_point(f_out, nodes4, s, t, f0, f1, f2, fm, delta, rec, sign):
-    """One Gauss point of a line part: the force (f0, f1, f2) of magnitude ``fm`` as
-    :func:`apply_pair_force`, and its share of the pair's accumulator ``rec`` (Σ|f|, Σf from B to A,
-    Σ|f|·s_first, Σ|f|·t_second, max δ; ``sign`` −1 when A is the pair's second segment)."""
+    """One contact point of a pair (a Gauss point of a line part, or the point part's closest
+    points): the force (f0, f1, f2) of magnitude ``fm`` as :func:`apply_pair_force`, and its share
+    of the pair's accumulator ``rec`` (Σ|f|, Σf from B to A, Σ|f|·s_first, Σ|f|·t_second, max δ;
+    ``sign`` −1 when A is the pair's second segment)."""
     apply_pair_force(f_out, nodes4, s, t, f0, f1, f2)
     rec[0] += fm
     rec[1] += sign * f0

@@ -44,6 +44,16 @@ def _squeezed(rng, x, steps=60, d=1.5e-6):
         yield x, 2.0 * path
 
 
+def _potential_bundle(rng):
+    """:func:`_bundle` with what the potential kernel takes besides: the segments' arc lengths, the
+    default law and two Gauss points per segment."""
+    x, seg, rad, pairs = _bundle(rng)
+    arc = np.zeros((len(seg), 2))
+    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
+    gxi, gw = gauss_points(2)
+    return x, seg, rad, pairs, arc, L.make_law("hertz_oriented", E_pa=15e9, nu=0.3), gxi, gw
+
+
 def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
     n = len(pairs)
     gxi, gw = gauss_points(2)
@@ -85,12 +95,8 @@ def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records()
     from fiberpipe.solver.contact_state import new_records
 
     rng = np.random.default_rng(5)
-    x, seg, rad, pairs = _bundle(rng)
-    arc = np.zeros((len(seg), 2))
-    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
-    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    x, seg, rad, pairs, arc, law, gxi, gw = _potential_bundle(rng)
     n = len(pairs)
-    gxi, gw = gauss_points(2)
     kept = new_records(n)
     kept.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]  # the build
     visited_less = 0
@@ -118,12 +124,8 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     from fiberpipe.solver.contact_state import new_records
 
     rng = np.random.default_rng(7)
-    x, seg, rad, pairs = _bundle(rng)
-    arc = np.zeros((len(seg), 2))
-    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
-    law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
+    x, seg, rad, pairs, arc, law, gxi, gw = _potential_bundle(rng)
     n = len(pairs)
-    gxi, gw = gauss_points(2)
     kept = [new_records(n), new_records(n)]
     for r in kept:
         r.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]
