@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import apply_line_point, crossing_angle, segment_distance2_s
+from .geometry import apply_line_point, crossing_angle, line_closest_params, segment_distance2_s
 from ._specialise import specialise
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
@@ -230,14 +230,10 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
     nodes4 = (na0, na1, nb0, nb1)
     rr = ra + rb
     den = aa * bb - ab * ab
-    # closest points of the infinite lines
+    s, t = line_closest_params(a0, b0, ta, tb, aa, bb, ab, den)  # closest points of the infinite lines
     r0 = a0[0] - b0[0]
     r1 = a0[1] - b0[1]
     r2 = a0[2] - b0[2]
-    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-    s = (ab * br - ar * bb) / den
-    t = (aa * br - ab * ar) / den
     # ownership across element joints (partition of unity): compare with the neighbouring
     # segment at the nearer end, on each fibre (see _joint_share)
     d_own = math.sqrt(dist2)

@@ -454,19 +454,27 @@ contact_step_potential = specialise(
     cache=True, fastmath=True, error_model="numpy")
 
 
-def _threads_step(normal_forces, tag: str):
-    """A copy of :func:`contact_step` whose normal pass is ``normal_forces`` with its pairs in
-    ``prange`` tasks (not cached: a parfor kernel, see ``_kernels_beam.beam_pass_fibers``)."""
-    flags = dict(fastmath=True, error_model="numpy")
-    nf = specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": normal_forces},
-                    cache=False, inline="always", **flags)
+_SPEC = dict(fastmath=True, error_model="numpy")
+
+
+def _potential_pass(forces, tag: str):
+    """:func:`_normal_forces_potential` calling ``forces`` (a copy of ``contact_forces_pot``)."""
+    return specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": forces}, cache=False,
+                      inline="always", **_SPEC)
+
+
+def _step_with(normal_pass, tag: str, overlaps):
+    """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass and ``overlaps`` recording
+    the initial overlaps (not cached)."""
     return specialise(contact_step, f"contact_step_{tag}",
-                      {"_normal_forces": nf, "_record_initial_overlaps": _record_initial_overlaps_potential},
-                      cache=False, **flags)
+                      {"_normal_forces": normal_pass, "_record_initial_overlaps": overlaps}, cache=False, **_SPEC)
 
 
-# solver.threads > 1 with the built-in laws and the potential formulation
-contact_step_potential_threads = _threads_step(contact_forces_pot_threads, "potential_threads")
+# solver.threads > 1 with the built-in laws and the potential formulation: the pairs in prange tasks
+# (a parfor kernel, not cached: see _kernels_beam.beam_pass_fibers); the initial overlaps, recorded
+# once, by the serial pass
+contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_threads, "potential_threads"),
+                                            "potential_threads", _record_initial_overlaps_potential)
 
 
 def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
@@ -478,35 +486,29 @@ def contact_kernel_for(law, formulation: str = "potential", threads: bool = Fals
     pairs in parallel tasks (same result bit for bit; not cached); the legacy pass stays serial."""
     if formulation not in FORMULATIONS:
         raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
-    if threads and formulation == "potential":
-        if law.kernels is None:
-            return contact_step_potential_threads, None
-        key = (type(law), "potential_threads")
-        if key not in _CUSTOM_KERNELS:
-            _CUSTOM_KERNELS[key] = _threads_step(potential_kernels_for(law, threads=True),
-                                                 f"{type(law).__name__}_potential_threads")
-        return _CUSTOM_KERNELS[key], None
+    threads = threads and formulation == "potential"
     if law.kernels is None:
+        if threads:
+            return contact_step_potential_threads, None
         if formulation == "potential":
             return contact_step_potential, "advance_contact_potential"
         return contact_step, "advance_contact"
-    key = (type(law), formulation)
+    key = (type(law), formulation, threads)
     if key not in _CUSTOM_KERNELS:
         tag = f"{type(law).__name__}_{formulation}"
-        flags = dict(fastmath=True, error_model="numpy")
         if formulation == "potential":
-            cf = potential_kernels_for(law)
-            nf = specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": cf},
-                            cache=False, inline="always", **flags)
+            nf = _potential_pass(potential_kernels_for(law), tag)
         else:
             cf, _ = contact_kernels_for(law)
             nf = specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_ex": cf}, cache=False,
-                            inline="always", **flags)
-        ro = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
-                        cache=False, **flags)
-        _CUSTOM_KERNELS[key] = specialise(contact_step, f"contact_step_{tag}",
-                                          {"_normal_forces": nf, "_record_initial_overlaps": ro}, cache=False,
-                                          **flags)
+                            inline="always", **_SPEC)
+        # the initial overlaps, recorded once, by the law's serial pass (also with threads)
+        overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
+                              cache=False, **_SPEC)
+        if threads:
+            tag += "_threads"
+            nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps)
     return _CUSTOM_KERNELS[key], None
 
 

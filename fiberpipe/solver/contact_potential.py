@@ -39,7 +39,7 @@ from numba import njit, prange
 
 from ._specialise import specialise
 from .contact import _joint_share, record_pair
-from .geometry import apply_line_point, crossing_angle, segment_distance2_s
+from .geometry import apply_line_point, crossing_angle, line_closest_params, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
 
@@ -453,13 +453,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                     wst = 1.0
                     den = aa * bb - ab * ab
                     if den > 1e-10 * aa * bb:
-                        r0 = a0[0] - b0[0]
-                        r1 = a0[1] - b0[1]
-                        r2 = a0[2] - b0[2]
-                        ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
-                        br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
-                        s_l = (ab * br - ar * bb) / den
-                        t_l = (aa * br - ab * ar) / den
+                        s_l, t_l = line_closest_params(a0, b0, ta, tb, aa, bb, ab, den)
                         wst = (_joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr)
                                * _joint_share(x, seg_nodes, j, t_l, d_own, a0, ta, rr))
                     if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:

@@ -111,6 +111,18 @@ def pair_gap(x, seg_nodes, seg_radius, pairs, k):
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def line_closest_params(a0, b0, ta, tb, aa, bb, ab, den):
+    """Parameters (s, t) of the closest points of the infinite lines a0 + s·ta and b0 + t·tb
+    (``aa, bb, ab`` their dot products, ``den = aa bb − ab² > 0``)."""
+    r0 = a0[0] - b0[0]
+    r1 = a0[1] - b0[1]
+    r2 = a0[2] - b0[2]
+    ar = ta[0] * r0 + ta[1] * r1 + ta[2] * r2
+    br = tb[0] * r0 + tb[1] * r1 + tb[2] * r2
+    return (ab * br - ar * bb) / den, (aa * br - ab * ar) / den
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
     """+f on segment A at parameter s, −f on segment B at t, linearly shared by each segment's nodes."""
     na0, na1, nb0, nb1 = nodes4
