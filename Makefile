@@ -108,8 +108,8 @@ stable-step: setup
 
 # energy the time step creates in the six-fibre scene at 1000 N/m, against dt_safety (docs/contact.md)
 step-energy: setup
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --dt-safety 0.9 0.85 0.8 0.75 0.7 0.6 0.5 0.45 --seeds 4
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --dt-safety 0.9 --penalty-factor 0.05 0.02 --seeds 4
+	$(PY) -m fiberpipe.benchmarks.bench_step_energy --load 3 30 300 1000 --seeds 4
+	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_oriented --load 1000 --onset-fraction 0.004 0.012 --seeds 4
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_parallel --dt-safety 0.9 0.8 0.7 0.6 0.45 --seeds 4
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law linear --dt-safety 0.9 0.8 0.7 0.6 0.45 --penalty-factor 0.1 0.05 --seeds 4
 

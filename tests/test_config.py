@@ -221,3 +221,21 @@ def test_friction_stiffness_takes_units_and_a_misspelt_law_gets_a_suggestion():
     assert c.scene.friction.stiffness == pytest.approx(1e4)
     with pytest.raises(ConfigError, match="did you mean 'hertz_oriented'"):
         validate_config({**base, "scene": {"effects": ["contact"], "contact": {"law": "hertz_orientd"}}})
+
+
+def test_the_plane_penalty_defaults_of_the_schema_are_the_solvers():
+    from fiberpipe.config import PlatesConfig, WallsConfig
+    from fiberpipe.solver._kernels_boundary import DEFAULT_ONSET_FRACTION
+    from fiberpipe.solver.effects import DEFAULT_PENALTY_FACTOR, Plates, Walls
+
+    for schema in (PlatesConfig(), WallsConfig()):
+        assert schema.penalty_factor == DEFAULT_PENALTY_FACTOR and schema.onset_fraction == DEFAULT_ONSET_FRACTION
+    assert Walls().onset_fraction == Plates(lower="fixed").onset_fraction == DEFAULT_ONSET_FRACTION
+
+
+def test_a_plane_onset_outside_its_range_is_refused():
+    from fiberpipe.errors import FiberpipeError
+    from fiberpipe.solver.effects import Walls
+
+    with pytest.raises(FiberpipeError, match="onset_fraction"):
+        Walls({"y": (0.0, 1.0)}, onset_fraction=0.0)

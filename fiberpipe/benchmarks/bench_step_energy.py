@@ -1,21 +1,23 @@
-"""Energy created by the time step in the six-fibre conservation scene, against ``dt_safety``.
+"""Energy created in the six-fibre conservation scene, per law, load, plane penalty and step.
 
 The scene of :mod:`fiberpipe.verification.six_fibres` (undamped, frictionless, loaded at once) is
-chaotic at high loads, so each step is run on an ensemble: the top fibres lifted by
-``seed × --lift`` (seed 0 is the test's scene). For each ``dt_safety`` the table gives the mean and
-the largest excess (ALLKE + ALLSE + Π − W)/max|W| over the seeds, and the kinetic energy at the
-end over W. The last column asks whether the contact lowers the stable step: the modal step
-(:func:`fiberpipe.solver.timestep.modal_time_step`) at seed 0's final state with the tangent of the
-fibre–fibre contact forces added to the beams', over the beams' alone.
+chaotic at high loads, so each cell is run on an ensemble: the top fibres lifted by
+``seed × --lift`` (seed 0 is the test's scene). Each row gives the mean and the largest excess
+(ALLKE + ALLSE + Π − W)/max|W| over the seeds (the leapfrog kinetic term, the stored contact
+energy of planes and fibres) and the kinetic energy at the end over W. ``--tangent`` adds whether
+the contact lowers the stable step: the modal step (:func:`fiberpipe.solver.timestep.modal_time_step`)
+at seed 0's final state with the tangent of the fibre–fibre contact forces added to the beams',
+over the beams' alone.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_step_energy \\
-        [--law hertz_oriented] [--load 1000] [--dt-safety 0.9 0.8 0.7 0.6 0.5 0.45] [--seeds 4]
-        [--penalty-factor 0.1 0.05 0.02]
+        [--law hertz_oriented ...] [--load 3 30 300 1000] [--dt-safety 0.9] [--seeds 4]
+        [--penalty-factor 0.1] [--onset-fraction 0.04 0.004] [--tangent]
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 
 import numpy as np
@@ -52,36 +54,41 @@ def contact_tangent_ratio(model, law, x, q, onset_m: float) -> float:
 
 def main(argv=None) -> None:
     from fiberpipe.config import ContactConfig
-    from fiberpipe.solver.laws import make_law
-    from fiberpipe.verification.six_fibres import energy_excess, six_fibres_run
+    from fiberpipe.verification.six_fibres import LAWS, energy_excess, law_label, six_fibres_law, six_fibres_run
 
+    names = sorted({n for n, _ in LAWS})
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--law", default="hertz_oriented")
-    ap.add_argument("--load", type=float, default=1000.0, help="line load on the top fibres, N/m")
-    ap.add_argument("--dt-safety", type=float, nargs="+", default=[0.9, 0.8, 0.7, 0.6, 0.5, 0.45])
+    ap.add_argument("--law", nargs="+", choices=names, default=None,
+                    help="laws of the scene's set (default: all, every preset); a law with presets runs each")
+    ap.add_argument("--load", type=float, nargs="+", default=[1000.0], help="line load on the top fibres, N/m")
+    ap.add_argument("--dt-safety", type=float, nargs="+", default=[0.9])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--lift", type=float, default=1e-9, help="perturbation per seed, m")
     ap.add_argument("--penalty-factor", type=float, nargs="+", default=[0.1],
                     help="the plate's and walls' penalty factor(s) (scene.plates/walls.penalty_factor)")
+    ap.add_argument("--onset-fraction", type=float, nargs="+", default=[0.04],
+                    help="the plate's and walls' onset, fraction(s) of the radius (scene.plates/walls.onset_fraction)")
+    ap.add_argument("--tangent", action="store_true", help="add the contact-tangent stable-step ratio (slow)")
     a = ap.parse_args(argv)
-    cc = ContactConfig()
-    extra = {"stiffness": 1e9} if a.law == "linear" else {}  # the energy tests' linear law (N/m²)
-    law = make_law(a.law, E_pa=15e9, nu=0.3, blend_length_m=float(cc.blend_length), **extra)
-    print(f"# Six fibres, {a.law}, {a.load:g} N/m, undamped ({time.strftime('%Y-%m-%d %H:%M')})\n")
-    print("| penalty factor | dt_safety | ω_max Δt | excess, mean over seeds | largest | ALLKE/W at the end, mean | "
-          "dt with the contact's tangent / beams' |\n|---|---|---|---|---|---|---|", flush=True)
-    for pf, s in ((pf, s) for pf in a.penalty_factor for s in a.dt_safety):
-        ex, kw = [], []
+    laws = [(n, kw) for n, kw in LAWS if a.law is None or n in a.law]
+    onset_m = float(ContactConfig().onset)
+    print(f"# Six fibres, undamped and frictionless, {a.seeds} seeds ({time.strftime('%Y-%m-%d %H:%M')})\n")
+    print("| law | load (N/m) | onset (r) | penalty factor | dt_safety | excess, mean over seeds | largest | "
+          "ALLKE/W at the end, mean | dt with the contact's tangent / beams' |\n|---|---|---|---|---|---|---|---|---|",
+          flush=True)
+    for (name, kw), q, of, pf, s in itertools.product(laws, a.load, a.onset_fraction, a.penalty_factor, a.dt_safety):
+        law = six_fibres_law(name, kw)
+        ex, kw_end = [], []
         ratio = float("nan")
         for seed in range(a.seeds):
-            m, res = six_fibres_run(law, a.load, dt_safety=s, lift_m=seed * a.lift, penalty_factor=pf)
+            m, res = six_fibres_run(law, q, dt_safety=s, lift_m=seed * a.lift, penalty_factor=pf, onset_fraction=of)
             e, ke = energy_excess(res)
             ex.append(e)
-            kw.append(ke[-1] / np.max(np.abs(res.history["energy/external"])))
-            if seed == 0:
-                ratio = contact_tangent_ratio(m, law, res.final_state.x, res.final_state.q, float(cc.onset))
-        print(f"| {pf:g} | {s:g} | {2 * s:.2f} | {np.mean(ex):+.4f} | {np.max(ex):+.4f} | {np.mean(kw):.2f} | {ratio:.6f} |",
-              flush=True)
+            kw_end.append(ke[-1] / np.max(np.abs(res.history["energy/external"])))
+            if seed == 0 and a.tangent:
+                ratio = contact_tangent_ratio(m, law, res.final_state.x, res.final_state.q, onset_m)
+        print(f"| {law_label(name, kw)} | {q:g} | {of:g} | {pf:g} | {s:g} | {np.mean(ex):+.4f} | {np.max(ex):+.4f} | "
+              f"{np.mean(kw_end):.2f} | {ratio:.6f} |", flush=True)
 
 
 if __name__ == "__main__":

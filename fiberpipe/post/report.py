@@ -219,8 +219,8 @@ CREATED_WARN_FRACTION = 0.05
 
 def _created(s: dict, planes: bool = False) -> str:
     """The created-energy cell; above 5 % of ALLWK it says so, and with plates or walls (``planes``)
-    it names the two settings that removed such a gain in the measured rattling scenes
-    (docs/contact.md, "The step and the plane penalty")."""
+    it names the two settings that remove such a gain in rattling scenes (docs/contact.md, "The step
+    and the plane penalty")."""
     c, r = s.get("contact_energy_created_J"), s.get("contact_energy_created_over_external")
     if c is None:
         return "n/a"
@@ -228,8 +228,9 @@ def _created(s: dict, planes: bool = False) -> str:
     if r is not None and np.isfinite(r) and r > CREATED_WARN_FRACTION:
         text += " **above 5 % of ALLWK: the contact created energy, see docs/contact.md"
         if planes:
-            text += ("; fibers rattling on the plates or walls gain it from the stiff plane penalty at the default "
-                     "step: rerun with scene.plates/walls.penalty_factor 0.05 or solver.dt_safety 0.7")
+            text += ("; fibers rattling on the plates or walls gain it when the plane penalty switches on over a "
+                     "penetration too short for the step: rerun with a longer scene.plates/walls.onset_fraction "
+                     "or a smaller solver.dt_safety")
         text += "**"
     return text
 

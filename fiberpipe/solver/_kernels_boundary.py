@@ -3,10 +3,12 @@
 Penalty contact of the fiber surface against a rigid plane (node-to-plane, lumped): for node ``i``
 with radius ``r_i`` and plane ``p`` (axis ``a``, position ``s_p``, outward sign ``σ_p = +1`` when
 the plane pushes towards +a, i.e. a lower plane), the penetration is
-``δ = r_i − σ_p (x_{i,a} − s_p)``; if ``δ > 0`` the node gets ``σ_p k_i δ`` along ``a`` and the
-plane's reaction (positive when pressed) grows by ``k_i δ``. ``k_i`` is chosen against the time
-step (Belytschko, Liu & Moran, *Nonlinear Finite Elements*, 2000, §9.4: the penalty adds
-``k/m`` to the node's ``ω²``): ``k_i = c_pen m_i (2/Δt)²`` with ``c_pen`` = 0.1 by default.
+``δ = r_i − σ_p (x_{i,a} − s_p)``; if ``δ > 0`` the node stores ``½ k_i g(δ)²`` (:func:`plane_onset`,
+onset length ``δ_s,i``), gets ``σ_p k_i g g'`` along ``a``, and the plane's reaction (positive when
+pressed) grows by ``k_i g g'``. ``k_i`` is chosen against the time step (Belytschko, Liu & Moran,
+*Nonlinear Finite Elements*, 2000, §9.4: the penalty adds ``k/m`` to the node's ``ω²``):
+``k_i = c_pen m_i (2/Δt)²`` with ``c_pen`` = 0.1 by default; ``δ_s,i`` is a fraction of the node's
+radius (0.02 by default).
 """
 
 from __future__ import annotations
@@ -19,10 +21,12 @@ RAMP_LINEAR = 0
 RAMP_SMOOTH = 1
 RAMP_SMOOTHSTEP = 2
 
-# onset length of the plane penalty, m: longer than the approach per step (0.1 m/s × 82 ns ≈
-# 8 nm at a fiber impact), so the stiffness switches on over many steps
-PLANE_ONSET_M = 1e-6
-
+# onset length of the plane penalty as a fraction of the node's radius (5 µm at r = 0.25 mm): the
+# stiffness must switch on over many steps of the fastest approach, or nodes rattling on a plane at
+# a step near the stability limit gain energy (six undamped fibres pressed at once by 1000 N/m, every
+# law, dt_safety 0.9: +3–4 % of the loads' work at 0.004 r, ≤ −0.0001 at 0.02 r); a longer onset
+# leaves the fibres deeper in the planes (the static penetration grows by up to half of it)
+DEFAULT_ONSET_FRACTION = 0.02
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def plane_onset(delta, ds):
@@ -38,9 +42,9 @@ def plane_onset(delta, ds):
     return ds * u2 * u * (1.0 - 0.5 * u), u2 * (3.0 - 2.0 * u)
 
 
-def plane_static_penetration(force_over_k_m: float, ds: float = PLANE_ONSET_M) -> float:
-    """The penetration δ [m] at which the plane penalty holds a static force F, given F/k [m]:
-    k g(δ) g'(δ) = F (:func:`plane_onset`; g g' is increasing, so the root is unique)."""
+def plane_static_penetration(force_over_k_m: float, ds: float) -> float:
+    """The penetration δ [m] at which the plane penalty of onset length ``ds`` [m] holds a static force
+    F, given F/k [m]: k g(δ) g'(δ) = F (:func:`plane_onset`; g g' is increasing, so the root is unique)."""
     if force_over_k_m <= 0.0:
         return 0.0
     if force_over_k_m >= 0.5 * ds:
@@ -138,7 +142,7 @@ def path_delta(t1, t0, u_end, duration, t_accel, mode):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
+def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
     """Penalty forces of rigid planes on the nodes.
 
     Parameters
@@ -146,6 +150,7 @@ def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force,
     x : (N, 3) float64, m — node positions.
     radius_node : (N,) float64, m — fiber radius at each node.
     k_pen : (N,) float64, N/m — penalty stiffness per node.
+    onset_m : (N,) float64, m — penalty onset length per node (:func:`plane_onset`).
     pl_axis : (P,) int64 — axis (0, 1, 2) normal to each plane.
     pl_sign : (P,) float64 — +1 if the plane pushes towards +axis (lower), −1 otherwise.
     pl_pos : (P,) float64, m — current plane positions.
@@ -173,7 +178,7 @@ def plane_contacts(x, radius_node, k_pen, pl_axis, pl_sign, pl_pos, f, pl_force,
         for i in range(x.shape[0]):
             d = radius_node[i] - sg * (x[i, ax] - pos)
             if d > 0.0:
-                g, gp = plane_onset(d, PLANE_ONSET_M)
+                g, gp = plane_onset(d, onset_m[i])
                 fn = k_pen[i] * g * gp
                 energy += 0.5 * k_pen[i] * g * g
                 f[i, ax] += sg * fn

@@ -74,7 +74,7 @@ def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
     for p in range(P):
         planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
                                        planes.mode[p])
-    n_pen, stored = plane_contacts(x, radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos, f,
+    n_pen, stored = plane_contacts(x, radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign, planes.pos, f,
                                    planes.force, planes.pen_idx, planes.pen_f)
     acc[ACC_STORED] += stored
     wk = 0.0

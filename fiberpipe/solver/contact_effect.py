@@ -430,9 +430,11 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
     N = model.n_nodes
     P = scene.pl_axis.size
     k_pen = scene.k_pen() if P > 0 else np.zeros(0)
+    onset = scene.pen_onset() if P > 0 else np.zeros(0)
     pos0 = scene.pl_pos0.astype(np.float64)
     return PlaneFriction(
         np.ascontiguousarray(model.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
+        np.ascontiguousarray(onset),
         scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), pos0, scene.pl_move.astype(np.float64),
         scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64), pos0.copy(),
         np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), np.zeros(N * P, np.int64),

@@ -96,6 +96,7 @@ class PlaneFriction(NamedTuple):
 
     radius_node: np.ndarray  # (N,) m
     k_pen: np.ndarray        # (N,) N/m, the plane penalty per node
+    onset: np.ndarray        # (N,) m, the plane penalty's onset length per node
     axis: np.ndarray         # (P,) int64
     sign: np.ndarray         # (P,)
     pos0: np.ndarray         # (P,) m

@@ -13,7 +13,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..errors import FiberpipeError
-from ._kernels_boundary import RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
+from ._kernels_boundary import DEFAULT_ONSET_FRACTION, RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
 from ._kernels_integrate import no_contact, no_contact_forces
 from .layout import DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_PLATE_FORCE, H_WALL
 from .model import Model
@@ -121,6 +121,7 @@ class SceneArrays:
         self.pl_mode = np.zeros(0, np.int64)
         self.pl_hist_col = np.zeros(0, np.int64)
         self.penalty_factor = 0.0
+        self.onset_fraction = 0.0
         self.n_walls = 0
         self.wall_names: list[str] = []
         self.plate_axis = None
@@ -146,9 +147,11 @@ class SceneArrays:
             self.node_drive = np.full(self._n, -1, np.int64)
         return self.fix_mask
 
-    def add_plane(self, axis, sign, pos, move, T, ta, mode, hist_col, penalty_factor):
+    def add_plane(self, axis, sign, pos, move, T, ta, mode, hist_col, penalty_factor,
+                  onset_fraction=DEFAULT_ONSET_FRACTION):
         """Add a plane; ``move``, ``T``, ``ta``: its travel table (scalars for one entry, or
-        equal-length sequences, :func:`_kernels_boundary.path_travel`)."""
+        equal-length sequences, :func:`_kernels_boundary.path_travel`). The penalty factor and the
+        onset fraction are the scene's (the largest of its planes')."""
         self.pl_axis = np.append(self.pl_axis, axis).astype(np.int64)
         self.pl_sign = np.append(self.pl_sign, sign)
         self.pl_pos0 = np.append(self.pl_pos0, pos)
@@ -156,6 +159,7 @@ class SceneArrays:
         self.pl_mode = np.append(self.pl_mode, mode).astype(np.int64)
         self.pl_hist_col = np.append(self.pl_hist_col, hist_col).astype(np.int64)
         self.penalty_factor = max(self.penalty_factor, penalty_factor)
+        self.onset_fraction = max(self.onset_fraction, onset_fraction)
 
     def penalty_dt(self) -> float:
         """The step [s] the step-scaled penalties are chosen against
@@ -168,6 +172,13 @@ class SceneArrays:
         if self.pl_axis.size == 0:
             return np.zeros(0)
         return self.penalty_factor * self.model.mass * (2.0 / self.penalty_dt()) ** 2
+
+    def pen_onset(self) -> np.ndarray:
+        """Per-node onset length of the plane penalty, ``onset_fraction · r_i`` (m)
+        (:func:`fiberpipe.solver._kernels_boundary.plane_onset`)."""
+        if self.pl_axis.size == 0:
+            return np.zeros(0)
+        return self.onset_fraction * np.asarray(self.model.radius_node, dtype=np.float64)
 
 
 #: the effects a scene may list (``scene.effects``), by config name: one class each, added by
@@ -429,6 +440,8 @@ class Plates(Effect):
     hold_s : float, s — the hold at each turning point of ``path_m``.
     penalty_factor : float — plane penalty per node ``k_i = factor · m_i (2/Δt)²`` (default 0.1:
         raises the touching node's ω² by 10 % of the stability bound).
+    onset_fraction : float — the penalty's force and stiffness rise from zero over a penetration of
+        this fraction of the fiber radius (default 0.02, :func:`_kernels_boundary.plane_onset`).
 
     Outputs: ``plate_force`` (T, 2) N, positive when the fibers press the plate;
     ``plate_displacement`` (T, 2) m, travel of each plate towards the bundle.
@@ -444,6 +457,7 @@ class Plates(Effect):
     lower_position_m: float | None = None
     upper_position_m: float | None = None
     penalty_factor: float = DEFAULT_PENALTY_FACTOR
+    onset_fraction: float = DEFAULT_ONSET_FRACTION
     path_m: Sequence[float] | None = None
     hold_s: float = 0.0
     name = "plates"
@@ -464,8 +478,7 @@ class Plates(Effect):
         _ramp_code(self.ramp, "loading")
         if not 0.0 < self.ramp_fraction < 0.5:
             raise FiberpipeError(f"loading ramp_fraction must be in (0, 0.5), got {self.ramp_fraction}")
-        if not 0 < self.penalty_factor <= 0.25:
-            raise FiberpipeError(f"plates penalty_factor must be in (0, 0.25], got {self.penalty_factor}")
+        _check_plane_penalty("plates", self.penalty_factor, self.onset_fraction)
 
     def _move_time(self, du_m: float) -> float:
         if "moving" not in (self.lower, self.upper):
@@ -509,7 +522,7 @@ class Plates(Effect):
                    velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
                    lower_position_m=p.lower_position, upper_position_m=p.upper_position,
                    path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold),
-                   penalty_factor=float(p.penalty_factor))
+                   penalty_factor=float(p.penalty_factor), onset_fraction=float(p.onset_fraction))
 
     def setup(self, model, scene):
         ax = _AXES[self.axis]
@@ -524,7 +537,8 @@ class Plates(Effect):
             if state == "none":
                 continue
             move = u_end if state == "moving" else np.zeros_like(u_end)
-            scene.add_plane(ax, sign, pos, move, T, ta, mode, H_PLATE_FORCE + k, self.penalty_factor)
+            scene.add_plane(ax, sign, pos, move, T, ta, mode, H_PLATE_FORCE + k, self.penalty_factor,
+                            self.onset_fraction)
         scene.plate_axis = ax
         scene.end_time_hint = max(scene.end_time_hint, self.loading_time_s)
 
@@ -540,6 +554,14 @@ class Plates(Effect):
             raise FiberpipeError(
                 f"reverses at {far * 1e3:.4g} mm but the plates are {gap * 1e3:.4g} mm apart and {movers}: "
                 f"keep every entry below {gap / n_moving * 1e3:.4g} mm", where="scene.loading.path")
+
+
+def _check_plane_penalty(kind: str, penalty_factor: float, onset_fraction: float) -> None:
+    """The plane penalty's factor in (0, 0.25] and onset fraction in (0, 0.5]."""
+    if not 0 < penalty_factor <= 0.25:
+        raise FiberpipeError(f"{kind} penalty_factor must be in (0, 0.25], got {penalty_factor}")
+    if not 0 < onset_fraction <= 0.5:
+        raise FiberpipeError(f"{kind} onset_fraction must be in (0, 0.5], got {onset_fraction}")
 
 
 def _check_path(path_m: Sequence[float], hold_s: float) -> None:
@@ -569,9 +591,11 @@ class Walls(Effect):
 
     planes: dict = field(default_factory=dict)
     penalty_factor: float = DEFAULT_PENALTY_FACTOR
+    onset_fraction: float = DEFAULT_ONSET_FRACTION
     name = "walls"
 
     def __post_init__(self):
+        _check_plane_penalty("walls", self.penalty_factor, self.onset_fraction)
         out = {}
         for ax, pair in dict(self.planes).items():
             if ax not in _AXES:
@@ -586,12 +610,13 @@ class Walls(Effect):
     def from_config(cls, sc, model, cfg):
         w = sc.walls
         return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None},
-                   penalty_factor=float(w.penalty_factor))
+                   penalty_factor=float(w.penalty_factor), onset_fraction=float(w.onset_fraction))
 
     def setup(self, model, scene):
         for ax, (lo, hi) in self.planes.items():
             for sign, pos, tag in ((1.0, lo, "lo"), (-1.0, hi, "hi")):
-                scene.add_plane(_AXES[ax], sign, pos, 0.0, 1.0, 0.0, 0, H_WALL + scene.n_walls, self.penalty_factor)
+                scene.add_plane(_AXES[ax], sign, pos, 0.0, 1.0, 0.0, 0, H_WALL + scene.n_walls, self.penalty_factor,
+                                self.onset_fraction)
                 scene.n_walls += 1
                 scene.wall_names.append(f"{ax}_{tag}")
 

@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._kernels_boundary import PLANE_ONSET_M, plane_onset
+from ._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from .contact_state import PairRecords, PlaneFriction
 from .geometry import apply_pair_force, pair_nodes
 
@@ -225,7 +225,8 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     (:func:`plane_candidates`; the caller keeps them valid), not all N.
     Returns (the dissipated energy [J], the elastic energy of the tangential springs [J]).
     """
-    radius_node, k_pen, pl_axis, pl_sign, pl_pos = planes.radius_node, planes.k_pen, planes.axis, planes.sign, planes.pos
+    radius_node, k_pen, onset, pl_axis, pl_sign = planes.radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign
+    pl_pos = planes.pos
     pl_vel, hist, pl_tforce, cand_idx, cand_off = planes.vel, planes.hist, planes.tforce, planes.cand_idx, planes.cand_off
     diss = 0.0
     espring = 0.0
@@ -275,7 +276,7 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
                     hist[i, p, 1] = 0.0
                     hist[i, p, 2] = 0.0
                 hist[i, p, 3] = step
-            g, gp = plane_onset(d, PLANE_ONSET_M)
+            g, gp = plane_onset(d, onset[i])
             fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
             du0 = (v[i, 0] - pl_vel[p, 0]) * dt
             du1 = (v[i, 1] - pl_vel[p, 1]) * dt
@@ -292,12 +293,14 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     return diss, espring
 
 
-def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None):
+def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None,
+                          onset_fraction=DEFAULT_ONSET_FRACTION):
     """A :class:`PlaneFriction` for calling :func:`plane_friction` directly (tests, scripts); the
-    ramp fields are those of fixed planes at ``pos``."""
+    ramp fields are those of fixed planes at ``pos``, the onset ``onset_fraction`` of each radius."""
     P = len(axis)
     z = np.zeros(P)
-    return PlaneFriction(np.asarray(radius_node, float), np.asarray(k_pen, float), np.asarray(axis, np.int64),
+    radius_node = np.asarray(radius_node, float)
+    return PlaneFriction(radius_node, np.asarray(k_pen, float), onset_fraction * radius_node, np.asarray(axis, np.int64),
                          np.asarray(sign, float), np.asarray(pos, float).copy(), z, np.ones(P), z.copy(),
                          np.zeros(P, np.int64), np.asarray(pos, float), np.asarray(vel, float), hist, tforce,
                          np.zeros(0, np.int64) if cand_idx is None else np.asarray(cand_idx, np.int64),

@@ -182,7 +182,7 @@ def _plane_energy(sc: SceneArrays, x: np.ndarray) -> float:
         return 0.0
     n = x.shape[0]
     _, energy = plane_contacts(np.ascontiguousarray(x, dtype=np.float64), m_(sc.model.radius_node), sc.k_pen(),
-                               sc.pl_axis, sc.pl_sign, sc.pl_pos0, np.zeros((n, 3)), np.zeros(P),
+                               sc.pen_onset(), sc.pl_axis, sc.pl_sign, sc.pl_pos0, np.zeros((n, 3)), np.zeros(P),
                                np.zeros(n * P, np.int64), np.zeros(n * P))
     return float(energy)
 
@@ -231,6 +231,7 @@ class Integrator:
         self.mom = np.zeros((n, 3))
         self.strain_prev = np.zeros((model.n_elements, 6)) if sc.beta > 0 else np.zeros((0, 6))
         self.k_pen = sc.k_pen()
+        self.pen_onset = sc.pen_onset()
         P = sc.pl_axis.size
         self.pl_pos = sc.pl_pos0.copy()
         self.pl_force = np.zeros(P)
@@ -276,7 +277,7 @@ class Integrator:
         """The scene and work structures of the step loop (views of this integrator's arrays)."""
         sc = self.scene
         planes = PlaneArrays(sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode,
-                             sc.pl_hist_col, self.k_pen, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f)
+                             sc.pl_hist_col, self.k_pen, self.pen_onset, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f)
         drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
         scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes,
                             fixity_of(sc.fix_mask, self.model.n_nodes))

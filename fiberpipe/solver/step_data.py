@@ -66,6 +66,7 @@ class PlaneArrays(NamedTuple):
     mode: np.ndarray       # (P,) int64, ramp code (_kernels_boundary.RAMP_*)
     hist_col: np.ndarray   # (P,) int64, history column of the reaction (-1: none)
     k_pen: np.ndarray      # (N,) N/m, penalty stiffness per node (size 0 without planes)
+    onset: np.ndarray      # (N,) m, penalty onset length per node (_kernels_boundary.plane_onset)
     pos: np.ndarray        # (P,) m, out: position at t_n
     force: np.ndarray      # (P,) N, out: reaction, positive when pressed
     pen_idx: np.ndarray    # (N·P,) int64, out: node·3 + axis of each touching node
@@ -144,5 +145,5 @@ class StepControl(NamedTuple):
 def empty_planes(n_nodes: int) -> PlaneArrays:
     """A :class:`PlaneArrays` with no plane."""
     z, zi, z2 = np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 1))
-    return PlaneArrays(zi, z, z, z2, z2.copy(), z2.copy(), zi, zi, np.zeros(0), z.copy(), z.copy(), zi.copy(),
-                       z.copy())
+    return PlaneArrays(zi, z, z, z2, z2.copy(), z2.copy(), zi, zi, np.zeros(0), np.zeros(0), z.copy(), z.copy(),
+                       zi.copy(), z.copy())

@@ -494,10 +494,11 @@ def inclined_plate(case: str = "friction_inclined_slide", quick: bool = False) -
     p = s.plates
     plates = dict(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
                   upper_position_m=p.upper_position)
-    eff0 = [Gravity(gvec), Plates(**plates)]
-    dt, _ = choose_time_step(probe, eff0, s.settings())
-    # start at the static penetration of the plate penalty (k = 0.1 m (2/Δt)², same δ on every node)
-    d_s = plane_static_penetration(g * math.cos(th) / (0.1 * (2.0 / dt) ** 2))
+    plate = Plates(**plates)
+    dt, _ = choose_time_step(probe, [Gravity(gvec), plate], s.settings())
+    # start at the static penetration of the plate penalty (k = c m (2/Δt)², same δ on every node)
+    d_s = plane_static_penetration(g * math.cos(th) / (plate.penalty_factor * (2.0 / dt) ** 2),
+                                   plate.onset_fraction * float(probe.radius_node[0]))
     m = s.model(nodes_m=probe.nodes_m - np.array([0.0, 0.0, d_s]))
     eff = [Gravity(gvec), Plates(**plates), contact_hook(m, contact=False, friction=True, mu=mu)]
     T = s.end_time / 3 if quick else s.end_time

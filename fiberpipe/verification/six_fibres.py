@@ -14,13 +14,33 @@ import math
 
 import numpy as np
 
-from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, simulate
+from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, choose_time_step, simulate
+from ..solver._kernels_boundary import DEFAULT_ONSET_FRACTION
 from ..solver.effects import DEFAULT_PENALTY_FACTOR, LineLoad
 from .case_config import contact_hook
 
 RADIUS_M = 0.25e-3
 MATERIAL = Material(15e9, 1380.0, 0.3)
 GAP_M = 0.5e-6
+
+#: the laws the scene checks, as ``(name, keyword arguments of make_law)``: every built-in law, the
+#: crossed law at 90°, the linear law at 1e9 N/m² and the study's scaled-stiffness presets
+LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness": 1e9}),
+        ("hertz_crossed", {"phi_deg": 90.0}), ("scaled_stiffness", {"preset": "table1_phi6"}),
+        ("scaled_stiffness", {"preset": "table1_parallel"}), ("scaled_stiffness", {"preset": "table3_identified"})]
+
+
+def six_fibres_law(name, kw):
+    """The law as a config builds it: with the schema's blend length (the patch criterion)."""
+    from ..config import ContactConfig
+    from ..solver.laws import make_law
+
+    return make_law(name, E_pa=15e9, nu=0.3, blend_length_m=float(ContactConfig().blend_length), **kw)
+
+
+def law_label(name, kw) -> str:
+    """``name`` with its preset, angle or stiffness: ``scaled_stiffness table1_phi6``."""
+    return " ".join([name] + [str(v) if k == "preset" else f"{k}={v:g}" for k, v in kw.items()])
 
 
 def six_fibres(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
@@ -46,16 +66,25 @@ def six_fibres(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
 
 
 def six_fibres_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
-                   penalty_factor=DEFAULT_PENALTY_FACTOR):
+                   penalty_factor=DEFAULT_PENALTY_FACTOR, onset_fraction=DEFAULT_ONSET_FRACTION, steps=None):
     """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibres
-    (``penalty_factor``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`)."""
+    (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;
+    ``steps``: run that many steps instead of ``t_end_s``)."""
     m, pitch = six_fibres(lift_m=lift_m)
-    eff = [Loads([LineLoad(4, (0, 0, -q_n_per_m)), LineLoad(5, (0, 0, -q_n_per_m))]),
-           Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, penalty_factor=penalty_factor),
-           Walls({"y": (0.0, 4 * pitch + GAP_M)}, penalty_factor=penalty_factor),
-           contact_hook(m, law=law, formulation=formulation)]
-    return m, simulate(m, eff, SimulationSettings(end_time_s=t_end_s, output_frames=3, history_every=100,
-                                                  dt_safety=dt_safety))
+    planes = dict(penalty_factor=penalty_factor, onset_fraction=onset_fraction)
+
+    def effects():
+        return [Loads([LineLoad(4, (0, 0, -q_n_per_m)), LineLoad(5, (0, 0, -q_n_per_m))]),
+                Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, **planes),
+                Walls({"y": (0.0, 4 * pitch + GAP_M)}, **planes), contact_hook(m, law=law, formulation=formulation)]
+
+    settings = SimulationSettings(end_time_s=t_end_s, output_frames=3, history_every=100, dt_safety=dt_safety)
+    if steps is not None:
+        dt = choose_time_step(m, effects(), settings)[0]
+        settings = SimulationSettings(end_time_s=steps * dt, output_frames=3, history_every=max(1, steps // 400),
+                                      dt_safety=dt_safety)
+    eff = effects()
+    return m, simulate(m, eff, settings)
 
 
 def energy_excess(res) -> tuple[float, np.ndarray]:

@@ -156,10 +156,10 @@ def test_report_flags_energy_created_by_the_contact():
     assert _created({}) == "n/a"
 
 
-def test_report_names_the_plane_penalty_when_a_scene_with_planes_creates_energy():
+def test_report_names_the_plane_onset_when_a_scene_with_planes_creates_energy():
     from fiberpipe.post.report import _created
 
     s = {"contact_energy_created_J": 0.13, "contact_energy_created_over_external": 0.5}
-    assert "penalty_factor 0.05" in _created(s, planes=True) and "dt_safety 0.7" in _created(s, planes=True)
-    assert "penalty_factor" not in _created(s, planes=False)
-    assert "penalty_factor" not in _created({**s, "contact_energy_created_over_external": 0.01}, planes=True)
+    assert "onset_fraction" in _created(s, planes=True) and "dt_safety" in _created(s, planes=True)
+    assert "onset_fraction" not in _created(s, planes=False)
+    assert "onset_fraction" not in _created({**s, "contact_energy_created_over_external": 0.01}, planes=True)

@@ -11,50 +11,30 @@ load on the top two. With the potential formulation every law stays at or below 
 import numpy as np
 import pytest
 
-from fiberpipe.config import ContactConfig
 from fiberpipe.solver.laws import make_law
-from fiberpipe.verification.six_fibres import energy_excess, six_fibres_run
+from fiberpipe.verification.six_fibres import LAWS, energy_excess, six_fibres_law, six_fibres_run
 
 
-def _excess(law, q, formulation, t_end=2e-3, dt_safety=0.9, penalty_factor=0.1):
+def _excess(law, q, formulation):
     """max over the rows of (state energy − loads' work)/max|W|, and the kinetic energy per row."""
-    _, res = six_fibres_run(law, q, formulation=formulation, t_end_s=t_end, dt_safety=dt_safety,
-                            penalty_factor=penalty_factor)
+    _, res = six_fibres_run(law, q, formulation=formulation)
     return energy_excess(res)
 
 
-LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness": 1e9}),
-        ("hertz_crossed", {"phi_deg": 90.0}), ("scaled_stiffness", {"preset": "table1_phi6"}),
-        ("scaled_stiffness", {"preset": "table1_parallel"}), ("scaled_stiffness", {"preset": "table3_identified"})]
-
-
-def _law(name, kw):
-    """The law as a config builds it: with the schema's blend length (the patch criterion)."""
-    return make_law(name, E_pa=15e9, nu=0.3, blend_length_m=float(ContactConfig().blend_length), **kw)
-
-
-# at 300 N/m the plate and wall penalty of the default step (penalty_factor 0.1) gains up to 2.3 % of W
-# on some trajectories of this chaotic scene (table1_phi6, top fibres lifted by 0.5–2 nm; docs/contact.md,
-# the plane penalty): the fibre–fibre contact is checked there with the penalty that resolves it, 0.05
-# (measured ≤ −0.0005 on the same six trajectories)
-@pytest.mark.parametrize("q,penalty_factor", [(3.0, 0.1), (300.0, 0.05)])
+# measured at the default settings (dt_safety 0.9, plane penalty 0.1, onset 0.02 r), four seeds each:
+# ≤ +0.0000 of max|W| for every law at 3 and 30 N/m, ≤ −0.0000 at 300 N/m and ≤ −0.0001 at 1000 N/m
+# (docs/contact.md); a plane onset of 0.004 r made 1000 N/m gain 3–42 % of W here
+@pytest.mark.parametrize("q,lift_m", [(3.0, 0.0), (300.0, 0.0), (1000.0, 0.0), (1000.0, 1e-9)])
 @pytest.mark.parametrize("law_name,kw", LAWS)
-def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw, q, penalty_factor):
-    excess, ke = _excess(_law(law_name, kw), q, "potential", penalty_factor=penalty_factor)
+def test_six_fibres_create_no_energy_with_the_potential_formulation(law_name, kw, q, lift_m):
+    # two seeds of the chaotic 1000 N/m scene (lift_m: top fibres raised), where the sudden load rattles
+    # the fibres on the plate and the walls
+    _, res = six_fibres_run(six_fibres_law(law_name, kw), q, lift_m=lift_m)
+    excess, ke = energy_excess(res)
     assert excess < 0.01, excess
-    n = len(ke) // 4
-    assert np.max(ke[-n:]) < 2.0 * np.max(ke[:n]) + 1e-12  # no secular growth
-
-
-@pytest.mark.parametrize("lift_m", [0.0, 1e-9])
-@pytest.mark.parametrize("law_name,kw", LAWS)
-def test_six_fibres_create_no_energy_at_1000_n_per_m_on_a_converged_step(law_name, kw, lift_m):
-    # the sudden 1000 N/m load rattles the fibres on the plate and walls; at dt_safety 0.9 the stiff
-    # plane penalty gains up to 54 % of W here (docs/contact.md), at 0.45 nothing is created
-    # (measured ≤ 0 for every law on four seeds); two seeds of the chaotic scene (lift_m: top fibres raised)
-    _, res = six_fibres_run(_law(law_name, kw), 1000.0, dt_safety=0.45, lift_m=lift_m)
-    excess, _ = energy_excess(res)
-    assert excess < 0.01, excess
+    if q < 10.0:  # resting under a light load (at 300 and 1000 N/m the 2 ms span is the fall itself)
+        n = len(ke) // 4
+        assert np.max(ke[-n:]) < 2.0 * np.max(ke[:n]) + 1e-12  # no secular growth
 
 
 @pytest.mark.xfail(strict=True, reason="known defect of the point part: without the patch criterion the angle "
@@ -71,3 +51,15 @@ def test_six_fibres_create_no_energy_with_the_point_part_alone_at_300_n_per_m():
 def test_six_fibres_create_no_energy_with_the_legacy_hertz_oriented():
     excess, _ = _excess(make_law("hertz_oriented", E_pa=15e9, nu=0.3, blend_length_m=1e-3), 3.0, "legacy")
     assert excess < 0.01, excess
+
+
+def test_a_pressed_undamped_bundle_gains_no_kinetic_energy_over_1e5_steps():
+    """The six fibres resting under 30 N/m, undamped, for 1e5 steps: the state energy stays at or
+    below the loads' work, and the kinetic energy of the last eighth is no larger than that of the
+    second (the first is the fall onto the lower fibres). Measured: ratio 0.91, excess −0.0000."""
+    _, res = six_fibres_run(six_fibres_law("hertz_oriented", {}), 30.0, steps=100_000)
+    assert res.steps == 100_000
+    excess, ke = energy_excess(res)
+    assert excess < 0.01, excess
+    n = len(ke) // 8
+    assert np.mean(ke[-n:]) < 1.1 * np.mean(ke[n:2 * n]), (np.mean(ke[-n:]), np.mean(ke[n:2 * n]))

@@ -6,7 +6,7 @@ import pytest
 from fiberpipe.solver import laws as L
 from _contact_geometry import LE, R, all_pairs_between, assemble, fiber
 from fiberpipe.solver.contact import compute_contact
-from fiberpipe.solver._kernels_boundary import PLANE_ONSET_M, plane_onset
+from fiberpipe.solver._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from fiberpipe.solver.friction import friction_forces, plane_friction, plane_friction_arrays, remap_history
 
 MU, KT, DT = 0.2, 1e5, 1e-7
@@ -95,7 +95,7 @@ def test_plane_friction_stick_and_slip():
     x = np.array([[0.0, 0.0, R - 1e-6]])
     v = np.array([[1.0, 0.0, 0.0]])
     kpen = np.array([1e6])
-    g, gp = plane_onset(1e-6, PLANE_ONSET_M)  # the plane penalty's normal force k g g'
+    g, gp = plane_onset(1e-6, DEFAULT_ONSET_FRACTION * R)  # the plane penalty's normal force k g g'
     fn = 1e6 * g * gp
     args = (np.array([R]), kpen, np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
     hist = np.zeros((1, 1, 3))
