@@ -215,9 +215,11 @@ class CaseSetup:
         w = self._scene("walls")
         return {ax: tuple(float(v) for v in getattr(w, ax)) for ax in "xyz" if getattr(w, ax) is not None}
 
-    @property
-    def walls_penalty_factor(self) -> float:
-        return float(self._scene("walls").penalty_factor)
+    def plane_penalty(self, kind: str) -> dict:
+        """The config's plane penalty of ``kind`` ("plates" or "walls") as keyword arguments of
+        :class:`~fiberpipe.solver.Plates` / :class:`~fiberpipe.solver.Walls`."""
+        c = self._scene(kind)
+        return {"penalty_factor": float(c.penalty_factor), "onset_fraction": float(c.onset_fraction)}
 
     @property
     def drives(self):

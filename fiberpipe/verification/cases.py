@@ -273,7 +273,7 @@ def euler_buckling(quick: bool = False) -> Row:
     p = s.plates
     eff = [Clamps([Clamp(0, "start", "xy"), Clamp(0, "end", "xy")]),
            Plates(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=U, velocity_m_s=v, ramp="smoothstep",
-                  lower_position_m=p.lower_position, upper_position_m=p.upper_position),
+                  lower_position_m=p.lower_position, upper_position_m=p.upper_position, **s.plane_penalty("plates")),
            Damping(s.damping_alpha)]
     res = simulate(m, eff, s.settings())
     tf = res.frames_time

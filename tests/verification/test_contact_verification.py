@@ -24,6 +24,11 @@ def _check_informational(r):
         assert d["frames_contact_lost"] > d["frames"] // 2 and 0 < d["max_gap_m"] < 0.05 * 0.25e-3, (
             f"undamped rearrangement: beams 2/3 off beam 1 in {d['frames_contact_lost']}/{d['frames']} frames, "
             f"gap up to {d['max_gap_m'] * 1e6:.3g} µm (measured 55/61 frames, 6.1–6.2 µm)")
+    elif r.case.startswith("3-beam static α = 0") and "energy gained" in r.case:
+        gained = r.data["max_energy_gained"]
+        # measured: +0.49 % of W (quick, 6 mm beams), up to +1.3 % (full, q/2) at the default step,
+        # +0.09 % at dt_safety 0.45 (the sudden impact's step error)
+        assert gained < 0.02, f"undamped 3-beam case gains {100 * gained:.2f} % of W (measured ≤ 1.3 %) ({r.note})"
     elif r.case.startswith("3-beam static α = 0") and ": NF" in r.case:
         lo, hi = r.data["nf_over_ref"]
         mean = r.data["mean_nf_last_half_over_ref"]
