@@ -98,7 +98,7 @@ def kernel_times(state_path) -> dict:
     f = np.zeros((n, 3))
     pf, pi, pv = np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P)
     out["planes (plane_contacts, all nodes)"] = _best(lambda: plane_contacts(
-        x, m.radius_node, integ.k_pen, sc.pl_axis, sc.pl_sign, integ.pl_pos, f, pf, pi, pv), 2000)
+        x, m.radius_node, integ.k_pen, integ.pen_onset, sc.pl_axis, sc.pl_sign, integ.pl_pos, f, pf, pi, pv), 2000)
     data = sc.contact_data
     segs, prm = data.segs, data.params
     pl = data.lists[1]
