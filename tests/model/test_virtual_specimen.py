@@ -35,36 +35,62 @@ def _build(tmp_path, name, **specimen):
     return read_fibers(tmp_path / name / "fibers.h5"), info
 
 
-def test_specimen_is_deterministic_by_seed(tmp_path):
-    kw = dict(n_fibers=10, width="1.5 mm", volume_fraction=0.3, candidates=4)
-    a, _ = _build(tmp_path, "a", seed=3, **kw)
-    b, _ = _build(tmp_path, "b", seed=3, **kw)
-    c, _ = _build(tmp_path, "c", seed=4, **kw)
+SMALL = dict(n_fibers=10, width="1.5 mm", volume_fraction=0.3, candidates=4)
+
+
+@pytest.fixture(scope="module")
+def seed3(tmp_path_factory):
+    """The small specimen (10 fibers, 1.5 mm cassette, v_f0 = 30 %) of seed 3: (folder, fibers, info)."""
+    d = tmp_path_factory.mktemp("seed3")
+    fibers, info = _build(d, "a", seed=3, **SMALL)
+    return d / "a", fibers, info
+
+
+def test_specimen_is_deterministic_by_seed(tmp_path, seed3):
+    _, a, _ = seed3
+    b, _ = _build(tmp_path, "b", seed=3, **SMALL)
+    c, _ = _build(tmp_path, "c", seed=4, **SMALL)
     assert np.array_equal(a.points_m, b.points_m)
     assert not np.allclose(a.points_m, c.points_m)
 
 
-def test_study_specimen_fits_its_cassette_at_the_target_vf0(tmp_path):
-    """40 fibers of the study (Ø 0.5 mm, 15 mm, 3 mm cassette) at v_f0 = 37.7 %: four trial drops per
-    fiber make a pile denser than that, so it fits under the plate without settling."""
-    fibers, info = _build(tmp_path, "s", n_fibers=40, candidates=4, volume_fraction=0.377)
+def _check_fits_its_cassette(d, fibers, info, n, width, vf0, min_contacts):
+    """The specimen in folder ``d`` (n fibers of R, cassette ``width``) under its plate at ``vf0``,
+    without overlaps, inside the walls, its config ready to run."""
     h = info["height_m"]
-    assert h == pytest.approx(40 * math.pi * R**2 / (0.377 * 3e-3), rel=1e-12)
-    assert info["volume_fraction"] == pytest.approx(0.377, rel=0.005)
+    assert h == pytest.approx(n * math.pi * R**2 / (vf0 * width), rel=1e-12)
+    assert info["volume_fraction"] == pytest.approx(vf0, rel=0.005)
     # independently: Σ π r² × arc length over the box (tilted, bowed fibers are a little longer)
-    assert info["statistics"]["volume_fraction"] == pytest.approx(0.377, rel=0.005)
+    assert info["statistics"]["volume_fraction"] == pytest.approx(vf0, rel=0.005)
     pts = fibers.points_m
     assert np.max(pts[:, 1] + R) <= h and np.min(pts[:, 1] - R) >= 0
     assert info["statistics"]["max_outside_m"] <= 1e-9  # inside the walls
     assert info["statistics"]["min_gap_m"] >= 0.9e-6  # no overlaps: the 1 µm clearance
-    assert info["contacts_at_U0"]["fiber_fiber"] > 20
+    assert info["contacts_at_U0"]["fiber_fiber"] > min_contacts
     assert sum(info["phi_histogram_deg"]["counts"]) == info["statistics"]["neighbour_pairs"]
-    cfg = load_config(tmp_path / "s" / "config.yaml")  # ready to run
-    assert cfg.input.fibers == str((tmp_path / "s" / "fibers.h5").resolve())
+    cfg = load_config(d / "config.yaml")  # ready to run
+    assert cfg.input.fibers == str((d / "fibers.h5").resolve())
     assert cfg.scene.plates.upper_position == pytest.approx(h) and cfg.scene.plates.lower_position == 0
-    assert cfg.scene.walls.x == [-1.5e-3, 1.5e-3]
-    assert "specimen" not in yaml.safe_load((tmp_path / "s" / "config.yaml").read_text())
-    assert json.loads((tmp_path / "s" / "specimen.json").read_text())["height_m"] == h
+    assert cfg.scene.walls.x == [-width / 2, width / 2]
+    assert "specimen" not in yaml.safe_load((d / "config.yaml").read_text())
+    assert json.loads((d / "specimen.json").read_text())["height_m"] == h
+
+
+def test_specimen_fits_its_cassette_at_the_target_vf0(seed3):
+    """10 fibers in a 1.5 mm cassette at v_f0 = 30 %, four trial drops per fiber: the study
+    specimen's checks (test_study_specimen_fits_its_cassette_at_the_target_vf0, 40 fibers, slow)
+    on a specimen a quarter its size (measured: 15 fibre–fibre contacts at U = 0)."""
+    d, fibers, info = seed3
+    _check_fits_its_cassette(d, fibers, info, 10, 1.5e-3, 0.3, min_contacts=10)
+
+
+@pytest.mark.slow
+def test_study_specimen_fits_its_cassette_at_the_target_vf0(tmp_path):
+    """40 fibers of the study (Ø 0.5 mm, 15 mm, 3 mm cassette) at v_f0 = 37.7 %: four trial drops per
+    fiber make a pile denser than that, so it fits under the plate without settling (≈ 20 s; the
+    default suite checks the same on 10 fibers: test_specimen_fits_its_cassette_at_the_target_vf0)."""
+    fibers, info = _build(tmp_path, "s", n_fibers=40, candidates=4, volume_fraction=0.377)
+    _check_fits_its_cassette(tmp_path / "s", fibers, info, 40, 3e-3, 0.377, min_contacts=20)
 
 
 @pytest.mark.parametrize("plane, on, off", [("flat", "xz", "yz"), ("upright", "yz", "xz")])
