@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fiberpipe.model.specimen import cassette_specimen
 
 R = 0.25e-3
 SCRIPT = Path(__file__).resolve().parents[2] / "data-samples" / "make_paper40.py"
@@ -22,10 +21,8 @@ def _make_paper40():
 
 
 @pytest.fixture(scope="module")
-def small():
-    return cassette_specimen(n_fibers=12, width_m=1.5e-3, length_m=6e-3, points_per_fiber=25, seed=1,
-                             placement="deposit", tilt_rad=float(np.deg2rad(6.0) / np.sqrt(np.pi)),
-                             curvature_per_m=0.384, candidates=2, top="pile")
+def small(small_deposit):
+    return small_deposit  # tests/model/conftest.py: the deposit tests' pile
 
 
 def test_settle_pile_is_deterministic_and_puts_the_plate_on_the_settled_top(small):

@@ -46,9 +46,8 @@ def _supports(pts, z_tol=0.3e-3, touch=GAP + 0.1e-6):
 
 
 @pytest.fixture(scope="module")
-def small():
-    return cassette_specimen(n_fibers=12, width_m=1.5e-3, length_m=6e-3, points_per_fiber=25, seed=1,
-                             placement="deposit", tilt_rad=SIGMA, curvature_per_m=0.384, candidates=2, top="pile")
+def small(small_deposit):
+    return small_deposit  # tests/model/conftest.py: n_fibers=12, seed=1, tilt SIGMA, candidates=2, top="pile"
 
 
 def test_small_deposit_is_a_supported_pile_without_overlaps(small):
