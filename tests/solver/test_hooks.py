@@ -6,16 +6,10 @@ from numba import njit
 
 from fiberpipe.errors import FiberpipeError
 from fiberpipe.solver import ContactHook, Damping, Material, SimulationSettings, build_model, simulate
-from fiberpipe.solver.layout import ACC_PW
+
+from _hooks import lift  # f[:, 2] += data[0][0], its work booked; data[0][1] contacts
 
 MAT = Material(15e9, 1380.0, 0.3)
-
-
-@njit(cache=True)
-def _lift(x, q, v, w, f, mom, acc, t, dt, data):
-    f[:, 2] += data[0][0]
-    acc[ACC_PW] += data[0][0] * np.sum(v[:, 2]) * dt  # a hook adding into f books its own work
-    return 1
 
 
 @njit(cache=True)
@@ -36,7 +30,7 @@ def _model():
 
 def test_a_hook_writing_its_own_array_moves_the_fiber_as_one_adding_into_f():
     m = _model()
-    a = simulate(m, [ContactHook(_lift, (np.array([1e-4]),)), Damping(1e3)],
+    a = simulate(m, [ContactHook(lift, (np.array([1e-4, 1.0]),)), Damping(1e3)],
                  SimulationSettings(end_time_s=1e-4, output_frames=2))
     own = ContactHook(_own_array_lift, (np.array([1e-4]), np.zeros((m.n_nodes, 3))), forces_of=_own_forces)
     b = simulate(m, [own, Damping(1e3)], SimulationSettings(end_time_s=1e-4, output_frames=2))
@@ -49,8 +43,8 @@ def test_a_hook_writing_its_own_array_moves_the_fiber_as_one_adding_into_f():
 
 def test_a_second_hook_is_refused():
     m = _model()
-    one = ContactHook(_lift, (np.array([1e-4]),))
-    two = ContactHook(_lift, (np.array([1e-4]),))
+    one = ContactHook(lift, (np.array([1e-4, 1.0]),))
+    two = ContactHook(lift, (np.array([1e-4, 1.0]),))
     two.name = "second"
     with pytest.raises(FiberpipeError, match="two contact hooks"):
         simulate(m, [one, two], SimulationSettings(end_time_s=1e-5, output_frames=2))
@@ -71,5 +65,5 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     integ = Integrator(m, [hook], 1e-8, threads=threads)
     expect = contact_step_potential_threads if threads > 1 else contact_step_potential
     assert integ._loop is step_loop_for(expect, contact_forces_of, threads, hook.cache_name)
-    plain = Integrator(m, [ContactHook(_lift, (np.array([1e-4]),))], 1e-8, threads=threads)
-    assert plain._loop is step_loop_for(_lift, threads=threads)
+    plain = Integrator(m, [ContactHook(lift, (np.array([1e-4, 1.0]),))], 1e-8, threads=threads)
+    assert plain._loop is step_loop_for(lift, threads=threads)
