@@ -366,14 +366,16 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     return n_active
 
 
-# Without reference counts (``_nrt=False``; it allocates nothing, and it is called only from jitted
-# code: no Python wrapper, which would need them to unbox the typed lists): numba takes and releases
-# a reference, an atomic count, to every array of a structure it hands to an inlined function, and
-# the hook's helpers take the whole ContactData (some fifty arrays). On paper-40 this halves the
-# hook's counts per step (≈ 1170 to ≈ 540) and saves ≈ 3 µs a step. contact_step keeps them: it
-# allocates (the offsets, a rebuild) and reads the typed lists.
+# The potential formulation's copy runs without reference counts (``_nrt=False``; it allocates
+# nothing, and it is called only from jitted code: no Python wrapper, which would need them to unbox
+# the typed lists): numba takes and releases a reference, an atomic count, to every array of a
+# structure it hands to an inlined function, and the hook's helpers take the whole ContactData (some
+# fifty arrays). On paper-40 this halves the hook's counts per step (≈ 1170 to ≈ 540) and saves ≈ 3 µs
+# a step. contact_step keeps them: it allocates (the offsets, a rebuild) and reads the typed lists. So
+# does the legacy formulation's copy: a function compiled from one without counts inherits that
+# unless it sets its own, and the legacy kernels allocate (the potential ones set ``_nrt=True``).
 _NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)
-_step_forces_pass = njit(cache=True, fastmath=True, error_model="numpy", **_NO_COUNTS)(_step_forces)
+_step_forces_pass = njit(**_FLAGS)(_step_forces)
 
 
 class ContactSetup:
@@ -484,11 +486,12 @@ def _potential_pass(forces, tag: str):
                       inline="always", **_SPEC)
 
 
-def _step_with(normal_pass, tag: str, overlaps):
+def _step_with(normal_pass, tag: str, overlaps, counts: bool = False):
     """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass and ``overlaps`` recording
-    the initial overlaps (not cached)."""
+    the initial overlaps (not cached); ``counts``: its forces part with reference counts (the legacy
+    formulation)."""
     forces = specialise(_step_forces, f"_step_forces_{tag}", {"_normal_forces": normal_pass}, cache=False,
-                        **_NO_COUNTS, **_SPEC)
+                        **({} if counts else _NO_COUNTS), **_SPEC)
     return specialise(contact_step, f"contact_step_{tag}",
                       {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, **_SPEC)
 
@@ -531,7 +534,7 @@ def contact_kernel_for(law, formulation: str = "potential", threads: bool = Fals
         if threads:
             tag += "_threads"
             nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
-        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps)
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, counts=formulation != "potential")
     return _CUSTOM_KERNELS[key], None
 
 

@@ -518,7 +518,7 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
                          reach, n_look, compact, _pass_work(0, 1, gxi.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _pass_work(n_rows, n_tasks, n_gauss):
     """Scratch arrays of :func:`_pairs_pass`: ``n_rows`` result rows, energies and outcomes kept for the
     merge after the tasks (0: one row, reused; the serial pass merges each pair at once), and per task
@@ -536,15 +536,17 @@ _THREADS = False
 # per Gauss point, and LLVM removes only the pairs whose release post-dominates the take. On
 # paper-40's saved states the pass costs 30 / 73 µs instead of 61 / 178 µs (early / compacted). The
 # two calls stay calls: the serial and the threaded pass then run the same code for them, and their
-# results stay equal bit for bit.
+# results stay equal bit for bit. A function compiled from one without reference counts inherits
+# that unless it sets its own (numba's ``nrt`` flag), so every kernel here that allocates, or calls a
+# law's own functions, sets ``_nrt=True``.
 _pairs_serial = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_pairs_pass)
 # Not cached (a parfor kernel linked into a step loop compiled in another process: see
 # _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it
 _pairs_tasks = specialise(_pairs_pass, "_pairs_tasks", {"_THREADS": True}, cache=False, fastmath=True,
-                          error_model="numpy", parallel=True)
-contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy")(_contact_forces_pot)
+                          error_model="numpy", parallel=True, _nrt=True)
+contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy", _nrt=True)(_contact_forces_pot)
 contact_forces_pot_threads = specialise(_contact_forces_pot, "contact_forces_pot_threads", {"_THREADS": True},
-                                        cache=False, fastmath=True, error_model="numpy")
+                                        cache=False, fastmath=True, error_model="numpy", _nrt=True)
 
 
 _LAW_KERNELS: dict = {}
@@ -563,16 +565,16 @@ def potential_kernels_for(law, threads: bool = False):
         line, point, weight_point = law.kernels
         tag = type(law).__name__
         flags = dict(fastmath=True, error_model="numpy")
-        loads = specialise(_line_loads, f"_line_loads_{tag}", {"law_line": line}, cache=False, **flags)
+        loads = specialise(_line_loads, f"_line_loads_{tag}", {"law_line": line}, cache=False, _nrt=True, **flags)
         lh = specialise(_line_part, f"_line_part_{tag}", {"_line_loads": loads}, cache=False, _nrt=False, **flags)
         blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
-                           {"law_weight_point": weight_point, "law_point": point}, cache=False, **flags)
+                           {"law_weight_point": weight_point, "law_point": point}, cache=False, _nrt=True, **flags)
         calls = {"_line_part": lh, "_pair_blend_point": blend}
         passes = {"_pairs_serial": specialise(_pairs_pass, f"_pairs_serial_{tag}", calls, cache=False, _nrt=False,
                                               **flags)}
         if threads:
             passes["_pairs_tasks"] = specialise(_pairs_pass, f"_pairs_tasks_{tag}", {**calls, "_THREADS": True},
-                                                cache=False, parallel=True, **flags)
+                                                cache=False, parallel=True, _nrt=True, **flags)
         _LAW_KERNELS[key] = specialise(_contact_forces_pot, f"contact_forces_pot{'_threads' if threads else ''}_{tag}",
-                                       {**passes, "_THREADS": bool(threads)}, cache=False, **flags)
+                                       {**passes, "_THREADS": bool(threads)}, cache=False, _nrt=True, **flags)
     return _LAW_KERNELS[key]
