@@ -377,7 +377,7 @@ _PAIR_TASKS = 8
 
 
 def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off, reach,
-                n_look, compact, work):
+                n_look, work):
     """The pairs of the look list (:func:`_look_list`) of :func:`contact_forces_pot`: one task
     (``_THREADS`` False), or ``prange`` tasks of consecutive pairs, merged after them in order.
     ``work``: the pass's scratch arrays (:func:`_pass_work`), one set per task."""
@@ -392,6 +392,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     look = out.active
     c_gap = out.gap
     use_gap = c_gap.shape[0] > 0
+    compact = use_gap and use_list  # _look_list's test: the look list is at the front of out.active
     use_off = c_off.shape[0] > 0
     rows, e_pair, outcomes, t_rec, t_geo, t_blk, t_gbuf = work
     energy = 0.0
@@ -509,13 +510,13 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
     ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
     (``solver.threads`` > 1) in ``prange`` tasks once there are pairs for two, with the same
     forces, records and energy bit for bit."""
-    n_look, compact = _look_list(out, n_pairs, reach)
+    n_look = _look_list(out, n_pairs, reach)[0]
     if _THREADS and n_look >= 2 * PAIR_TASK_MIN:
         work = _pass_work(n_look, max(1, min(_PAIR_TASKS, n_look // PAIR_TASK_MIN)), gxi.shape[0])
         return _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
-                            c_off, reach, n_look, compact, work)
+                            c_off, reach, n_look, work)
     return _pairs_serial(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
-                         reach, n_look, compact, _pass_work(0, 1, gxi.shape[0]))
+                         reach, n_look, _pass_work(0, 1, gxi.shape[0]))
 
 
 @njit(cache=True, _nrt=True)
