@@ -24,7 +24,8 @@ def state_total(energy: dict[str, np.ndarray]) -> np.ndarray:
     """E = K + SE + E_contact + VD + FD − WK over time, J, (T,), from state functions: the stored
     contact energy (``contact_stored``) instead of the booked contact work ALLPW and the leapfrog's
     kinetic term ½ v_{n−½}·M v_{n+½} (``kinetic_leapfrog``, which central differences conserve
-    exactly for a quadratic potential; ALLKE exceeds it by ¼Δt² Σ|f|²/m), so E stays
+    exactly for a quadratic potential; ALLKE exceeds it by ¼Δt² Σ|f|²/m) with the damping booked in
+    step with it (``damping_leapfrog``, where the history has it), so E stays
     constant only if the contact creates no energy. A history without ``contact_stored`` (written
     before it existed) gives Abaqus' ETOTAL = KE + SE + VD + FD − WK − PW, which closes whatever the
     contact does."""
@@ -32,7 +33,8 @@ def state_total(energy: dict[str, np.ndarray]) -> np.ndarray:
     g = lambda k: np.asarray(energy.get(k, z), dtype=float)  # noqa: E731
     if "contact_stored" in energy:
         ke = g("kinetic_leapfrog") if "kinetic_leapfrog" in energy else g("kinetic")
-        return ke + g("strain") + g("contact_stored") + g("damping") + g("friction") - g("external")
+        vd = g("damping_leapfrog") if "damping_leapfrog" in energy and "kinetic_leapfrog" in energy else g("damping")
+        return ke + g("strain") + g("contact_stored") + vd + g("friction") - g("external")
     return g("kinetic") + g("strain") + g("damping") + g("friction") - g("external") - g("contact")
 
 

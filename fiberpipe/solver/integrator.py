@@ -25,7 +25,7 @@ from ._kernels_beam import EB_SIZE, beam_forces, new_element_forces, node_beams
 from ._kernels_boundary import plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
-from .layout import (ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_VD_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
@@ -33,7 +33,7 @@ from .step_data import DriveArrays, Fixity, ModelArrays, PlaneArrays, SceneKerne
 from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
-                "kinetic_leapfrog", "total", "residual")
+                "kinetic_leapfrog", "damping_leapfrog", "total", "residual")
 
 
 def m_(a, dtype=np.float64) -> np.ndarray:
@@ -119,8 +119,10 @@ class SimulationResult:
         (J; ``contact_stored`` the stored contact energy at t (plane penalties, fiber–fiber penalties
         and tangential springs), ``total`` Abaqus' ETOTAL with the booked ALLPW; ``residual`` is
         (E − E₀)/max(|ALLWK|, ALLSE + ALLKE) so far with the state functions
-        E = K_lf + ALLSE + contact_stored + ALLVD + ALLFD − ALLWK, dimensionless; ``kinetic_leapfrog``
-        K_lf = ½ v_{n−½}·M v_{n+½}, the kinetic term central differences conserve).
+        E = K_lf + ALLSE + contact_stored + ALLVD_lf + ALLFD − ALLWK, dimensionless; ``kinetic_leapfrog``
+        K_lf = ½ v_{n−½}·M v_{n+½}, the kinetic term central differences conserve; ``damping_leapfrog``
+        ALLVD_lf, the mass damping's dissipation in step with K_lf, which differs from ALLVD by less
+        than one step's).
     dt_s, steps, elements, wall_time_s, effects (names), timestep (TimeStepReport),
     final_state (State), completed (False for the partial result of a diverged run),
     wall_names (labels of the wall columns), warnings (what the effects' looks between chunks found,
@@ -441,13 +443,15 @@ def _residual_start(state: State, ke0: float, se0: float) -> float:
 
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
     h = hist[:n_rows]
-    KE, SE, VD, WK, PW, FD, ST, KL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF))
+    KE, SE, VD, WK, PW, FD, ST, KL, VL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF,
+                                                            H_VD_LF))
     # Abaqus' ETOTAL books the contact forces' work (ALLPW), so it closes whatever the contact does;
     # the residual uses the stored contact energy instead, a state function, so it shows energy
     # that no load supplied
     total = KE + SE + VD + FD - WK - PW
-    # with the leapfrog's own kinetic term, which the scheme conserves exactly for a quadratic potential
-    state_total = KL + SE + ST + VD + FD - WK
+    # with the leapfrog's own kinetic term, which the scheme conserves exactly for a quadratic potential,
+    # and the damping booked in step with it (_kernels_integrate.write_history)
+    state_total = KL + SE + ST + VL + FD - WK
     # over the run's largest external work or mechanical energy (not the running one: early rows, with
     # almost nothing moved yet, would divide by almost nothing)
     scale = max(float(np.max(np.maximum(np.abs(WK), SE + KE))) if n_rows else 0.0, 1e-300)
@@ -462,7 +466,7 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
         "energy/external": WK.copy(), "energy/contact": PW.copy(), "energy/friction": FD.copy(),
         # the friction forces' work on the fibers (part of ALLPW): ALLPW − ALLFD − this is the normal forces'
         "energy/friction_work": h[:, H_WF].copy(),
-        "energy/contact_stored": ST.copy(), "energy/kinetic_leapfrog": KL.copy(),
+        "energy/contact_stored": ST.copy(), "energy/kinetic_leapfrog": KL.copy(), "energy/damping_leapfrog": VL.copy(),
         "energy/total": total, "energy/residual": (state_total - e0) / scale,
     }
     return out

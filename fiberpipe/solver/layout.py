@@ -34,7 +34,8 @@ H_WF = 12          # work of the friction forces on the fibers (ACC_WF), J
 H_STORED = 13      # stored contact energy at t_n (ACC_STORED), J
 H_KE_LF = 14       # ½ v_{n−½}·M v_{n+½} + rotations, the kinetic term central differences conserve, J
 H_SEGMENT = 15     # the entry of scene.loading.path the plates are in (0 for the one-segment loading; a hold counts with the move before it)
-H_WALL = 16        # one column per wall plane from here on, N (the fixed slots above come first)
+H_VD_LF = 16       # the damping dissipation in step with H_KE_LF (ALLVD to t_{n−1} + ½αΔt v_{n−½}·M v̄_n), J
+H_WALL = 17        # one column per wall plane from here on, N (the fixed slots above come first)
 
 # node fixity bits (SceneArrays.fix_mask)
 FIX_X = 1

@@ -14,8 +14,9 @@ import math
 
 import numpy as np
 
-from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, choose_time_step, simulate
+from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, choose_time_step
 from ..solver._kernels_boundary import DEFAULT_ONSET_FRACTION
+from .energy_residual import simulate
 from ..solver.effects import DEFAULT_PENALTY_FACTOR, LineLoad
 from .case_config import contact_hook
 

@@ -98,10 +98,28 @@ def test_table_marks_informational_rows_and_exit_status_ignores_them(monkeypatch
             Row("departs", 1.0, 1.02, 0.02, 0.05, must_exceed=True, informational=True, note="2 % only")]
     assert rows[0].passed and not rows[1].passed
     assert Row("departs", 1.0, 1.1, 0.1, 0.05, must_exceed=True).passed
-    monkeypatch.setattr(vm, "run_all", lambda quick=False, only=None: rows)
+    monkeypatch.setattr(vm, "run_all", lambda quick=False, only=None, residuals=None: rows)
     assert vm.main([]) == 0
     out = capsys.readouterr().out
     assert "NOT REPRODUCED (info)" in out and "> 5 %" in out and "2 % only" in out
     assert "1/1 passed; informational (not counted): 1 row, 1 not reproduced" in out
     rows.append(Row("broken", 1.0, 2.0, 1.0, 0.01))
     assert vm.main([]) == 1
+
+
+def test_parallel_contact_closes_its_state_function_balance_within_1e_3():
+    """The suddenly pressed pair under α Δt = 0.16: its residual is the step's slow drift (2.5e-4),
+    not the O(αΔt) swing a damping booked out of step with the leapfrog term leaves (1.7e-3)."""
+    from fiberpipe.verification.energy_residual import recording
+
+    with recording() as runs:
+        CONTACT_CASES["contact_parallel"](quick=True)
+    assert len(runs) == 1 and runs[0] < 1e-3, runs
+
+
+def test_residual_table_flags_the_runs_above_the_tolerance():
+    from fiberpipe.verification.energy_residual import format_residuals
+
+    text = format_residuals({"a": [1e-5, 2e-3], "b": [1e-4], "c": []})
+    assert "| a | 2 | 1e-05, 0.002 | 1 of 2 |" in text and "| b | 1 | 0.0001 | yes |" in text
+    assert "| c |" not in text
