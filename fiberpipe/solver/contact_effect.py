@@ -41,7 +41,7 @@ from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
-from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments,
+from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
 from .geometry import pair_gap
@@ -55,9 +55,10 @@ OVERLAP_MIN_FRACTION = 0.05        # initial penetrations below 5 % of the small
                                    # (pressed set-ups, verification cases): no offset
 
 _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
+_NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)  # see _step_forces_pass below
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def _rebuild(x, data):
     """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
     history and the initial-overlap offsets, swap."""
@@ -303,14 +304,14 @@ def contact_forces_of(data):
     return data.fc
 
 
-@njit(**_FLAGS)
+@njit(**_FLAGS, **_NO_COUNTS)
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring.
 
     It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`),
     which the step loop applies (a hook that wraps this one must add that array to ``f`` itself).
     """
-    prm, st, segs = data.params, data.stats, data.segs
+    prm, st = data.params, data.stats
     calls = st.calls[0]
     st.calls[0] = calls + 1
     P = data.planes.axis.shape[0]
@@ -330,6 +331,18 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
     # (contact_forces_ex, records.gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * st.path_m[0]
+    if st.overlaps_done[0] == 0 or st.offset_max_m[0] > 0.0:
+        return _first_steps_pass(x, v, acc, t, dt, data, calls, plane_fric, reach)
+    # no offsets: an empty array (a view, not an allocation), as _overlap_offsets returns then; the
+    # list in use and the records read without a reference (borrowed_item): the lists hold them
+    return _step_forces_pass(x, v, acc, dt, data, borrowed_item(data.lists, 0), borrowed_item(data.records, 0),
+                             st.path_m[:0], 0.0, 0.0, reach, calls, plane_fric)
+
+
+def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
+    """The rest of :func:`contact_step` while the initial overlaps are recorded (first call) or
+    released (offsets > 0): with reference counts, as it allocates the offsets."""
+    st = data.stats
     if st.overlaps_done[0] == 0:
         st.overlaps_done[0] = 1
         _record_initial_overlaps(x, data, reach)
@@ -366,16 +379,16 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     return n_active
 
 
-# The potential formulation's copy runs without reference counts (``_nrt=False``; it allocates
-# nothing, and it is called only from jitted code: no Python wrapper, which would need them to unbox
-# the typed lists): numba takes and releases a reference, an atomic count, to every array of a
-# structure it hands to an inlined function, and the hook's helpers take the whole ContactData (some
-# fifty arrays). On paper-40 this halves the hook's counts per step (≈ 1170 to ≈ 540) and saves ≈ 3 µs
-# a step. contact_step keeps them: it allocates (the offsets, a rebuild) and reads the typed lists. So
-# does the legacy formulation's copy: a function compiled from one without counts inherits that
-# unless it sets its own, and the legacy kernels allocate (the potential ones set ``_nrt=True``).
-_NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)
-_step_forces_pass = njit(**_FLAGS)(_step_forces)
+# contact_step and the potential formulation's normal pass, friction and statistics (_step_forces)
+# run without reference counts (``_nrt=False``; numba takes and releases a reference, an atomic count,
+# to every array of a structure it binds or hands to an inlined function, and the hook's functions
+# take the whole ContactData, some fifty arrays). They allocate nothing and are called only from
+# jitted code (no Python wrapper, which would need the counts to unbox the typed lists). The
+# functions that allocate set ``_nrt=True`` (a function compiled from one without counts inherits
+# that unless it sets its own): _rebuild, _first_steps (the offsets), the legacy formulation's
+# _step_forces (its kernels allocate) and the potential pass.
+_step_forces_pass = njit(**_FLAGS, _nrt=True)(_step_forces)
+_first_steps_pass = njit(**_FLAGS, _nrt=True)(_first_steps)
 
 
 class ContactSetup:
@@ -471,10 +484,14 @@ _record_initial_overlaps_potential = specialise(
 _step_forces_potential = specialise(_step_forces, "_step_forces_potential",
                                     {"_normal_forces": _normal_forces_potential}, cache=True, fastmath=True,
                                     error_model="numpy", **_NO_COUNTS)
+_first_steps_potential = specialise(
+    _first_steps, "_first_steps_potential",
+    {"_step_forces_pass": _step_forces_potential, "_record_initial_overlaps": _record_initial_overlaps_potential},
+    cache=True, fastmath=True, error_model="numpy", _nrt=True)
 contact_step_potential = specialise(
     contact_step, "contact_step_potential",
-    {"_step_forces_pass": _step_forces_potential, "_record_initial_overlaps": _record_initial_overlaps_potential},
-    cache=True, fastmath=True, error_model="numpy")
+    {"_step_forces_pass": _step_forces_potential, "_first_steps_pass": _first_steps_potential},
+    cache=True, fastmath=True, error_model="numpy", **_NO_COUNTS)
 
 
 _SPEC = dict(fastmath=True, error_model="numpy")
@@ -491,9 +508,12 @@ def _step_with(normal_pass, tag: str, overlaps, counts: bool = False):
     the initial overlaps (not cached); ``counts``: its forces part with reference counts (the legacy
     formulation)."""
     forces = specialise(_step_forces, f"_step_forces_{tag}", {"_normal_forces": normal_pass}, cache=False,
-                        **({} if counts else _NO_COUNTS), **_SPEC)
-    return specialise(contact_step, f"contact_step_{tag}",
-                      {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, **_SPEC)
+                        **(dict(_nrt=True) if counts else _NO_COUNTS), **_SPEC)
+    first = specialise(_first_steps, f"_first_steps_{tag}",
+                       {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, _nrt=True,
+                       **_SPEC)
+    return specialise(contact_step, f"contact_step_{tag}", {"_step_forces_pass": forces, "_first_steps_pass": first},
+                      cache=False, **_NO_COUNTS, **_SPEC)
 
 
 # solver.threads > 1 with the built-in laws and the potential formulation: the pairs in prange tasks

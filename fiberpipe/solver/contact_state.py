@@ -23,7 +23,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 
 class ContactParams(NamedTuple):
@@ -152,3 +155,29 @@ def new_records(capacity):
     return PairRecords(np.zeros(capacity), np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity),
                        np.zeros(capacity), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
                        np.zeros(capacity), np.zeros(capacity, np.int64))
+
+
+@intrinsic
+def borrowed_item(typingctx, lst, index):
+    """``lst[index]`` of a numba typed list without taking a reference to the item, for a kernel
+    compiled without reference counts (``_nrt=False``), where numba's ``lst[index]`` does not compile
+    (it takes one). The item is valid while the list holds it: read it only until the list's entry
+    is replaced. No bounds check: ``index`` must be within the list.
+
+    It reads the list as numba's own item access does (``numba.typed.listobject``): the C list's item
+    buffer (``numba_list_base_ptr``), the item's data model at ``index``, without the reference.
+    """
+    if not isinstance(lst, types.ListType) or not isinstance(index, types.Integer):
+        return None
+    item_ty = lst.item_type
+
+    def codegen(context, builder, sig, args):
+        l, idx = args
+        voidptr = ir.IntType(8).as_pointer()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(voidptr, [voidptr]),
+                                            "numba_list_base_ptr")
+        lp = cgutils.create_struct_proxy(sig.args[0])(context, builder, value=l).data
+        base = builder.bitcast(builder.call(fn, [lp]), context.get_data_type(item_ty).as_pointer())
+        return context.data_model_manager[item_ty].load_from_data_pointer(builder, cgutils.gep(builder, base, idx))
+
+    return item_ty(lst, index), codegen

@@ -57,7 +57,9 @@ def max_displacement2_speed2(x, x_ref, v):
     return m, vm
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+# _nrt=True: it allocates (its empty v), and the contact hook that calls it runs without reference
+# counts, which a callee inherits unless it sets its own
+@njit(cache=True, fastmath=True, error_model="numpy", _nrt=True)
 def max_displacement2(x, x_ref):
     """Largest squared distance [m²] of a node from ``x_ref`` (the positions at the last build)."""
     return max_displacement2_speed2(x, x_ref, np.empty((0, 3)))[0]
