@@ -567,7 +567,10 @@ def _beam_pass_nodes(x, q, model, work):
 # pass takes 70, 67, 78 and 84 µs with 2, 4, 16 and 64 tasks (serial: 110 µs)
 PARALLEL_CHUNKS = 4
 _PARALLEL = False
-beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy")(_beam_pass_nodes)
+# the serial copy runs without reference counts (``_nrt=False``; it allocates nothing): numba takes and
+# releases a reference, an atomic count, for each view it makes of the state and of model.beams (≈ 46
+# a step on paper-40); the parallel copy keeps them, it allocates the tasks' sums
+beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_beam_pass_nodes)
 # Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
 # compiled in another process makes that loop's own cache entry crash when it is loaded (numba
 # 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2, load it
