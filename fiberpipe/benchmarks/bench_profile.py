@@ -77,6 +77,7 @@ def kernel_times(state_path) -> dict:
     from fiberpipe.solver.contact import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
     from fiberpipe.solver.contact_state import new_records
+    from fiberpipe.solver.friction import friction_forces_ex, plane_friction
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.solver.neighbours import build_pairs, max_displacement2_speed2
 
@@ -117,6 +118,14 @@ def kernel_times(state_path) -> dict:
     out["contact, every candidate evaluated (contact_forces_pot)"] = _best(lambda: contact_forces_pot(
         x, segs.nodes, segs.radius, segs.arc, pairs, npairs, prm.law_id, prm.law_params, gxi, gw, prm.onset_m, f,
         recs, none, 0.0), 500)
+    # the friction kernels of the step on its pairs in contact and plane candidates (the records and
+    # histories of the state's last step; each call restarts the histories it visits, as a contact
+    # that opened would: the same work per call)
+    rec, n_act, calls = data.records[0], int(data.stats.n_active[0]), int(data.stats.calls[0])
+    out["friction, fiber–fiber (friction_forces_ex, pairs in contact)"] = _best(lambda: friction_forces_ex(
+        v, segs.nodes, pairs, npairs, rec, prm.mu, prm.kt_n_per_m, dt, data.lists[0].friction, f, n_act, calls), 2000)
+    out["friction, plates and walls (plane_friction, candidate nodes)"] = _best(lambda: plane_friction(
+        x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, f, calls, True), 2000)
     out["_candidates"] = npairs
     out["_in_contact"] = int(res[1])
     out["_elements"] = model.n_elements
