@@ -1,8 +1,9 @@
 """Fiber–fiber contact forces of an output frame, as a field for ParaView and per-frame statistics.
 
 The normal contact force is a function of the positions alone (a penalty law), so it is evaluated
-again on each stored frame with the scene's own law and the solver's own kernels (neighbour list,
-line-to-line contact); the friction part, which depends on the slip history, is not included.
+again on each stored frame with the scene's own law, formulation, Gauss points and onset and the
+solver's own kernels (neighbour list, contact pass); the friction part, which depends on the slip
+history, and the release of initial overlaps, which a frame does not keep, are not included.
 """
 
 from __future__ import annotations
@@ -35,6 +36,9 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
     seg_radius = mesh.element_radius_m()
     arc = segment_arclength(seg, seg_fiber, mesh.nodes_m)
     verlet = VerletList(seg, seg_radius, seg_fiber, arc, skin_m=0.05 * float(seg_radius.max()))
+    # the run's formulation: the potential one (the default) with the run's Gauss points and onset
+    potential = (_potential_pass(seg, seg_radius, arc, law, scene_cfg.contact)
+                 if scene_cfg.contact.formulation == "potential" else None)
     K, N = frames_positions.shape[:2]
     out = {
         "contact_force": np.zeros((K, N, 3)),
@@ -51,7 +55,10 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
         f = out["contact_force"][k]
         if n == 0:
             continue
-        _, n_active, buffers = compute_contact(x, seg, seg_radius, verlet.pairs, n, law, f, buffers=buffers)
+        if potential is not None:
+            buffers = potential(x, verlet.pairs, n, f)
+        else:
+            buffers = compute_contact(x, seg, seg_radius, verlet.pairs, n, law, f, buffers=buffers)[2]
         fn = np.asarray(buffers.fn[:n])
         active = fn > 0
         pairs = verlet.pairs[:n][active]
@@ -62,3 +69,26 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
             out["max_normal_force"][k] = float(fn[active].max())
             out["max_penetration"][k] = float(np.asarray(buffers.delta[:n])[active].max())
     return out
+
+
+def _potential_pass(seg, seg_radius, arc, law, contact_cfg):
+    """``(x, pairs, n, f) -> records``: the potential formulation's normal forces on the candidate
+    pairs, added into ``f`` (the kernel the run's hook binds for ``law``; no initial-overlap offsets,
+    which a frame does not keep)."""
+    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_potential import potential_kernels_for
+    from fiberpipe.solver.contact_state import new_records
+
+    kernel = potential_kernels_for(law)
+    gxi, gw = gauss_points(int(contact_cfg.gauss_points))
+    seg = np.ascontiguousarray(seg, dtype=np.int64)
+    radius = np.ascontiguousarray(seg_radius, dtype=np.float64)
+    onset_m = float(contact_cfg.onset)
+
+    def run(x, pairs, n, f):
+        records = new_records(max(n, 1))
+        kernel(x, seg, radius, arc, np.ascontiguousarray(pairs[:n], dtype=np.int64), n, law.law_id, law.params(),
+               gxi, gw, onset_m, f, records, np.zeros(0), 0.0)
+        return records
+
+    return run

@@ -28,3 +28,33 @@ def test_pressed_parallel_fibers_carry_the_johnson_line_load():
     assert -f[fib == 0, 0].sum() == pytest.approx(p * 3e-3, rel=0.02)
     assert out["contacts"][0] > 0 and out["max_penetration"][0] == pytest.approx(delta, rel=1e-6)
     assert out["contacts"][1] == 0 and np.all(out["contact_force"][1] == 0)
+
+
+@pytest.mark.parametrize("formulation", ["potential", "legacy"])
+def test_the_field_is_the_runs_formulation(formulation):
+    """Two parallel fibres pressed 1 µm that overlap only over the last 50 µm of their ends, where
+    the Gauss points of the potential formulation sample the overlap coarsely and the legacy
+    kernel's exact overlap does not: the field is the force of the formulation the config names."""
+    from fiberpipe.solver import Material, build_model
+    from fiberpipe.solver.laws import law_from_config
+    from fiberpipe.verification.contact_cases import pair_force
+
+    R, L = 0.25e-3, 3e-3
+    s = np.linspace(0.0, L, 11)
+    a = np.c_[s, 0 * s, 0 * s]
+    b = np.c_[s + L - 0.05e-3, 0 * s, 0 * s + 2 * R - 1e-6]
+    mesh = mesh_polylines(Polylines.from_list([a, b], R), 0.3e-3)
+    contact = {"law": "hertz_oriented", "formulation": formulation}
+    cfg = validate_config({"input": {"fibers": "x"}, "scene": {"effects": ["contact"], "contact": contact}})
+    out = frame_contact_forces(mesh, mesh.nodes_m[None], cfg.scene, cfg.material)
+    fib = mesh.node_fiber()
+    model = build_model(mesh.nodes_m, [0, int(np.sum(fib == 0)), mesh.nodes_m.shape[0]], R,
+                        Material(15e9, 1380.0, 0.3))
+    law = law_from_config(cfg.scene.contact, cfg.material)
+    ref = pair_force(model, mesh.nodes_m, law, 0, 1, formulation=formulation,
+                     n_gauss=int(cfg.scene.contact.gauss_points))
+    other = pair_force(model, mesh.nodes_m, law, 0, 1, formulation={"potential": "legacy", "legacy": "potential"}[formulation],
+                       n_gauss=int(cfg.scene.contact.gauss_points))
+    got = out["contact_force"][0][fib == 1].sum(0)
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-15)
+    assert np.linalg.norm(ref - other) > 1e-3 * np.linalg.norm(ref)  # the two differ here
