@@ -19,7 +19,10 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   ``Π_line = ½ Σ_g w_g L0_A e_line(g(δ_g))`` both ways (A on B and B on A). The closest point is
   stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
 * **Point part**: clamped segment–segment closest points, ``Π_point = e_point(g(δ_c), Φ)``, with
-  the joint share of :func:`fiberpipe.solver.contact._joint_share`.
+  the joint share ``s_joint`` of :func:`_joint_share`: smooth ramps, ±(0.1 δ_c + 1e-5 (r_i + r_j)),
+  in the difference of each neighbouring pair's clamped distance and the pair's own, their gradient
+  in the force, so the point part stays continuous and conservative while a crossing moves from one
+  segment pair to the next.
 * **Blend**: ``w = smoothstep((Φ − Φ_lo)/(Φ_hi − Φ_lo))`` on the crossing angle, times the patch
   criterion ``w_ξ(δ_c, Φ)`` from the Hertz ellipse against ℓ_blend (:func:`_patch_weight`; every law
   with a point part, from ``scene.contact.blend_length``), δ_c the pair's clamped penetration. The blend's derivatives and the law's own ``∂e_point/∂Φ`` (hertz_oriented:
@@ -38,8 +41,8 @@ import numpy as np
 from numba import njit, prange
 
 from ._specialise import specialise
-from .contact import _joint_share, record_pair
-from .geometry import apply_line_point, crossing_angle, line_closest_params, segment_distance2_s
+from .contact import record_pair
+from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
 
@@ -282,6 +285,133 @@ def _pair_blend_point_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
             (qa - qb) / (phi + h - lo))
 
 
+# Half-width of the joint share's ramps in the difference of two clamped distances: 0.1 of the
+# pair's penetration δ_c plus 1e-5 (r_i + r_j) (5 nm for paper-40's fibres). Wide against the change
+# of that difference in one step where two fibres' distance is nearly flat (≈ 1e-10 m a step at
+# δ_c ≈ 1e-7 m on paper-40 at 7.5°; up to ≈ 1e-9 m at 1.7° and δ_c ≈ 5e-9 m, hence the floor),
+# where the ramp of 1e-9 (r_i + r_j) it replaces was crossed within a step and without a force; with
+# a stiffness that follows the law's (the ramp's force ∝ Π_point/e: a fixed 1e-6 (r_i + r_j) made it
+# the stiffest term in the scene and paper-40 gained 30 % of its work); narrow enough that the pairs
+# inside a ramp, whose depths differ by < 2e, share a crossing with ≈ 1 % of its energy lost.
+_JOINT_RAMP = 0.1
+_JOINT_RAMP_FLOOR = 1e-5
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _ramp(u, e):
+    """``(smoothstep((u + e)/2e), its derivative in u)``: 0 for u ≤ −e, ½ at u = 0, 1 for u ≥ e, and
+    ramp(u) + ramp(−u) = 1."""
+    v = (u + e) / (2.0 * e)
+    if v <= 0.0:
+        return 0.0, 0.0
+    if v >= 1.0:
+        return 1.0, 0.0
+    return v * v * (3.0 - 2.0 * v), 3.0 * v * (1.0 - v) / e
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _rival(x, nodes, d_own, shift, e, geo):
+    """One factor of the joint share: the ramp (:func:`_ramp`) of d_nb − d_own + ``shift``, d_nb the
+    clamped distance of the rival segments ``nodes = (n0, n1, m0, m1)``; ``geo[0:5]`` gets that
+    distance's closest points and unit normal ``(s_n, t_n, n)`` for its gradient, ``geo[7]``
+    d_nb − d_own. ``(f, ∂f/∂d_nb)``; (1, 0) without a rival (a node −1: a free end)."""
+    n0, n1, m0, m1 = nodes
+    if n0 < 0 or n1 < 0 or m0 < 0 or m1 < 0:
+        return 1.0, 0.0
+    c0 = x[n0, 0]
+    c1 = x[n0, 1]
+    c2 = x[n0, 2]
+    d2, sn, tn = segment_distance2_s(c0 - x[m0, 0], c1 - x[m0, 1], c2 - x[m0, 2], x[n1, 0] - c0, x[n1, 1] - c1,
+                                      x[n1, 2] - c2, x[m1, 0] - x[m0, 0], x[m1, 1] - x[m0, 1], x[m1, 2] - x[m0, 2])
+    d = math.sqrt(d2)
+    f, fp = _ramp(d - d_own + shift, e)
+    if fp == 0.0 or d <= 0.0:
+        return f, 0.0
+    geo[0] = sn
+    geo[1] = tn
+    geo[7] = d - d_own
+    for c in range(3):
+        geo[2 + c] = (x[n0, c] + sn * (x[n1, c] - x[n0, c]) - x[m0, c] - tn * (x[m1, c] - x[m0, c])) / d
+    return f, fp
+
+
+# the joint share's rivals of pair (i, j) as rows of the pair's force block (0–3: a0, a1, b0, b1;
+# 4–7: the far nodes of the segments before and after i, before and after j): (i−1, j), (i+1, j),
+# (i, j−1), (i, j+1), then the diagonals (i∓1, j∓1)
+_RIVAL_ROWS = np.array([[4, 0, 2, 3], [1, 5, 2, 3], [0, 1, 6, 2], [0, 1, 3, 7],
+                        [4, 0, 6, 2], [4, 0, 3, 7], [1, 5, 6, 2], [1, 5, 3, 7]], np.int64)
+N_RIVALS = 8
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _joint_share(x, seg_nodes, i, j, d_own, e, jgeo):
+    """The point part's joint share H of segment pair (i, j): the product of ramps (:func:`_rival`) of
+    the clamped distance of each neighbouring pair less the pair's own d_own, of half-width ``e``
+    (0.1 δ_c and a floor, ``_JOINT_RAMP``); ``jgeo[r, 6]`` gets ``∂H/∂d_r`` at fixed e and
+    ``jgeo[r, 0:5]`` rival r's closest points and normal.
+
+    Across a joint of a straight fibre the two pairs' shares sum to 1 (their ramps see the same
+    difference with opposite signs), equal distances giving ½ each; a free end has no rival (its
+    cap is a contact surface). A diagonal rival (both segments moved on) cuts the pair only once it is
+    closer by more than the ramp (its ramp shifted by e): at a crossing on a joint of each fibre the
+    four pairs then share it by ¼, and a pair whose clamped points sit on both joints while the
+    crossing is on the diagonal pair gets nothing. With the ramps of finite width and their gradient
+    in the force (:func:`_joint_share_forces`), ``H Π_point`` is continuous and conservative where
+    a crossing moves from one pair to the next, and where two crossings of bent fibres merge (a
+    secondary minimum of the distance fades as its depth below the rival's goes to 0)."""
+    nodes = (seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1], _prev_node(seg_nodes, i),
+             _next_node(seg_nodes, i), _prev_node(seg_nodes, j), _next_node(seg_nodes, j))
+    h = 1.0
+    for r in range(N_RIVALS):
+        rw = _RIVAL_ROWS[r]
+        f, fp = _rival(x, (nodes[rw[0]], nodes[rw[1]], nodes[rw[2]], nodes[rw[3]]), d_own, e if r >= 4 else 0.0,
+                       e, jgeo[r])
+        jgeo[r, 5] = f
+        jgeo[r, 6] = fp
+        h *= f
+    for r in range(N_RIVALS):
+        g = jgeo[r, 6]
+        if g != 0.0:
+            for q in range(N_RIVALS):
+                if q != r:
+                    g *= jgeo[q, 5]
+        jgeo[r, 6] = g
+    return h
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _joint_share_forces(blk, jgeo, own, ce, k):
+    """The forces ``k ∇H`` (k = −w Π_point) of the joint share (:func:`_joint_share`, its derivatives in
+    ``jgeo``) into the pair's block ``blk`` (rows as ``_RIVAL_ROWS``). Each ramp sees (d_r − d_own)/e
+    with e = c δ_c + e_0, δ_c = r_i + r_j − d_own (``ce`` = c/e), so ∇ of its argument is
+    (∇d_r − (1 − c (d_r − d_own)/e) ∇d_own)/e; ∇d: each clamped distance's unit normal at its closest
+    points (``own = (s_c, t_c, n)``), shared linearly by its segments' nodes."""
+    gown = 0.0
+    for r in range(N_RIVALS):
+        g = k * jgeo[r, 6]
+        if g == 0.0:
+            continue
+        gown += g * (1.0 - ce * jgeo[r, 7])
+        sn = jgeo[r, 0]
+        tn = jgeo[r, 1]
+        rw = _RIVAL_ROWS[r]
+        for c in range(3):
+            nc = g * jgeo[r, 2 + c]
+            blk[rw[0], c] += (1.0 - sn) * nc
+            blk[rw[1], c] += sn * nc
+            blk[rw[2], c] -= (1.0 - tn) * nc
+            blk[rw[3], c] -= tn * nc
+    if gown != 0.0:
+        sc = own[0]
+        tc = own[1]
+        for c in range(3):
+            nc = gown * own[2 + c]
+            blk[0, c] -= (1.0 - sc) * nc
+            blk[1, c] -= sc * nc
+            blk[2, c] += (1.0 - tc) * nc
+            blk[3, c] += tc * nc
+
+
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def _blend_forces(f_out, nodes4, a0, b0, ta, tb, geo, gd, G):
     """The blend's forces: ``gd = ∂Π/∂δ_c`` through w (hertz_oriented's ellipse) along the clamped
@@ -339,10 +469,11 @@ def _look_list(out, n_pairs, reach):
 _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="always")(record_pair.py_func)
 
 # columns of a pair's result row in the contact pass (:func:`_pairs_pass`): its force block (rows
-# a0, a1, b0, b1 of the pair's nodes, 3 components each), its accumulator
+# a0, a1, b0, b1 of the pair's nodes, then the far nodes of the segments before and after each,
+# 3 components each), its accumulator
 # (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle and its new skip threshold
-_R_BLOCK, _R_REC, _R_PHI, _R_GAP = 0, 12, 20, 21
-N_ROW = 22
+_R_BLOCK, _R_REC, _R_PHI, _R_GAP = 0, 24, 32, 33
+N_ROW = 34
 # what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
 # row), within touch but no force, in contact
 _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
@@ -351,7 +482,8 @@ _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use_list, use_share):
     """Pair ``k``'s result row ``rows[r]`` into the records ``out`` and its force block onto its four
-    nodes (the pair's fn is reset first: 0 unless in contact); returns the count of pairs in contact."""
+    nodes and the far nodes of their neighbouring segments (the pair's fn is reset first: 0 unless in
+    contact); returns the count of pairs in contact."""
     out.fn[k] = 0.0
     if outcome == _APART:
         if out.gap.shape[0] > 0:
@@ -366,6 +498,12 @@ def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use
         f_out[seg_nodes[i, 1], c] += rows[r, _R_BLOCK + 3 + c]
         f_out[seg_nodes[j, 0], c] += rows[r, _R_BLOCK + 6 + c]
         f_out[seg_nodes[j, 1], c] += rows[r, _R_BLOCK + 9 + c]
+    # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient
+    for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
+                           _next_node(seg_nodes, j))):
+        if n >= 0:
+            for c in range(3):
+                f_out[n, c] += rows[r, _R_BLOCK + 12 + 3 * q + c]
     return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
 
 
@@ -394,7 +532,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     use_gap = c_gap.shape[0] > 0
     compact = use_gap and use_list  # _look_list's test: the look list is at the front of out.active
     use_off = c_off.shape[0] > 0
-    rows, e_pair, outcomes, t_rec, t_geo, t_blk, t_gbuf = work
+    rows, e_pair, outcomes, t_rec, t_geo, t_blk, t_gbuf, t_jgeo = work
     energy = 0.0
     n_active = 0
     n_tasks = t_rec.shape[0]
@@ -406,6 +544,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
         tb = t_geo[task, 3]
         blk = t_blk[task]
         gbuf = t_gbuf[task]
+        jgeo = t_jgeo[task]
         loc = (0, 1, 2, 3)  # the block's rows: the pair's nodes a0, a1, b0, b1
         for kk in range(task * n_look // n_tasks, (task + 1) * n_look // n_tasks):
             k = look[kk] if compact else kk
@@ -434,7 +573,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                     break
                 for c in range(8):
                     rec[c] = 0.0
-                for r in range(4):
+                for r in range(8):
                     for c in range(3):
                         blk[r, c] = 0.0
                 aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
@@ -448,16 +587,17 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                 e_point = 0.0   # s_joint Π_point (unweighted by w)
                 de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
                 if w > 0.0:
-                    wst = 1.0
-                    den = aa * bb - ab * ab
-                    if den > 1e-10 * aa * bb:
-                        s_l, t_l = line_closest_params(a0, b0, ta, tb, aa, bb, ab, den)
-                        wst = (_joint_share(x, seg_nodes, i, s_l, d_own, b0, tb, rr)
-                               * _joint_share(x, seg_nodes, j, t_l, d_own, a0, ta, rr))
+                    ej = _JOINT_RAMP * delta + _JOINT_RAMP_FLOOR * rr  # the ramps' half-width
+                    wst = _joint_share(x, seg_nodes, i, j, d_own, ej, jgeo) if delta > 0.0 else 1.0
                     if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
                         gp = onset(delta, ds)[1]
                         e_point = wst * ep
                         de_point = wst * dep
+                        inv = 1.0 / d_own
+                        own = (sc, tc, (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv,
+                               (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv,
+                               (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv)
+                        _joint_share_forces(blk, jgeo, own, _JOINT_RAMP / ej, -w * ep)
                         rec[7] += w * wst
                         fm = w * wst * fp * gp
                         inv = 1.0 / d_own
@@ -477,7 +617,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                     outcome = _CLOSE
                     break
                 outcome = _TOUCHING
-                for r in range(4):
+                for r in range(8):
                     for c in range(3):
                         rows[ri, _R_BLOCK + 3 * r + c] = blk[r, c]
                 for c in range(8):
@@ -523,11 +663,12 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
 def _pass_work(n_rows, n_tasks, n_gauss):
     """Scratch arrays of :func:`_pairs_pass`: ``n_rows`` result rows, energies and outcomes kept for the
     merge after the tasks (0: one row, reused; the serial pass merges each pair at once), and per task
-    a pair's accumulator, its segments' start nodes and tangents (a0, b0, ta, tb), its force block and
-    its Gauss-point buffer."""
+    a pair's accumulator, its segments' start nodes and tangents (a0, b0, ta, tb), its force block, its
+    Gauss-point buffer and its joint share's rivals (:func:`_joint_share`)."""
     m = max(n_rows, 1)
     return (np.empty((m, N_ROW)), np.zeros(m), np.zeros(m, np.int64), np.zeros((n_tasks, 8)),
-            np.empty((n_tasks, 4, 3)), np.empty((n_tasks, 4, 3)), np.empty((n_tasks, 2 * n_gauss, N_GP_COLUMNS)))
+            np.empty((n_tasks, 4, 3)), np.empty((n_tasks, 8, 3)), np.empty((n_tasks, 2 * n_gauss, N_GP_COLUMNS)),
+            np.empty((n_tasks, N_RIVALS, 8)))
 
 
 _THREADS = False

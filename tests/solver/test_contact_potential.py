@@ -104,12 +104,6 @@ def _check_gradient(law, phi_deg, depth, shift, radius=None, lift=0.0):
     assert np.abs(f.sum(axis=0)).max() < 1e-9 * scale
 
 
-_POINT_ON_KINK = pytest.mark.xfail(strict=True, reason=(
-    "the point law's K(Φ) uses the crossing angle of the owning segment pair: where the crossing "
-    "passes a joint kinked towards the other fibre the owner changes and Φ with it (0.4° here), a "
-    "jump of 0.3 % of the contact energy"))
-
-
 _BLEND_ON_KINK = pytest.mark.xfail(strict=True, reason=(
     "inside the angle blend each pair weighs its Gauss points by its own (1 − w(Φ)): where a kinked "
     "joint hands a Gauss point to the neighbouring segment, Φ and the weight change with the owner "
@@ -118,7 +112,7 @@ _POINT = {"blend_length_m": 1e-3}  # the point law at 3° (the default ℓ_blend
 
 
 @pytest.mark.parametrize("law_name,kw,phi_deg,kink", [
-    ("hertz_oriented", _POINT, 3.0, 0.0), pytest.param("hertz_oriented", _POINT, 3.0, 2e-6, marks=_POINT_ON_KINK),
+    ("hertz_oriented", _POINT, 3.0, 0.0), ("hertz_oriented", _POINT, 3.0, 2e-6),
     ("hertz_oriented", _POINT, 3.0, -2e-6), ("hertz_oriented", {}, 3.0, 2e-6),
     ("hertz_parallel", {}, 0.0, 0.0), ("hertz_parallel", {}, 0.0, 2e-6), ("hertz_parallel", {}, 0.0, -2e-6),
     ("hertz_parallel", {}, 0.3, 0.0), ("hertz_parallel", {}, 0.3, 2e-6), ("hertz_parallel", {}, 0.3, -2e-6),
