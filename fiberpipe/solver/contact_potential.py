@@ -366,6 +366,10 @@ def _joint_share(x, seg_nodes, i, j, d_own, e, jgeo):
         rw = _RIVAL_ROWS[r]
         f, fp = _rival(x, (nodes[rw[0]], nodes[rw[1]], nodes[rw[2]], nodes[rw[3]]), d_own, e if r >= 4 else 0.0,
                        e, jgeo[r])
+        if f == 0.0:  # a rival owns the crossing (its ramp is flat there): no share, no gradient
+            for q in range(N_RIVALS):
+                jgeo[q, 6] = 0.0
+            return 0.0
         jgeo[r, 5] = f
         jgeo[r, 6] = fp
         h *= f
