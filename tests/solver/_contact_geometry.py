@@ -31,3 +31,15 @@ def all_pairs_between(fib, a, b):
     ia = np.flatnonzero(fib == a)
     ib = np.flatnonzero(fib == b)
     return np.array([[i, j] for i in ia for j in ib], np.int64)
+
+
+def central_gradient(energy, x, h):
+    """∂energy/∂x by central differences of step ``h`` [m] in every coordinate of ``x`` (N, 3)."""
+    g = np.zeros_like(x)
+    for i in range(x.shape[0]):
+        for c in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[i, c] += h
+            xm[i, c] -= h
+            g[i, c] = (energy(xp) - energy(xm)) / (2 * h)
+    return g

@@ -13,6 +13,8 @@ from fiberpipe.solver.contact_potential import contact_forces_pot
 from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
 
+from _contact_geometry import central_gradient
+
 R = 0.25e-3
 # paper-40's law in configs/paper-40/oblique-6.yaml (the default ℓ_blend)
 PRESET = dict(preset="table1_phi6", blend_length_m=5e-5)
@@ -103,16 +105,7 @@ def test_force_is_minus_the_gradient_where_two_crossings_merge(lam):
     xa, xb = (np.array(s) * 1e-6 for s in STEP)
     x = (1.0 - lam) * xa + lam * xb
     e, f = _energy_forces(x, seg, pairs, arc, law)
-    h = 1e-12
-    g = np.zeros_like(x)
-    for i in range(x.shape[0]):
-        for c in range(3):
-            xp = x.copy()
-            xp[i, c] += h
-            xm = x.copy()
-            xm[i, c] -= h
-            g[i, c] = (_energy_forces(xp, seg, pairs, arc, law)[0]
-                       - _energy_forces(xm, seg, pairs, arc, law)[0]) / (2 * h)
+    g = central_gradient(lambda xx: _energy_forces(xx, seg, pairs, arc, law)[0], x, 1e-12)
     scale = np.abs(f).max()
     assert scale > 0
     assert np.abs(f + g).max() < 1e-4 * scale, (np.abs(f + g).max() / scale)
