@@ -453,20 +453,27 @@ def _blend_forces(f_out, nodes4, a0, b0, ta, tb, geo, gd, G):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _compact_look(out):
+    """Whether the look list sits at the front of ``out.active``: the records keep both a gap and an
+    active list (:func:`_look_list`)."""
+    return out.gap.shape[0] > 0 and out.active.shape[0] > 0
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _look_list(out, n_pairs, reach):
-    """The pairs to evaluate this step: ``(n_look, compact)``. With both a gap and an active list
-    (``compact``), one branch-free pass lists the pairs within reach at the front of ``out.active``
-    (most candidates of a bundle are beyond reach; their fn stays 0 from their last look, or from the
-    neighbour-list build); otherwise every candidate, in order."""
+    """The number of pairs to evaluate this step. With both a gap and an active list
+    (:func:`_compact_look`), one branch-free pass lists the pairs within reach at the front of
+    ``out.active`` (most candidates of a bundle are beyond reach; their fn stays 0 from their last
+    look, or from the neighbour-list build); otherwise every candidate, in order."""
+    if not _compact_look(out):
+        return n_pairs
     c_gap = out.gap
-    if not (c_gap.shape[0] > 0 and out.active.shape[0] > 0):
-        return n_pairs, False
     n_look = 0
     look = out.active
     for k in range(n_pairs):
         look[n_look] = k
         n_look += 1 if c_gap[k] <= reach else 0
-    return n_look, True
+    return n_look
 
 
 # record_pair inlined into the merge (the serial pass has no reference counts to take for its arguments)
@@ -534,7 +541,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     look = out.active
     c_gap = out.gap
     use_gap = c_gap.shape[0] > 0
-    compact = use_gap and use_list  # _look_list's test: the look list is at the front of out.active
+    compact = _compact_look(out)
     use_off = c_off.shape[0] > 0
     rows, e_pair, outcomes, t_rec, t_geo, t_blk, t_gbuf, t_jgeo = work
     energy = 0.0
@@ -597,17 +604,14 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                         gp = onset(delta, ds)[1]
                         e_point = wst * ep
                         de_point = wst * dep
-                        inv = 1.0 / d_own
-                        own = (sc, tc, (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv,
-                               (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv,
-                               (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv)
-                        _joint_share_forces(blk, jgeo, own, _JOINT_RAMP / ej, -w * ep)
+                        inv = 1.0 / d_own  # the closest points' unit normal, B to A
+                        nx = (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv
+                        ny = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
+                        nz = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
+                        _joint_share_forces(blk, jgeo, (sc, tc, nx, ny, nz), _JOINT_RAMP / ej, -w * ep)
                         rec[7] += w * wst
                         fm = w * wst * fp * gp
-                        inv = 1.0 / d_own
-                        apply_line_point(blk, loc, sc, tc, fm * ((a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv),
-                                         fm * ((a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv),
-                                         fm * ((a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv), fm, delta, rec, 1.0)
+                        apply_line_point(blk, loc, sc, tc, fm * nx, fm * ny, fm * nz, fm, delta, rec, 1.0)
                 e_line = 0.0  # Π_line (unweighted by 1 − w)
                 if w < 1.0:
                     half = 0.5 * (1.0 - w)
@@ -654,7 +658,7 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
     ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
     (``solver.threads`` > 1) in ``prange`` tasks once there are pairs for two, with the same
     forces, records and energy bit for bit."""
-    n_look = _look_list(out, n_pairs, reach)[0]
+    n_look = _look_list(out, n_pairs, reach)
     if _THREADS and n_look >= 2 * PAIR_TASK_MIN:
         work = _pass_work(n_look, max(1, min(_PAIR_TASKS, n_look // PAIR_TASK_MIN)), gxi.shape[0])
         return _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
