@@ -580,13 +580,3 @@ CONTACT_CASES = {
     "friction_inclined_slide": lambda quick=False: inclined_plate("friction_inclined_slide", quick),
     "sliding_parallel": sliding_parallel,
 }
-
-
-def run_all(quick: bool = False, only=None) -> list[Row]:
-    rows = []
-    for name, fn in CONTACT_CASES.items():
-        if only and name not in only:
-            continue
-        r = fn(quick=quick)
-        rows.extend(r if isinstance(r, list) else [r])
-    return rows
