@@ -279,17 +279,22 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
 
 @njit(inline="always", **_FLAGS)
 def _statistics(data, rec, n_active):
-    """Σ normal force and the largest penetration of this step's contacts."""
+    """Σ normal force, the largest penetration and the largest secant stiffness F_n/δ of this step's
+    contacts (the last two as peaks for the run's slope watch)."""
     st = data.stats
     fsum = 0.0
     dmax = 0.0
+    ks = st.secant_peak_n_per_m[0]
     for kk in range(n_active):
         k = rec.active[kk]
         fsum += rec.fn[k]
         if rec.delta[k] > dmax:
             dmax = rec.delta[k]
+        if rec.fn[k] > ks * rec.delta[k]:  # no division for the pairs below the peak
+            ks = rec.fn[k] / rec.delta[k]
     st.fn_sum_n[0] = fsum
     st.delta_max_m[0] = dmax
+    st.secant_peak_n_per_m[0] = ks
     if dmax > st.delta_peak_m[0]:
         st.delta_peak_m[0] = dmax
     st.n_active[0] = n_active
@@ -611,11 +616,14 @@ def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: f
 
 
 class ContactSlopeWatch:
-    """The run's look at a stiffening law: between chunks, the law's slope at the largest penetration
-    the contact reached since the last look (``ContactStats.delta_peak_m``, reset here) against the
-    step (:func:`penalty_step_bound`). The first slope the step cannot carry gives one warning; a
-    law whose slope is fixed (``linear``) was checked before the run, and the Hertz laws are not
-    watched (their tangent does not lower the stable step at the loads measured, docs/contact.md).
+    """The run's look at a law's stiffness: between chunks, the largest node stiffness the contact
+    reached since the last look against the step (:func:`penalty_step_bound`). The first stiffness
+    the step cannot carry gives one warning. The stiffness is the law's slope at the largest
+    penetration (``ContactStats.delta_peak_m``) for a law whose slope is known at every
+    penetration (the study's Eq. 1), and ``law.tangent_over_secant`` × the largest F_n/δ of a pair
+    in contact (``ContactStats.secant_peak_n_per_m``) for a law without (Hertz: the tangent of
+    F ∝ δ^{3/2} is 3/2 of its secant); both peaks are reset at each look. A law whose slope is
+    fixed (``linear``) was checked before the run.
     """
 
     def __init__(self, model, dt: float, law, stats, onset_m: float):
@@ -627,30 +635,45 @@ class ContactSlopeWatch:
         self.warning: str | None = None
 
     @staticmethod
+    def watched(law) -> bool:
+        return bool(getattr(law, "stiffens", False)) or getattr(law, "tangent_over_secant", None) is not None
+
+    @staticmethod
     def for_hook(model, dt: float, hook) -> "ContactSlopeWatch | None":
         info = getattr(hook, "setup_info", None)
         law = getattr(info, "law", None)
         data = getattr(info, "data", None)
-        if law is None or data is None or not getattr(law, "stiffens", False) or not info.contact_on:
+        if law is None or data is None or not ContactSlopeWatch.watched(law) or not info.contact_on:
             return None
         return ContactSlopeWatch(model, dt, law, data.stats, data.params.onset_m)
 
-    def __call__(self, t_s: float) -> str | None:
-        """The warning, the first time the slope outgrows the step (None otherwise)."""
+    def stiffness(self) -> tuple[float, float]:
+        """``(k [N/m] per node, the penetration [m] it was reached at or 0)`` since the last look; resets the peaks."""
         peak = float(self.stats.delta_peak_m[0])
+        secant = float(self.stats.secant_peak_n_per_m[0])
         self.stats.delta_peak_m[0] = 0.0
-        if self.warning is not None or peak <= 0.0:
+        self.stats.secant_peak_n_per_m[0] = 0.0
+        if getattr(self.law, "stiffens", False):
+            if peak <= 0.0:
+                return 0.0, 0.0
+            # the law acts on the mapped penetration of the onset (contact_potential.onset)
+            g = float(onset(peak, self.onset_m)[0]) if self.onset_m > 0.0 else peak
+            return self.law.node_stiffness_n_per_m(self.L_max, delta_m=g), peak
+        return self.law.tangent_over_secant * secant, 0.0
+
+    def __call__(self, t_s: float) -> str | None:
+        """The warning, the first time the contact's stiffness outgrows the step (None otherwise)."""
+        k, peak = self.stiffness()
+        if self.warning is not None or k <= 0.0:
             return None
-        # the law acts on the mapped penetration of the onset (contact_potential.onset)
-        g = float(onset(peak, self.onset_m)[0]) if self.onset_m > 0.0 else peak
-        k = self.law.node_stiffness_n_per_m(self.L_max, delta_m=g)
         total, dt_ok, _ = penalty_step_bound(self.model, self.dt, k, rep=self.rep)
         if total <= 4.0:
             return None
-        self.warning = (f"by t = {t_s:.4g} s the contact law {self.law.name!r} reached a penetration of "
-                        f"{peak:.3g} m, where its slope ({k:.3g} N/m per node) needs dt ≤ {dt_ok:.3g} s; the run "
-                        f"uses {self.dt:.3g} s: from there the step cannot carry the contact (energy is created "
-                        f"or the run diverges); use a smaller solver.dt_safety or a law that stiffens less")
+        where = f"reached a penetration of {peak:.3g} m, where its slope" if peak > 0.0 else "reached a tangent that"
+        self.warning = (f"by t = {t_s:.4g} s the contact law {self.law.name!r} {where} ({k:.3g} N/m per node) "
+                        f"needs dt ≤ {dt_ok:.3g} s; the run uses {self.dt:.3g} s: from there the step cannot "
+                        f"carry the contact (energy is created or the run diverges); use a smaller "
+                        f"solver.dt_safety or a law that stiffens less")
         return self.warning
 
 

@@ -19,7 +19,7 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   ``Π_line = ½ Σ_g w_g L0_A e_line(g(δ_g))`` both ways (A on B and B on A). The closest point is
   stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
 * **Point part**: clamped segment–segment closest points, ``Π_point = e_point(g(δ_c), Φ)``, with
-  the joint share ``s_joint`` of :func:`_joint_share`: smooth ramps, ±(0.1 δ_c + 1e-5 (r_i + r_j)),
+  the joint share ``s_joint`` of :func:`_joint_share`: smooth ramps, ±(0.3 δ_c + 1e-5 (r_i + r_j)),
   in the difference of each neighbouring pair's clamped distance and the pair's own, their gradient
   in the force, so the point part stays continuous and conservative while a crossing moves from one
   segment pair to the next.
@@ -285,15 +285,17 @@ def _pair_blend_point_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
             (qa - qb) / (phi + h - lo))
 
 
-# Half-width of the joint share's ramps in the difference of two clamped distances: 0.1 of the
-# pair's penetration δ_c plus 1e-5 (r_i + r_j) (5 nm for paper-40's fibres). Wide against the change
-# of that difference in one step where two fibres' distance is nearly flat (≈ 1e-10 m a step at
-# δ_c ≈ 1e-7 m on paper-40 at 7.5°; up to ≈ 1e-9 m at 1.7° and δ_c ≈ 5e-9 m, hence the floor),
-# where the ramp of 1e-9 (r_i + r_j) it replaces was crossed within a step and without a force; with
-# a stiffness that follows the law's (the ramp's force ∝ Π_point/e: a fixed 1e-6 (r_i + r_j) made it
-# the stiffest term in the scene and paper-40 gained 30 % of its work); narrow enough that the pairs
-# inside a ramp, whose depths differ by < 2e, share a crossing with ≈ 1 % of its energy lost.
-_JOINT_RAMP = 0.1
+# Half-width of the joint share's ramps in the difference of two clamped distances: 0.3 of the
+# pair's penetration δ_c plus 1e-5 (r_i + r_j) (5 nm for paper-40's fibres). The ramp's stiffness
+# in that difference is at most Π_point · 3/(2e²); with Π_point = (2/5) K δ^{5/2} and e = c δ that
+# is (0.4/c²) times the law's own normal tangent 3/2 K δ^{1/2}: 4.4× at c = 0.3, 40× at 0.1, which
+# the step did not carry (paper-40/compaction-blend created 1.2 % of its work with 0.1, 13 % with
+# 0.03, none with 0.3). The floor keeps the ramp wide against the change of that difference in one
+# step where two fibres' distance is nearly flat (≈ 1e-9 m a step at 1.7° and δ_c ≈ 5e-9 m on
+# paper-40), where a ramp of 1e-9 (r_i + r_j) was crossed within a step and without a force. Inside a
+# ramp the pairs, whose depths differ by < 2e, share the crossing and the shallower one's energy
+# counts for part of it (docs/contact.md).
+_JOINT_RAMP = 0.3
 _JOINT_RAMP_FLOOR = 1e-5
 
 
@@ -347,7 +349,7 @@ N_RIVALS = 8
 def _joint_share(x, seg_nodes, i, j, d_own, e, jgeo):
     """The point part's joint share H of segment pair (i, j): the product of ramps (:func:`_rival`) of
     the clamped distance of each neighbouring pair less the pair's own d_own, of half-width ``e``
-    (0.1 δ_c and a floor, ``_JOINT_RAMP``); ``jgeo[r, 6]`` gets ``∂H/∂d_r`` at fixed e and
+    (0.3 δ_c and a floor, ``_JOINT_RAMP``); ``jgeo[r, 6]`` gets ``∂H/∂d_r`` at fixed e and
     ``jgeo[r, 0:5]`` rival r's closest points and normal.
 
     Across a joint of a straight fibre the two pairs' shares sum to 1 (their ramps see the same

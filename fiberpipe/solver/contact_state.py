@@ -61,6 +61,7 @@ class ContactStats(NamedTuple):
     offset_max_m: np.ndarray  # largest initial-overlap offset still applied, m
     path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
     delta_peak_m: np.ndarray  # largest penetration since the caller last reset it (the run's slope watch), m
+    secant_peak_n_per_m: np.ndarray  # largest F_n/δ of a pair in contact since the same reset, N/m
 
 
 class Segments(NamedTuple):
@@ -138,7 +139,7 @@ class ContactData(NamedTuple):
 
 def new_stats() -> ContactStats:
     i = [np.zeros(1, np.int64) for _ in range(7)]
-    f = [np.zeros(1) for _ in range(7)]
+    f = [np.zeros(1) for _ in range(8)]
     return ContactStats(*i, *f)
 
 

@@ -686,6 +686,12 @@ class ContactLaw:
     #: stiffness of the study's Eq. 1): then the run watches it (``contact_effect.ContactSlopeWatch``)
     stiffens = False
 
+    #: the largest ratio of the law's tangent dF/dδ to its secant F/δ, for a law without a
+    #: piecewise-constant slope: the run watches its tangent as this times the largest F_n/δ of a
+    #: pair in contact. Hertz: F ∝ δ^{3/2} for crossings (Johnson's line law grows more slowly),
+    #: so 3/2; None: not watched that way
+    tangent_over_secant: float | None = 1.5
+
     def node_stiffness_n_per_m(self, element_length_m: float, delta_m: float = 0.0) -> float | None:
         """The largest stiffness [N/m] one contact puts on a node of an element of that length, at the
         (mapped) penetration ``delta_m``, for a law whose slope is piecewise constant (None: it grows
@@ -718,6 +724,7 @@ class LinearLaw(ContactLaw):
 
     law_id = LAW_LINEAR
     name = "linear"
+    tangent_over_secant = None  # its slope is fixed and checked before the run
 
     def __init__(self, stiffness: float, per: str = "length", **kw):
         super().__init__(**kw)
@@ -778,6 +785,7 @@ class ScaledStiffnessLaw(ContactLaw):
 
     law_id = LAW_SCALED
     name = "scaled_stiffness"
+    tangent_over_secant = None  # its slope is known at every penetration (node_stiffness_n_per_m)
 
     def __init__(self, d_m: float, S: float, S0: float, K_def: float, n: int = 1000, per: str = "contact", **kw):
         super().__init__(**kw)

@@ -56,3 +56,32 @@ def test_a_run_whose_law_stiffens_past_the_step_says_so():
     assert len(res.warnings) == 1 and "needs dt ≤" in res.warnings[0]
     _, res = six_fibres_run(_preset("table1_phi2"), 3.0)
     assert res.warnings == []
+
+
+def test_the_watch_takes_a_hertz_laws_tangent_as_three_halves_of_its_largest_secant():
+    # F ∝ δ^{3/2}: dF/dδ = 3/2 F/δ; the watch reads the largest F_n/δ of the pairs since its last look
+    model, _ = six_fibres()
+    dt = 0.9 * model.material.wave_speed_m_s ** -1 * float(model.el_L0.min())
+    law = make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3)
+    assert law.tangent_over_secant == 1.5 and ContactSlopeWatch.watched(law)
+    assert not ContactSlopeWatch.watched(make_law("linear", stiffness=1e9, E_pa=15e9, nu=0.3))
+    stats = new_stats()
+    watch = ContactSlopeWatch(model, dt, law, stats, onset_m=0.0)
+    _, _, k_lim = penalty_step_bound(model, dt, 0.0)  # the node stiffness the step carries
+    stats.secant_peak_n_per_m[0] = 0.95 * k_lim / 1.5
+    assert watch(1e-4) is None and stats.secant_peak_n_per_m[0] == 0.0
+    stats.secant_peak_n_per_m[0] = 1.05 * k_lim / 1.5
+    msg = watch(2e-4)
+    assert msg and "hertz_crossed" in msg and "needs dt ≤" in msg
+    assert watch(3e-4) is None  # one warning per run
+
+
+def test_a_run_records_the_largest_secant_of_its_pairs_and_a_hertz_law_too_stiff_for_the_step_warns():
+    # the crossed law with a modulus 100× the fibres' under 30 N/m: its tangent needs a step below
+    # the run's (measured over 2 ms: 100× creates 7 % of W and warns, 60× warns, 30× is silent and
+    # conservative, 150× diverges); the fibres' own modulus stays silent
+    stiff = make_law("hertz_crossed", phi_deg=90.0, E_pa=100 * 15e9, nu=0.3)
+    _, res = six_fibres_run(stiff, 30.0, t_end_s=4e-4)
+    assert len(res.warnings) == 1 and "'hertz_crossed' reached a tangent" in res.warnings[0]
+    _, res = six_fibres_run(make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3), 30.0, t_end_s=4e-4)
+    assert res.warnings == []
