@@ -73,12 +73,12 @@ def test_contact_case_full(name):
 
 
 def test_three_beam_static_uses_the_setup_angle_and_can_fail():
-    """β₀ is the set-up's 30°, not the settled β; the settled one differs by ~0.03° (the plate's
-    penalty onset lowers the beams by δ_s/2 = 0.5 µm)."""
+    """β₀ is the set-up's 30°, not the settled β; the settled one differs by ~0.1° (the plate's and
+    walls' penalty onset lets the lower beams in by up to δ_s/2 = 2.5 µm)."""
     rows = CONTACT_CASES["three_beam_static"](quick=True, alphas=(1e5,))
     d = rows[0].data
     assert d["beta0_deg"] == pytest.approx(30.0, abs=1e-9)
-    assert 0 < abs(d["settled_beta_minus_beta0_deg"]) < 0.05, d
+    assert 0 < abs(d["settled_beta_minus_beta0_deg"]) < 0.15, d
     assert all(r.passed and not r.informational and r.error > 0 for r in rows), [r.note for r in rows]
 
 
