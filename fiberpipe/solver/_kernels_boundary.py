@@ -141,6 +141,12 @@ def path_delta(t1, t0, u_end, duration, t_accel, mode):
             - path_travel(t0, u_end, duration, t_accel, mode)[0])
 
 
+#: margin of the step loop's list of nodes near each plane, × the largest fibre radius: a node
+#: 0.2 r away from touching needs ≈ 2000 steps at 0.3 m/s to touch (paper-40), so the list is taken
+#: again about that often, at the cost of one pass over all nodes per plane
+PLANE_LIST_MARGIN = 0.2
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
     """Penalty forces of rigid planes on the nodes.
@@ -165,17 +171,36 @@ def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, 
     ``c`` is encoded as ``pen_idx[c] = node * 3 + axis``) and the stored penalty energy Σ ½ k g² [J]
     (:func:`plane_onset`).
     """
+    return _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
+                       pen_idx, pen_idx, False)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def plane_contacts_listed(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
+                          cand_idx, cand_off):
+    """:func:`plane_contacts` over the nodes :func:`plane_candidates` listed near each plane (in node
+    order, so the sums are the same to the last bit), the caller keeping the list valid."""
+    return _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
+                       cand_idx, cand_off, True)
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f, cand_idx,
+                cand_off, listed):
+    """The body of :func:`plane_contacts` (every node, ``listed`` False) and of
+    :func:`plane_contacts_listed` (the nodes ``cand_idx[cand_off[p]:cand_off[p + 1]]`` of plane p)."""
     n_pen = 0
     energy = 0.0
-    for p in range(pl_axis.shape[0]):
-        pl_force[p] = 0.0
     # plane outer, node inner: a tight loop over the nodes per plane (most nodes do not touch)
     for p in range(pl_axis.shape[0]):
         ax = pl_axis[p]
         sg = pl_sign[p]
         pos = pl_pos[p]
         fsum = 0.0
-        for i in range(x.shape[0]):
+        lo = cand_off[p] if listed else 0
+        hi = cand_off[p + 1] if listed else x.shape[0]
+        for c in range(lo, hi):
+            i = cand_idx[c] if listed else c
             d = radius_node[i] - sg * (x[i, ax] - pos)
             if d > 0.0:
                 g, gp = plane_onset(d, onset_m[i])
@@ -188,6 +213,31 @@ def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, 
                 n_pen += 1
         pl_force[p] = fsum
     return n_pen, energy
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, margin, cand_idx, cand_off):
+    """The nodes within ``margin`` [m] of touching each plane: ``cand_idx[cand_off[p]:cand_off[p + 1]]``
+    for plane ``p`` (gap ``σ(x_{i,a} − s_p) − r_i < margin``; same planes as :func:`plane_contacts`).
+
+    A node can touch plane ``p`` later only if its gap closed by more than ``margin``, i.e. if the
+    node and the plane moved by more than ``margin`` together since: while they have not,
+    :func:`plane_contacts_listed` and :func:`fiberpipe.solver.friction.plane_friction` may visit these
+    nodes only (a few hundred) instead of all N per plane.
+    cand_idx : (N·P,) int64, cand_off : (P + 1,) int64 — out. Returns the number of candidates.
+    """
+    n = 0
+    cand_off[0] = 0
+    for p in range(pl_axis.shape[0]):
+        ax = pl_axis[p]
+        sg = pl_sign[p]
+        pos = pl_pos[p]
+        for i in range(x.shape[0]):
+            if sg * (x[i, ax] - pos) - radius_node[i] < margin:
+                cand_idx[n] = i
+                n += 1
+        cand_off[p + 1] = n
+    return n
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")

@@ -34,7 +34,8 @@ from numba import njit, prange
 
 from ._specialise import specialise
 from ._kernels_beam import PARALLEL_CHUNKS, beam_pass_all, beam_pass_fibers, element_forces_exact
-from ._kernels_boundary import path_delta, path_travel, plane_contacts, plane_position, penalty_power, ramp_fraction
+from ._kernels_boundary import (path_delta, path_travel, penalty_power, plane_candidates, plane_contacts_listed,
+                                plane_position, ramp_fraction)
 from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_VD_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
@@ -74,8 +75,10 @@ def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
     for p in range(P):
         planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
                                        planes.mode[p])
-    n_pen, stored = plane_contacts(x, radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign, planes.pos, f,
-                                   planes.force, planes.pen_idx, planes.pen_f)
+    _keep_plane_list(planes, x, radius_node, acc, dt)
+    n_pen, stored = plane_contacts_listed(x, radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign,
+                                          planes.pos, f, planes.force, planes.pen_idx, planes.pen_f, planes.cand_idx,
+                                          planes.cand_off)
     acc[ACC_STORED] += stored
     wk = 0.0
     for p in range(P):
@@ -85,6 +88,27 @@ def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
     acc[ACC_WK] += wk
     acc[ACC_PW] += 0.5 * dt * penalty_power(v, planes.pen_idx, planes.pen_f, n_pen) - wk
     return n_pen
+
+
+@njit(inline="always", **_FLAGS)
+def _keep_plane_list(planes, x, radius_node, acc, dt):
+    """List the nodes near each plane again when one could have closed the list's margin since it was
+    taken: each step every node moves by at most Δt max|v_{n−½}| (``acc[ACC_V2_MAX]``, which the
+    previous update left; < 0 at a call's first step, whose state may have been set from outside)
+    and each plane by its travel since."""
+    slack = planes.cand_slack
+    v2 = acc[ACC_V2_MAX]
+    if v2 >= 0.0:
+        slack[0] -= dt * math.sqrt(v2)
+        moved = 0.0
+        for p in range(planes.axis.shape[0]):
+            moved = max(moved, abs(planes.pos[p] - planes.cand_pos[p]))
+        if slack[0] - moved > 0.0:
+            return
+    plane_candidates(x, radius_node, planes.axis, planes.sign, planes.pos, slack[1], planes.cand_idx, planes.cand_off)
+    for p in range(planes.axis.shape[0]):
+        planes.cand_pos[p] = planes.pos[p]
+    slack[0] = slack[1]
 
 
 @njit(inline="always", **_FLAGS)

@@ -36,14 +36,14 @@ from numba import njit
 from numba.typed import List
 
 from ..errors import FiberpipeError
-from ._kernels_boundary import path_delta, plane_position
+from ._kernels_boundary import path_delta, plane_candidates, plane_position
 from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
-from .friction import friction_forces_ex, plane_candidates, plane_friction, remap_history
+from .friction import friction_forces_ex, plane_friction, remap_history
 from .geometry import pair_gap
 from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WF, ACC_WK
 from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2

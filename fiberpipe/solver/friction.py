@@ -184,30 +184,6 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, margin, cand_idx, cand_off):
-    """The nodes within ``margin`` [m] of touching each plane: ``cand_idx[cand_off[p]:cand_off[p + 1]]``
-    for plane ``p`` (gap ``σ(x_{i,a} − s_p) − r_i < margin``; same planes as :func:`plane_friction`).
-
-    A node can touch plane ``p`` later only if its gap closed by more than ``margin``, i.e. if the
-    node and the plane moved by more than ``margin`` together since: while they have not,
-    :func:`plane_friction` may visit these nodes only (a few hundred) instead of all N per plane.
-    cand_idx : (N·P,) int64, cand_off : (P + 1,) int64 — out. Returns the number of candidates.
-    """
-    n = 0
-    cand_off[0] = 0
-    for p in range(pl_axis.shape[0]):
-        ax = pl_axis[p]
-        sg = pl_sign[p]
-        pos = pl_pos[p]
-        for i in range(x.shape[0]):
-            if sg * (x[i, ax] - pos) - radius_node[i] < margin:
-                cand_idx[n] = i
-                n += 1
-        cand_off[p + 1] = n
-    return n
-
-
-@njit(cache=True, fastmath=True, error_model="numpy")
 def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=False):
     """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
 
@@ -222,7 +198,7 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     plane is not visited again, and its history counts only if it
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
     ``use_candidates`` (with time stamps): visit only the nodes ``cand_idx``, ``cand_off`` per plane
-    (:func:`plane_candidates`; the caller keeps them valid), not all N.
+    (:func:`fiberpipe.solver._kernels_boundary.plane_candidates`; the caller keeps them valid), not all N.
     Returns (the dissipated energy [J], the elastic energy of the tangential springs [J]).
     """
     radius_node, k_pen, onset, pl_axis, pl_sign = planes.radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign

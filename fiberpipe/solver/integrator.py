@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import FiberpipeError, SimulationDiverged
 from ._kernels_integrate import step_loop_for
 from ._kernels_beam import EB_SIZE, beam_forces, new_element_forces, node_beams
-from ._kernels_boundary import plane_contacts
+from ._kernels_boundary import PLANE_LIST_MARGIN, plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
 from .layout import (ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_VD_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
@@ -239,6 +239,11 @@ class Integrator:
         self.pl_force = np.zeros(P)
         self.pen_idx = np.zeros(n * P, np.int64)
         self.pen_f = np.zeros(n * P)
+        self.pl_cand_idx = np.zeros(n * P, np.int64)
+        self.pl_cand_off = np.zeros(P + 1, np.int64)
+        self.pl_cand_pos = np.zeros(P)
+        r_max = float(np.max(model.radius_node)) if n else 0.0
+        self.pl_cand_slack = np.array([-1.0, PLANE_LIST_MARGIN * r_max])
         self.drive_v = np.zeros_like(sc.drive_vec)
         self.history_every = int(history_every)
         self.hist = np.zeros((history_rows, H_WALL + sc.n_walls))
@@ -279,7 +284,8 @@ class Integrator:
         """The scene and work structures of the step loop (views of this integrator's arrays)."""
         sc = self.scene
         planes = PlaneArrays(sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode,
-                             sc.pl_hist_col, self.k_pen, self.pen_onset, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f)
+                             sc.pl_hist_col, self.k_pen, self.pen_onset, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f,
+                             self.pl_cand_idx, self.pl_cand_off, self.pl_cand_pos, self.pl_cand_slack)
         drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
         scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes,
                             fixity_of(sc.fix_mask, self.model.n_nodes))

@@ -71,6 +71,12 @@ class PlaneArrays(NamedTuple):
     force: np.ndarray      # (P,) N, out: reaction, positive when pressed
     pen_idx: np.ndarray    # (N·P,) int64, out: node·3 + axis of each touching node
     pen_f: np.ndarray      # (N·P,) N, out: the penalty force component along the axis
+    # the nodes near each plane (_kernels_boundary.plane_candidates), which the penalty visits while
+    # no node and no plane can have moved by the list's margin since it was taken
+    cand_idx: np.ndarray   # (N·P,) int64, the listed nodes, plane after plane
+    cand_off: np.ndarray   # (P + 1,) int64, CSR offsets into cand_idx
+    cand_pos: np.ndarray   # (P,) m, plane positions when listed
+    cand_slack: np.ndarray  # (2,) m: the margin left (Σ Δt max|v| subtracted each step), the list's margin
 
 
 class DriveArrays(NamedTuple):
@@ -146,4 +152,4 @@ def empty_planes(n_nodes: int) -> PlaneArrays:
     """A :class:`PlaneArrays` with no plane."""
     z, zi, z2 = np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 1))
     return PlaneArrays(zi, z, z, z2, z2.copy(), z2.copy(), zi, zi, np.zeros(0), np.zeros(0), z.copy(), z.copy(),
-                       zi.copy(), z.copy())
+                       zi.copy(), z.copy(), zi.copy(), np.zeros(1, np.int64), z.copy(), np.zeros(2))

@@ -208,7 +208,7 @@ def test_plane_friction_on_candidate_nodes_equals_scanning_all():
     """Plane friction visiting only the nodes listed near each plane (``plane_candidates``, margin
     M) equals scanning every node, as long as nodes and plane together moved < M since the list:
     the hook's rule (remade at every neighbour-list build and when a plane moved skin/2)."""
-    from fiberpipe.solver.friction import plane_candidates
+    from fiberpipe.solver._kernels_boundary import plane_candidates
 
     rng = np.random.default_rng(11)
     N = 400
