@@ -622,14 +622,17 @@ class ContactSlopeWatch:
     penetration (``ContactStats.delta_peak_m``) for a law whose slope is known at every
     penetration (the study's Eq. 1), and ``law.tangent_over_secant`` × the largest F_n/δ of a pair
     in contact (``ContactStats.secant_peak_n_per_m``) for a law without (Hertz: the tangent of
-    F ∝ δ^{3/2} is 3/2 of its secant); both peaks are reset at each look. A law whose slope is
-    fixed (``linear``) was checked before the run.
+    F ∝ δ^{3/2} is 3/2 of its secant); both peaks are reset at each look. The contact keeps the
+    margin the run's step keeps below the beams' limit: it warns once (ωΔt)² passes
+    4 ``dt_safety``² (the run's ``solver.dt_safety``; 1: the stability limit itself). A law whose
+    slope is fixed (``linear``) was checked before the run.
     """
 
-    def __init__(self, model, dt: float, law, stats, onset_m: float):
+    def __init__(self, model, dt: float, law, stats, onset_m: float, dt_safety: float = 1.0):
         from .timestep import stable_time_step
 
         self.model, self.dt, self.law, self.stats, self.onset_m = model, float(dt), law, stats, float(onset_m)
+        self.dt_safety = min(float(dt_safety), 1.0)
         self.L_max = _max_element_length(model)
         self.rep = stable_time_step(model)  # the beam modes the bound couples with, once per run
         self.warning: str | None = None
@@ -639,13 +642,13 @@ class ContactSlopeWatch:
         return bool(getattr(law, "stiffens", False)) or getattr(law, "tangent_over_secant", None) is not None
 
     @staticmethod
-    def for_hook(model, dt: float, hook) -> "ContactSlopeWatch | None":
+    def for_hook(model, dt: float, hook, dt_safety: float = 1.0) -> "ContactSlopeWatch | None":
         info = getattr(hook, "setup_info", None)
         law = getattr(info, "law", None)
         data = getattr(info, "data", None)
         if law is None or data is None or not ContactSlopeWatch.watched(law) or not info.contact_on:
             return None
-        return ContactSlopeWatch(model, dt, law, data.stats, data.params.onset_m)
+        return ContactSlopeWatch(model, dt, law, data.stats, data.params.onset_m, dt_safety)
 
     def stiffness(self) -> tuple[float, float]:
         """``(k [N/m] per node, the penetration [m] it was reached at or 0)`` since the last look; resets the peaks."""
@@ -667,13 +670,14 @@ class ContactSlopeWatch:
         if self.warning is not None or k <= 0.0:
             return None
         total, dt_ok, _ = penalty_step_bound(self.model, self.dt, k, rep=self.rep)
-        if total <= 4.0:
+        s = self.dt_safety
+        if total <= 4.0 * s * s:
             return None
         where = f"reached a penetration of {peak:.3g} m, where its slope" if peak > 0.0 else "reached a tangent that"
         self.warning = (f"by t = {t_s:.4g} s the contact law {self.law.name!r} {where} ({k:.3g} N/m per node) "
-                        f"needs dt ≤ {dt_ok:.3g} s; the run uses {self.dt:.3g} s: from there the step cannot "
-                        f"carry the contact (energy is created or the run diverges); use a smaller "
-                        f"solver.dt_safety or a law that stiffens less")
+                        f"needs dt ≤ {s * dt_ok:.3g} s ({s:g} of its stable step {dt_ok:.3g} s, the run's dt_safety); "
+                        f"the run uses {self.dt:.3g} s: from there the step cannot carry the contact (energy is "
+                        f"created or the run diverges); use a smaller solver.dt_safety or a law that stiffens less")
         return self.warning
 
 
@@ -732,7 +736,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name,
                        kernel_threads=contact_kernel_for(law, formulation, threads=True)[0])
     hook.setup_info = info
-    hook.make_watch = lambda model_, dt: ContactSlopeWatch.for_hook(model_, dt, hook)
+    hook.make_watch = lambda model_, dt, dt_safety=1.0: ContactSlopeWatch.for_hook(model_, dt, hook, dt_safety)
     if not contact:
         hook.name = "friction"
     return hook

@@ -632,7 +632,8 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     if resume is not None:
         ft, fx, fq = _restore(integ, effects, resume, rows)
     # the effects' own looks at the run between chunks (a stiffening contact law against the step)
-    watches = [w for w in (e.make_watch(model, dt) for e in effects if hasattr(e, "make_watch")) if w is not None]
+    watches = [w for w in (e.make_watch(model, dt, settings.dt_safety) for e in effects if hasattr(e, "make_watch"))
+               if w is not None]
     warnings: list[str] = []
 
     def take_frame():

@@ -50,12 +50,31 @@ def test_the_watch_warns_once_when_the_slope_outgrows_the_step_and_resets_its_pe
 
 
 def test_a_run_whose_law_stiffens_past_the_step_says_so():
-    # the 2° preset under 1000 N/m, loaded at once: the penetration reaches the slopes the default
-    # step cannot carry (measured: 4.4 µm, 7.3e6 N/m per node, needs dt ≤ 7.9e-8 s against 8.19e-8 s)
-    _, res = six_fibres_run(_preset("table1_phi2"), 1000.0)
-    assert len(res.warnings) == 1 and "needs dt ≤" in res.warnings[0]
-    _, res = six_fibres_run(_preset("table1_phi2"), 3.0)
-    assert res.warnings == []
+    # the 2° preset loaded at once: under 1000 N/m the penetration reaches slopes the default step
+    # cannot carry at all (measured: 4.4 µm, 7.3e6 N/m per node, stable for dt ≤ 7.9e-8 s against
+    # 8.19e-8 s); under 300 N/m (ωΔt)² reaches 3.6, inside the stability limit 4 but past the
+    # 4 × 0.9² the run's dt_safety keeps for the beams, and the run creates 12 % of its work; under
+    # 30 N/m 3.0, and it creates none
+    for q in (1000.0, 300.0):
+        _, res = six_fibres_run(_preset("table1_phi2"), q)
+        assert len(res.warnings) == 1 and "needs dt ≤" in res.warnings[0] and "dt_safety" in res.warnings[0]
+    for q in (30.0, 3.0):
+        _, res = six_fibres_run(_preset("table1_phi2"), q)
+        assert res.warnings == []
+
+
+def test_the_watch_keeps_the_runs_dt_safety_margin():
+    model, _ = six_fibres()
+    dt = 0.9 * model.material.wave_speed_m_s ** -1 * float(model.el_L0.min())
+    law = make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3)
+    _, _, k_lim = penalty_step_bound(model, dt, 0.0)
+    margins = {}
+    for safety in (1.0, 0.9):
+        stats = new_stats()
+        watch = ContactSlopeWatch(model, dt, law, stats, onset_m=0.0, dt_safety=safety)
+        stats.secant_peak_n_per_m[0] = 0.9 * k_lim / 1.5  # 90 % of the stiffness the step carries
+        margins[safety] = watch(1e-4)
+    assert margins[1.0] is None and margins[0.9] and "0.9 of its stable step" in margins[0.9]
 
 
 def test_the_watch_takes_a_hertz_laws_tangent_as_three_halves_of_its_largest_secant():
