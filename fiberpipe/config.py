@@ -639,7 +639,8 @@ class SolverConfig(Section):
     dt_safety: float = Field(0.9, description="the step as a fraction of the stable step (ω_max Δt = 2 dt_safety); "
                              "the plane penalties keep the stiffness of 0.9 below it, so a smaller value "
                              "resolves impacts on plates and walls better (undamped rattling scenes: 0.7, "
-                             "docs/contact.md)")
+                             "docs/contact.md); the run warns once a contact law's slope (ωΔt)² passes "
+                             "4 dt_safety², the same margin (docs/contact.md, a law that stiffens past the step)")
     dt: Optional[Time] = Field(None, description="fixed time step; default: the stable step × dt_safety")
     end_time: Optional[Time] = None
     output_frames: int = Field(21, ge=2)
