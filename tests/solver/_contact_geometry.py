@@ -43,3 +43,31 @@ def central_gradient(energy, x, h):
             xm[i, c] -= h
             g[i, c] = (energy(xp) - energy(xm)) / (2 * h)
     return g
+
+
+def two_fibre_segments(n, le):
+    """Segments, candidate pairs (every segment of fibre 0 with every one of fibre 1) and reference
+    arc lengths of two fibres of ``n`` segments of length ``le`` each (nodes 0…n and n+1…2n+1)."""
+    seg = np.array([[k, k + 1] for k in range(n)] + [[n + 1 + k, n + 2 + k] for k in range(n)], np.int64)
+    pairs = np.array([[i, n + j] for i in range(n) for j in range(n)], np.int64)
+    arc = np.zeros((2 * n, 2))
+    for f in range(2):
+        arc[f * n:(f + 1) * n, 0] = np.arange(n) * le
+        arc[f * n:(f + 1) * n, 1] = (np.arange(n) + 1) * le
+    return seg, pairs, arc
+
+
+def pot_energy_forces(x, seg, pairs, arc, law, ds=0.0, n_gauss=2, radius=None):
+    """``(energy [J], forces (N, 3) [N], pairs in contact)`` of the potential formulation's kernel
+    on every candidate pair (onset ``ds`` [m], no initial-overlap offsets)."""
+    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_potential import contact_forces_pot
+    from fiberpipe.solver.contact_state import new_records
+
+    P = pairs.shape[0]
+    gxi, gw = gauss_points(n_gauss)
+    f = np.zeros_like(x)
+    radius = np.full(seg.shape[0], R) if radius is None else radius
+    e, n_act = contact_forces_pot(x, seg, radius, arc, pairs, P, law.law_id, law.params(), gxi, gw, ds, f,
+                                  new_records(P), np.zeros(0), 0.0)
+    return e, f, n_act

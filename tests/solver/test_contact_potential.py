@@ -13,7 +13,7 @@ from fiberpipe.solver.contact_potential import contact_forces_pot, onset
 from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
 
-from _contact_geometry import central_gradient
+from _contact_geometry import central_gradient, pot_energy_forces as _energy_forces, two_fibre_segments
 
 R = 0.25e-3
 
@@ -27,24 +27,7 @@ def _two_fibres(phi_deg, depth, n=3, L=0.9e-3, shift=0.0, bend=0.0, seed=0):
     ph = math.radians(phi_deg)
     b = np.c_[shift + s * L * math.cos(ph), s * L * math.sin(ph), np.full_like(s, 2 * R - depth)]
     x = np.vstack([a, b]) + bend * rng.standard_normal((2 * (n + 1), 3))
-    seg = np.array([[k, k + 1] for k in range(n)] + [[n + 1 + k, n + 2 + k] for k in range(n)], np.int64)
-    pairs = np.array([[i, n + j] for i in range(n) for j in range(n)], np.int64)
-    arc = np.zeros((2 * n, 2))
-    for f in range(2):
-        arc[f * n:(f + 1) * n, 0] = np.arange(n) * L / n
-        arc[f * n:(f + 1) * n, 1] = (np.arange(n) + 1) * L / n
-    return x, seg, pairs, arc
-
-
-def _energy_forces(x, seg, pairs, arc, law, ds, n_gauss=2, radius=None):
-    P = pairs.shape[0]
-    gxi, gw = gauss_points(n_gauss)
-    f = np.zeros_like(x)
-    rec = new_records(P)
-    radius = np.full(seg.shape[0], R) if radius is None else radius
-    e, n_act = contact_forces_pot(x, seg, radius, arc, pairs, P, law.law_id, law.params(), gxi, gw,
-                                  ds, f, rec, np.zeros(0), 0.0)
-    return e, f, n_act
+    return (x, *two_fibre_segments(n, L / n))
 
 
 LAWS = {

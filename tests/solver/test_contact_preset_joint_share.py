@@ -8,12 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from fiberpipe.solver.contact import gauss_points
-from fiberpipe.solver.contact_potential import contact_forces_pot
-from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
 
-from _contact_geometry import central_gradient
+from _contact_geometry import central_gradient, pot_energy_forces, two_fibre_segments
 
 R = 0.25e-3
 # paper-40's law in configs/paper-40/oblique-6.yaml (the default ℓ_blend)
@@ -49,24 +46,8 @@ STEP = (
 )
 
 
-def _fibres(n):
-    """Segments, candidate pairs and reference arc lengths of two fibres of ``n`` segments each
-    (nodes 0…n and n+1…2n+1)."""
-    seg = np.array([[k, k + 1] for k in range(n)] + [[n + 1 + k, n + 2 + k] for k in range(n)], np.int64)
-    pairs = np.array([[i, n + j] for i in range(n) for j in range(n)], np.int64)
-    arc = np.zeros((2 * n, 2))
-    for f in range(2):
-        arc[f * n:(f + 1) * n, 0] = np.arange(n) * 0.3e-3
-        arc[f * n:(f + 1) * n, 1] = (np.arange(n) + 1) * 0.3e-3
-    return seg, pairs, arc
-
-
-def _energy_forces(x, seg, pairs, arc, law):
-    gxi, gw = gauss_points(2)
-    f = np.zeros_like(x)
-    e, _ = contact_forces_pot(x, seg, np.full(seg.shape[0], R), arc, pairs, pairs.shape[0], law.law_id, law.params(),
-                              gxi, gw, 0.0, f, new_records(pairs.shape[0]), np.zeros(0), 0.0)
-    return e, f
+def _pot_ef(x, seg, pairs, arc, law):
+    return pot_energy_forces(x, seg, pairs, arc, law)[:2]
 
 
 def _law():
@@ -78,13 +59,13 @@ def test_the_forces_work_along_a_step_of_two_merging_crossings_equals_the_potent
     the energy change the share once made (5.5e-9 J), and no piece changes Π by more than twice the
     average."""
     law = _law()
-    seg, pairs, arc = _fibres(4)
+    seg, pairs, arc = two_fibre_segments(4, 0.3e-3)
     xa, xb = (np.array(s) * 1e-6 for s in STEP)
     lam = np.linspace(0.0, 1.0, 401)
     es, work = [], 0.0
     f_prev = None
     for lm in lam:
-        e, f = _energy_forces((1.0 - lm) * xa + lm * xb, seg, pairs, arc, law)
+        e, f = _pot_ef((1.0 - lm) * xa + lm * xb, seg, pairs, arc, law)
         if f_prev is not None:
             work += 0.5 * np.sum((f + f_prev) * (xb - xa)) * (lam[1] - lam[0])
         f_prev = f
@@ -101,11 +82,11 @@ def test_force_is_minus_the_gradient_where_two_crossings_merge(lam):
     """Central differences (step 1e-12 m, against the share's ramps of ±(0.1 δ_c + 5 nm)) at points of
     the recorded step, inside a ramp: the share's derivative is in the force."""
     law = _law()
-    seg, pairs, arc = _fibres(4)
+    seg, pairs, arc = two_fibre_segments(4, 0.3e-3)
     xa, xb = (np.array(s) * 1e-6 for s in STEP)
     x = (1.0 - lam) * xa + lam * xb
-    e, f = _energy_forces(x, seg, pairs, arc, law)
-    g = central_gradient(lambda xx: _energy_forces(xx, seg, pairs, arc, law)[0], x, 1e-12)
+    e, f = _pot_ef(x, seg, pairs, arc, law)
+    g = central_gradient(lambda xx: _pot_ef(xx, seg, pairs, arc, law)[0], x, 1e-12)
     scale = np.abs(f).max()
     assert scale > 0
     assert np.abs(f + g).max() < 1e-4 * scale, (np.abs(f + g).max() / scale)
@@ -133,11 +114,11 @@ def test_preset_point_contact_sliding_across_a_kinked_joint_keeps_its_energy(phi
     energy. A share that hands the crossing over within 1e-9 (r_i + r_j) without a force missed
     the step w(Φ₁) − w(Φ₂) of the point energy there, 11–15 % of the energy."""
     law = _law()
-    seg, pairs, arc = _fibres(3)
+    seg, pairs, arc = two_fibre_segments(3, 0.3e-3)
     shifts = np.linspace(0.13e-3, 0.17e-3, 2001)
     es, fx = [], []
     for sh in shifts:
-        e, f = _energy_forces(_crossing(phi_deg, depth, sh, kink), seg, pairs, arc, law)
+        e, f = _pot_ef(_crossing(phi_deg, depth, sh, kink), seg, pairs, arc, law)
         es.append(e)
         fx.append(f[4:, 0].sum())
     es, fx = np.array(es), np.array(fx)
