@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solver.integrator import state_energy
+
 #: Our energy names and the Abaqus output identifiers they correspond to.
 ABAQUS_NAMES = {
     "kinetic": "ALLKE",
@@ -34,7 +36,7 @@ def state_total(energy: dict[str, np.ndarray]) -> np.ndarray:
     if "contact_stored" in energy:
         ke = g("kinetic_leapfrog") if "kinetic_leapfrog" in energy else g("kinetic")
         vd = g("damping_leapfrog") if "damping_leapfrog" in energy and "kinetic_leapfrog" in energy else g("damping")
-        return ke + g("strain") + g("contact_stored") + vd + g("friction") - g("external")
+        return state_energy(ke, g("strain"), g("contact_stored"), vd, g("friction"), g("external"))
     return g("kinetic") + g("strain") + g("damping") + g("friction") - g("external") - g("contact")
 
 

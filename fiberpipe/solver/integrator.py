@@ -447,6 +447,15 @@ def _residual_start(state: State, ke0: float, se0: float) -> float:
     return ke0 + se0 + max(stored0, 0.0)
 
 
+def state_energy(kinetic_lf, strain, stored, damping_lf, friction, external):
+    """E = K_lf + ALLSE + Π + ALLVD_lf + ALLFD − ALLWK [J] from state functions (arrays or floats): the
+    leapfrog kinetic term, the strain energy, the stored contact energy Π and the dissipations booked
+    in step with K_lf, less the loads' work. Central differences keep it constant for a quadratic
+    potential, so it grows only where a force creates energy (the history's ``energy/residual``,
+    ``fiberpipe.post.energies.state_total``)."""
+    return kinetic_lf + strain + stored + damping_lf + friction - external
+
+
 def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
     h = hist[:n_rows]
     KE, SE, VD, WK, PW, FD, ST, KL, VL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF,
@@ -457,7 +466,7 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
     total = KE + SE + VD + FD - WK - PW
     # with the leapfrog's own kinetic term, which the scheme conserves exactly for a quadratic potential,
     # and the damping booked in step with it (_kernels_integrate.write_history)
-    state_total = KL + SE + ST + VL + FD - WK
+    state_total = state_energy(KL, SE, ST, VL, FD, WK)
     # over the run's largest external work or mechanical energy (not the running one: early rows, with
     # almost nothing moved yet, would divide by almost nothing)
     scale = max(float(np.max(np.maximum(np.abs(WK), SE + KE))) if n_rows else 0.0, 1e-300)
