@@ -259,13 +259,15 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
         ff[i, 2] = -fc[i, 2]
     diss = 0.0
     if prm.friction_on:
-        dff, esp = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
-                                      prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
+        dff, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
+                                            prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
         diss += dff
         st.e_spring_J[0] = esp
+        st.friction_returned_J[0] += back
     if plane_fric:
-        dpl, espl = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
+        dpl, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
         diss += dpl
+        st.friction_returned_J[0] += back
         acc[ACC_STORED] += espl
     for kk in range(n_ff):
         i = nodes[kk]

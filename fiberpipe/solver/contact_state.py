@@ -62,6 +62,7 @@ class ContactStats(NamedTuple):
     path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
     delta_peak_m: np.ndarray  # largest penetration since the caller last reset it (the run's slope watch), m
     secant_peak_n_per_m: np.ndarray  # largest F_n/δ of a pair in contact since the same reset, N/m
+    friction_returned_J: np.ndarray  # energy the friction gave back so far (its contacts' negative dissipations), J
 
 
 class Segments(NamedTuple):
@@ -76,7 +77,7 @@ class PairList(NamedTuple):
 
     pairs: np.ndarray     # (C, 2) int64, segment pairs (i < j)
     keys: np.ndarray      # (C,) int64, sorted pair keys
-    friction: np.ndarray  # (C, 5) tangential spring force (3), its stiffness, step of last update
+    friction: np.ndarray  # (C, 7) tangential spring force (3), its stiffness, step of last update, s and t it acted at
     offset: np.ndarray    # (C, 1) m, initial-overlap offset
 
 
@@ -139,14 +140,14 @@ class ContactData(NamedTuple):
 
 def new_stats() -> ContactStats:
     i = [np.zeros(1, np.int64) for _ in range(7)]
-    f = [np.zeros(1) for _ in range(8)]
+    f = [np.zeros(1) for _ in range(9)]
     return ContactStats(*i, *f)
 
 
 @njit(cache=True)
 def new_pair_list(capacity):
     """An empty :class:`PairList` of ``capacity`` pairs (the setup's and the kernel's when it grows)."""
-    return PairList(np.zeros((capacity, 2), np.int64), np.zeros(capacity, np.int64), np.zeros((capacity, 5)),
+    return PairList(np.zeros((capacity, 2), np.int64), np.zeros(capacity, np.int64), np.zeros((capacity, 7)),
                     np.zeros((capacity, 1)))
 
 

@@ -8,9 +8,19 @@ a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto 
    tangent plane: ``f_t ← f_t − (f_t·n)n``, rescaled to its old magnitude;
 2. trial ``f_t* = f_t − k_t Δu_t``, with ``Δu_t`` the tangential part of the relative displacement
    increment of the contact points over the step, ``Δu = (v_A(s) − v_B(t)) Δt``;
-3. stick if ``|f_t*| ≤ μ f_n``; else slip: ``f_t = μ f_n f_t*/|f_t*|``, slip increment
-   ``(|f_t*| − μ f_n)/k_t``, dissipation ``μ f_n × slip`` (ALLFD);
+3. stick if ``|f_t*| ≤ μ f_n``; else slip: ``f_t = μ f_n f_t*/|f_t*|``;
 4. an open contact (``f_n = 0``) forgets its history.
+
+Dissipation (ALLFD), per contact and step: the energy the contact took from the fibers less what its
+spring stored, ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
+the relative displacement over the step at this step's contact point and ``Δu'`` at the point the
+previous force acted at (the contact point slides along the segments). The first term is the
+friction forces' work as the step loop books it (``½Δt f_n·(v_{n−½} + v_{n+½})``, summed by parts),
+so ALLFD + the springs' energy equals minus that work and the state-function balance closes with
+friction on. In steady slip ``D = μ f_n × slip``; where the slip direction turns or the cone
+shrinks between steps (stick–slip chatter, a release) the end-of-step product ``μ f_n × slip``
+would over- or under-book the force's work by ``½(|f_t*| − μ f_n)(μ f_n − f_{n−1}·t̂)/k_t``.
+``D < 0`` would be friction giving energy back; its sum is kept apart (``returned``).
 
 Fiber–fiber: one history per segment pair, keyed ``i·E + j`` (the Verlet list's sorted keys), applied
 at the pair's force-weighted contact point (``c_s``, ``c_t`` from the contact kernel) along its
@@ -32,7 +42,7 @@ from .geometry import apply_pair_force, pair_nodes
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
-    """Update history row h[k] in place; returns (f_t vector (3), dissipation)."""
+    """Update history row h[k] in place; returns the new f_t vector (3)."""
     # rotate history into the current tangent plane, keep its magnitude
     h0 = h[k, 0]
     h1 = h[k, 1]
@@ -55,19 +65,24 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
     t2 = h2 - kt * (du2 - un * n2)
     tm2 = t0 * t0 + t1 * t1 + t2 * t2
     lim = mu * fn
-    diss = 0.0
     # stick (the common case of a compacted bundle) needs no square root
     if tm2 > lim * lim:
-        tm = math.sqrt(tm2)
-        sc = lim / tm
-        diss = lim * (tm - lim) / kt
+        sc = lim / math.sqrt(tm2)
         t0 *= sc
         t1 *= sc
         t2 *= sc
     h[k, 0] = t0
     h[k, 1] = t1
     h[k, 2] = t2
-    return t0, t1, t2, diss
+    return t0, t1, t2
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2):
+    """Energy a contact dissipated over the step (module docstring): minus the trapezoidal work of its
+    force ``f_{n−1} = p`` → ``f_n = f`` on the relative displacement ``Δu``, less the change of its
+    spring's energy ``e_prev`` → ``e_new`` [J]."""
+    return -0.5 * ((p0 + f0) * du0 + (p1 + f1) * du1 + (p2 + f2) * du2) - (e_new - e_prev)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -76,7 +91,7 @@ def friction_forces(v, seg_nodes, pairs, n_pairs, c_fn, c_n, c_s, c_t, mu, k_t, 
     returns the dissipated energy [J]."""
     e = np.zeros(0)
     rec = PairRecords(c_fn, c_n, c_s, c_t, e, e, e, e, e, np.zeros(0, np.int64))
-    d, es = friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, 0, -1)
+    d, es, back = friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, 0, -1)
     return d
 
 
@@ -106,14 +121,18 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
         step's number (< 0: no time stamps); with ``c_active``, ``step ≥ 0`` and a 5th ``hist``
         column (the step of the pair's last update) only the pairs in contact are visited, and a pair's history counts only if it was
         updated at ``step − 1`` (a contact that opened in between starts afresh, as if cleared).
-    Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J]).
+        Columns 5 and 6 (optional): the ``s``, ``t`` the pair's force last acted at, for its work.
+    Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J],
+    energy given back [J]: the sum of the contacts' negative dissipations, module docstring).
     """
     c_fn, c_n, c_s, c_t, c_share, c_active = rec.fn, rec.normal, rec.s, rec.t, rec.share, rec.active
     diss = 0.0
     espring = 0.0
+    returned = 0.0
     use_share = c_share.shape[0] > 0
     keep_k = use_share and hist.shape[1] > 3  # column 3: the pair's k_t at its last update
     lazy = c_active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0  # column 4: step of the last update
+    at_st = hist.shape[1] > 6  # columns 5, 6: the contact parameters the force last acted at
     n_visit = n_active if lazy else n_pairs
     for kk in range(n_visit):
         k = c_active[kk] if lazy else kk
@@ -124,6 +143,9 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
                     hist[k, c] = 0.0
             hist[k, 4] = step
         elif fn <= 0.0:
+            # open: the contact forgets its history. Its spring's energy, at most ½(μ f_n)²/k_t of its
+            # last step in contact (f_n rises from zero over the onset), is not booked, as for a
+            # pair that leaves the active list (not visited)
             for c in range(hist.shape[1]):
                 hist[k, c] = 0.0
             continue
@@ -134,31 +156,50 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
         du1 = ((1.0 - s) * v[a0, 1] + s * v[a1, 1] - (1.0 - t) * v[b0, 1] - t * v[b1, 1]) * dt
         du2 = ((1.0 - s) * v[a0, 2] + s * v[a1, 2] - (1.0 - t) * v[b0, 2] - t * v[b1, 2]) * dt
         ktp = k_t * c_share[k] if use_share else k_t
-        if not ktp > 0.0:
-            hist[k, 0] = 0.0
-            hist[k, 1] = 0.0
-            hist[k, 2] = 0.0
-            continue
-        if keep_k:
-            # the pair's stiffness changed since its last update (the contact moved/grew/shrank):
-            # keep the stored energy ½|f_t|²/k from growing — softer: scale f_t by √(k_new/k_old)
-            # (energy kept); stiffer: keep f_t (the energy difference is released: dissipation)
-            k_old = hist[k, 3]
-            if k_old > 0.0:
-                e2 = hist[k, 0] * hist[k, 0] + hist[k, 1] * hist[k, 1] + hist[k, 2] * hist[k, 2]
-                if ktp < k_old:
-                    sc = math.sqrt(ktp / k_old)
+        # the force applied at the previous step and its spring's energy, as booked then
+        p0 = hist[k, 0]
+        p1 = hist[k, 1]
+        p2 = hist[k, 2]
+        k_prev = hist[k, 3] if keep_k and hist[k, 3] > 0.0 else ktp
+        e_prev = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2) / k_prev if k_prev > 0.0 else 0.0
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        e_new = 0.0
+        if ktp > 0.0:
+            if keep_k:
+                # the pair's stiffness changed since its last update (the contact moved/grew/shrank):
+                # softer: scale f_t by √(k_new/k_old), which keeps the stored energy ½|f_t|²/k;
+                # stiffer: keep f_t (its energy falls, booked as dissipated with the step's)
+                if 0.0 < ktp < k_prev:
+                    sc = math.sqrt(ktp / k_prev)
                     hist[k, 0] *= sc
                     hist[k, 1] *= sc
                     hist[k, 2] *= sc
-                elif ktp > k_old:
-                    diss += 0.5 * e2 * (1.0 / k_old - 1.0 / ktp)
-            hist[k, 3] = ktp
-        f0, f1, f2, d = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, ktp)
+                hist[k, 3] = ktp
+            f0, f1, f2 = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, ktp)
+            e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
+            apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
+        else:
+            # no stiffness: the contact forgets its force (its energy, booked as dissipated)
+            hist[k, 0] = 0.0
+            hist[k, 1] = 0.0
+            hist[k, 2] = 0.0
+        d = _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2)
+        if at_st:
+            # the previous force acted at the contact parameters of its step, not this one's: its
+            # work is −½ p·Δu(s_prev, t_prev), and Δu is linear in s and t
+            ds = hist[k, 5] - s
+            dt_ = hist[k, 6] - t
+            d -= 0.5 * dt * (p0 * (ds * (v[a1, 0] - v[a0, 0]) - dt_ * (v[b1, 0] - v[b0, 0]))
+                             + p1 * (ds * (v[a1, 1] - v[a0, 1]) - dt_ * (v[b1, 1] - v[b0, 1]))
+                             + p2 * (ds * (v[a1, 2] - v[a0, 2]) - dt_ * (v[b1, 2] - v[b0, 2])))
+            hist[k, 5] = s
+            hist[k, 6] = t
         diss += d
-        espring += 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
-        apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
-    return diss, espring
+        returned -= min(d, 0.0)
+        espring += e_new
+    return diss, espring, returned
 
 
 @njit(cache=True, error_model="numpy")
@@ -199,13 +240,15 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
     touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
     ``use_candidates`` (with time stamps): visit only the nodes ``cand_idx``, ``cand_off`` per plane
     (:func:`fiberpipe.solver._kernels_boundary.plane_candidates`; the caller keeps them valid), not all N.
-    Returns (the dissipated energy [J], the elastic energy of the tangential springs [J]).
+    Returns (the dissipated energy [J], the elastic energy of the tangential springs [J], the energy
+    given back [J], as :func:`friction_forces_ex`).
     """
     radius_node, k_pen, onset, pl_axis, pl_sign = planes.radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign
     pl_pos = planes.pos
     pl_vel, hist, pl_tforce, cand_idx, cand_off = planes.vel, planes.hist, planes.tforce, planes.cand_idx, planes.cand_off
     diss = 0.0
     espring = 0.0
+    returned = 0.0
     npl = pl_axis.shape[0]
     for p in range(npl):
         pl_tforce[p, 0] = 0.0
@@ -240,33 +283,46 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
             else:
                 i = cand_idx[c]
             d = radius_node[i] - sg * (x[i, ax] - pos)
-            if d <= 0.0:
-                if not lazy and (hist[i, p, 0] != 0.0 or hist[i, p, 1] != 0.0 or hist[i, p, 2] != 0.0):
-                    hist[i, p, 0] = 0.0
-                    hist[i, p, 1] = 0.0
-                    hist[i, p, 2] = 0.0
+            r = i * npl + p
+            touched = not lazy or hflat[r, 3] == step - 1  # the entry holds the force of the last step
+            p0 = hflat[r, 0] if touched else 0.0
+            p1 = hflat[r, 1] if touched else 0.0
+            p2 = hflat[r, 2] if touched else 0.0
+            if d <= 0.0 and p0 == 0.0 and p1 == 0.0 and p2 == 0.0:
                 continue
-            if lazy:
-                if hist[i, p, 3] != step - 1:
-                    hist[i, p, 0] = 0.0
-                    hist[i, p, 1] = 0.0
-                    hist[i, p, 2] = 0.0
-                hist[i, p, 3] = step
-            g, gp = plane_onset(d, onset[i])
-            fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
             du0 = (v[i, 0] - pl_vel[p, 0]) * dt
             du1 = (v[i, 1] - pl_vel[p, 1]) * dt
             du2 = (v[i, 2] - pl_vel[p, 2]) * dt
-            f0, f1, f2, dd = _return_map(hflat, i * npl + p, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
+            e_prev = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2) / k_t
+            if d <= 0.0:
+                # off the plane: the entry forgets its force, whose energy is dissipated
+                hflat[r, 0] = 0.0
+                hflat[r, 1] = 0.0
+                hflat[r, 2] = 0.0
+                dd = _dissipated(p0, p1, p2, e_prev, 0.0, 0.0, 0.0, 0.0, du0, du1, du2)
+                diss += dd
+                returned -= min(dd, 0.0)
+                continue
+            hflat[r, 0] = p0
+            hflat[r, 1] = p1
+            hflat[r, 2] = p2
+            if lazy:
+                hflat[r, 3] = step
+            g, gp = plane_onset(d, onset[i])
+            fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
+            f0, f1, f2 = _return_map(hflat, r, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
+            e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / k_t
+            dd = _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2)
             diss += dd
-            espring += 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / k_t
+            returned -= min(dd, 0.0)
+            espring += e_new
             f_out[i, 0] += f0
             f_out[i, 1] += f1
             f_out[i, 2] += f2
             pl_tforce[p, 0] -= f0
             pl_tforce[p, 1] -= f1
             pl_tforce[p, 2] -= f2
-    return diss, espring
+    return diss, espring, returned
 
 
 def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None,

@@ -176,9 +176,9 @@ def test_stamped_friction_history_equals_clearing_it():
         v[rng[0][0]:rng[0][1], 0] = 0.3 * (1 + 0.1 * np.sin(step))
         f1 = np.zeros_like(x)
         f2 = np.zeros_like(x)
-        d1, e1 = friction_forces_ex(v, seg, pairs, 1, rec._replace(active=np.zeros(0, np.int64)), mu, kt, dt,
+        d1, e1, _ = friction_forces_ex(v, seg, pairs, 1, rec._replace(active=np.zeros(0, np.int64)), mu, kt, dt,
                                     hist_clear, f1, 0, 0)
-        d2, e2 = friction_forces_ex(v, seg, pairs, 1, rec, mu, kt, dt, hist_stamp, f2, na, step)
+        d2, e2, _ = friction_forces_ex(v, seg, pairs, 1, rec, mu, kt, dt, hist_stamp, f2, na, step)
         assert np.array_equal(f1, f2) and d1 == d2 and e1 == e2
         if na:
             assert np.array_equal(hist_clear[0, :4], hist_stamp[0, :4])

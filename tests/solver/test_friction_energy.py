@@ -34,7 +34,10 @@ def test_sliding_fiber_is_stopped_by_friction_and_stays_stopped():
     m, res, a, b, v0 = _slide()
     fd = np.asarray(res.history["energy/friction"])
     ke = np.asarray(res.history["energy/kinetic"])
-    assert np.all(np.diff(fd) >= -1e-18)  # dissipation only accumulates
+    # dissipation accumulates; ALLFD is the friction forces' work less the springs' energy, booked as
+    # it is, and while the stuck pair vibrates its contact point slides under the loaded spring and
+    # the spring's force turns with the normal: that exchanges 1e-4 of ALLFD here, either way
+    assert np.max(np.maximum.accumulate(fd) - fd) < 1e-3 * fd[-1]
     m_fiber = float(m.mass[a:b].sum())
     assert fd[-1] == pytest.approx(0.5 * m_fiber * v0**2, rel=0.25)  # the sliding energy went into friction
     # the suddenly applied load sets the pair vibrating (undamped): that energy may slosh between
@@ -58,3 +61,30 @@ def test_sliding_fiber_state_residual_stays_below_one_percent():
     closes within 1 % while friction stops the fibre (it read 1.7–2 % with the legacy kernel)."""
     m, res, a, b, v0 = _slide()
     assert np.max(np.abs(res.history["energy/residual"][1:])) < 0.01
+
+
+def test_booked_dissipation_is_the_forces_work_under_chatter():
+    """A fibre on a plate, undamped, its nodes launched with alternating velocities (the highest
+    modes): the plate friction's slip turns back and forth from step to step. ALLFD is the energy the
+    friction forces took from the fibre (energy/friction_work, booked by the step loop) less what
+    their springs store, so the state-function residual closes; the end-of-step product μ f_n × slip
+    books 3.4× that work here (residual 1.1e-2). No contact gives energy back."""
+    from test_contact_dynamics import _model
+    from fiberpipe.solver import Gravity, Plates
+    from fiberpipe.verification.case_config import contact_hook
+
+    m = _model([((0, 0, R), (3e-3, 0, R), 10)])
+    fr = contact_hook(m, contact=False, friction=True, mu=0.5)
+    st = State.at_rest(m)
+    k = np.arange(m.n_nodes)
+    st.v[:, 0] = 0.01 * (-1.0) ** k
+    st.v[:, 1] = 0.01 * (-1.0) ** (k // 2)
+    ke0 = 0.5 * float(np.sum(m.mass * np.sum(st.v**2, axis=1)))
+    res = simulate(m, [Gravity([0, 0, -9.81]), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0), fr],
+                   SimulationSettings(end_time_s=2e-4, output_frames=3, history_every=10), state=st)
+    h = res.history
+    fd, wf = h["energy/friction"][-1], -h["energy/friction_work"][-1]
+    assert fd > 0.01 * ke0  # the friction does work here
+    assert fd == pytest.approx(wf, rel=1e-3)  # less the springs' energy, small at the end
+    assert np.max(np.abs(h["energy/residual"])) < 1e-3
+    assert fr.setup_info.data.stats.friction_returned_J[0] <= 1e-9 * fd

@@ -72,3 +72,14 @@ def test_post_reports_the_cycle_and_the_residual_strain(cycle_run):
         assert (post / name).exists(), name
     report = (post / "report.md").read_text()
     assert "## Loading cycles" in report and "residual strain" in report
+
+
+def test_friction_gives_back_almost_nothing_over_the_cycle(cycle_run):
+    """The simulate summary reports the energy the friction gave back (its contacts' negative
+    dissipations): over the load reversals it stays a small part of what friction dissipated."""
+    s = json.loads((cycle_run / "summary.json").read_text())["stages"]["simulate"]
+    sim = load_simulation(cycle_run / "simulation.h5")
+    fd = float(np.asarray(sim.energy["friction"])[-1])
+    assert s["friction_returned_J"] >= 0.0
+    assert s["friction_returned_over_dissipated"] == pytest.approx(s["friction_returned_J"] / fd)
+    assert s["friction_returned_over_dissipated"] < 1e-3
