@@ -164,6 +164,10 @@ specimen-400: setup
 bench-400: specimen-400
 	NUMBA_NUM_THREADS=1 $(PY) -m fiberpipe.benchmarks.bench_bundle_cost runs/specimens/bundle-400/config.yaml
 
+.PHONY: bench-400-threads
+bench-400-threads: specimen-400
+	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.bench_threads --config runs/specimens/bundle-400/config.yaml --steps 200 --rounds 6
+
 # the spool radius of the study-like specimen fitted to the study's curve as its text describes it
 # (data-samples/paper-40-fit/target.csv); each evaluation builds and settles a specimen and compacts it
 # (11-15 min on one core), 3 evaluations; the range brackets Gutowski's estimate (β ≈ 46: R ≈ 85 mm)

@@ -11,6 +11,11 @@ means something only on an idle machine (each thread needs a core).
 
 ``--state``: paper-40 at the study's settings from states saved by
 :mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40``) instead of the bench bundle.
+``--config``: the scene of a run config (mesh built in memory) from rest, after 300 steps, e.g. the
+400-fiber specimen's (``make bench-400-threads``):
+
+    NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads \\
+        --config runs/specimens/bundle-400/config.yaml --steps 200 --rounds 6
 """
 
 from __future__ import annotations
@@ -44,16 +49,32 @@ def _state_scene(path: str):
     return m, eff, dt, load_state(path)
 
 
+def _config_scene(path: str):
+    """The scene of a run config from rest: (model, effects, dt, state at rest)."""
+    from pathlib import Path
+
+    from fiberpipe.benchmarks.paper40_states import scene
+    from fiberpipe.solver import State
+
+    m, eff, _, dt = scene(config=Path(path))
+    return m, eff, dt, State.at_rest(m)
+
+
 def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True,
-            state: str | None = None) -> dict:
+            state: str | None = None, config: str | None = None) -> dict:
     from fiberpipe.solver.integrator import Integrator
 
     runs = {}
     for th in (1, threads):
-        m, eff, dt, st = _state_scene(state) if state else _bench_scene(n_fibers, contact)
+        if config:
+            m, eff, dt, st = _config_scene(config)
+        else:
+            m, eff, dt, st = _state_scene(state) if state else _bench_scene(n_fibers, contact)
         integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
-        integ.advance(st, 10)  # compile
+        integ.advance(st, 300 if config else 10)  # compile (from rest: past the first contacts)
         runs[th] = (integ, st, m.n_elements)
+    if config:
+        state = f"{os.path.basename(os.path.dirname(os.path.abspath(config)))} from rest"
     n_fibers = m.n_fibers if state else n_fibers
     t = {1: [], threads: []}
     load = [os.getloadavg()[0]]
@@ -65,7 +86,8 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
             t[th].append(time.perf_counter() - t0)
         load.append(os.getloadavg()[0])
     per = [a / b for a, b in zip(t[1], t[threads])]
-    return {"fibers": n_fibers if not state else f"{n_fibers} (paper-40 state {os.path.basename(state)})",
+    where = state if config else f"paper-40 state {os.path.basename(state or '')}"
+    return {"fibers": n_fibers if not state else f"{n_fibers} ({where})",
             "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
             "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
             "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
@@ -92,8 +114,12 @@ def main(argv=None):
                     help="beams, clamps, damping and gravity only: the part that runs in parallel")
     ap.add_argument("--state", nargs="+", default=[],
                     help="paper-40 states saved by paper40_states (instead of the bench bundle)")
+    ap.add_argument("--config", nargs="+", default=[],
+                    help="run configs whose scenes run from rest (instead of the bench bundle)")
     a = ap.parse_args(argv)
-    if a.state:
+    if a.config:
+        rows = [measure(0, a.steps, a.rounds, a.threads, config=p) for p in a.config]
+    elif a.state:
         rows = [measure(0, a.steps, a.rounds, a.threads, state=p) for p in a.state]
     else:
         rows = [measure(n, a.steps, a.rounds, a.threads, contact=not a.no_contact) for n in a.fibers]
