@@ -484,9 +484,10 @@ _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="alwa
 # columns of a pair's result row in the contact pass (:func:`_pairs_pass`): its force block (rows
 # a0, a1, b0, b1 of the pair's nodes, then the far nodes of the segments before and after each,
 # 3 components each), its accumulator
-# (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle and its new skip threshold
-_R_BLOCK, _R_REC, _R_PHI, _R_GAP = 0, 24, 32, 33
-N_ROW = 34
+# (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle, its new skip threshold, and
+# for the merge after the tasks its energy and its outcome
+_R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME = 0, 24, 32, 33, 34, 35
+N_ROW = 36
 # what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
 # row), within touch but no force, in contact
 _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
@@ -527,6 +528,113 @@ PAIR_TASK_MIN = 32
 _PAIR_TASKS = 8
 
 
+def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
+                 span, rows, scratch):
+    """Entries ``lo`` … ``hi − 1`` of the look list (:func:`_look_list`) of :func:`contact_forces_pot`
+    (``span = (lo, hi, reach)``), with one task's scratch (``rec``, ``geo``, ``blk``, ``gbuf``, ``jgeo``
+    of :func:`_pass_work`): each pair merged at once (``_THREADS`` False; returns the energy and the
+    count of pairs in contact) or written to its result row ``rows[kk]`` for the merge after the
+    tasks (returns zeros)."""
+    lo, hi, reach = span
+    rec, geo, blk, gbuf, jgeo = scratch
+    use_list = out.active.shape[0] > 0
+    use_share = out.share.shape[0] > 0
+    look = out.active
+    c_gap = out.gap
+    use_gap = c_gap.shape[0] > 0
+    compact = _compact_look(out)
+    use_off = c_off.shape[0] > 0
+    energy = 0.0
+    n_active = 0
+    a0 = geo[0]
+    b0 = geo[1]
+    ta = geo[2]
+    tb = geo[3]
+    loc = (0, 1, 2, 3)  # the block's rows: the pair's nodes a0, a1, b0, b1
+    for kk in range(lo, hi):
+        k = look[kk] if compact else kk
+        ri = kk if _THREADS else 0  # the pair's result row
+        outcome = _SKIPPED
+        e = 0.0
+        for _ in range(1):  # one pass; a break ends the pair's evaluation at its outcome
+            if use_gap and c_gap[k] > reach:
+                break
+            i = pairs[k, 0]
+            j = pairs[k, 1]
+            ra = seg_radius[i]
+            rb = seg_radius[j]
+            rr = ra + rb
+            off = c_off[k] if use_off else 0.0
+            for c in range(3):
+                a0[c] = x[seg_nodes[i, 0], c]
+                b0[c] = x[seg_nodes[j, 0], c]
+                ta[c] = x[seg_nodes[i, 1], c] - a0[c]
+                tb[c] = x[seg_nodes[j, 1], c] - b0[c]
+            dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
+                                                 ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
+            if dist2 >= rr * rr:
+                rows[ri, _R_GAP] = reach + math.sqrt(dist2) - rr
+                outcome = _APART
+                break
+            for c in range(8):
+                rec[c] = 0.0
+            for r in range(8):
+                for c in range(3):
+                    blk[r, c] = 0.0
+            aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
+            bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
+            ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
+            phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
+            d_own = math.sqrt(dist2)
+            delta = rr - d_own - off
+            n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
+            w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
+            e_point = 0.0   # s_joint Π_point (unweighted by w)
+            de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
+            if w > 0.0:
+                ej = _JOINT_RAMP * delta + _JOINT_RAMP_FLOOR * rr  # the ramps' half-width
+                wst = _joint_share(x, seg_nodes, i, j, d_own, ej, jgeo) if delta > 0.0 else 1.0
+                if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
+                    gp = onset(delta, ds)[1]
+                    e_point = wst * ep
+                    de_point = wst * dep
+                    inv = 1.0 / d_own  # the closest points' unit normal, B to A
+                    nx = (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv
+                    ny = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
+                    nz = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
+                    _joint_share_forces(blk, jgeo, (sc, tc, nx, ny, nz), _JOINT_RAMP / ej, -w * ep)
+                    rec[7] += w * wst
+                    fm = w * wst * fp * gp
+                    apply_line_point(blk, loc, sc, tc, fm * nx, fm * ny, fm * nz, fm, delta, rec, 1.0)
+            e_line = 0.0  # Π_line (unweighted by 1 − w)
+            if w < 1.0:
+                half = 0.5 * (1.0 - w)
+                el = _line_part(gbuf, n_a, n_b, loc, (seg_arc[i, 1] - seg_arc[i, 0], seg_arc[j, 1] - seg_arc[j, 0]),
+                                ra, rb, law_id, law_params, half, ds, blk, rec)
+                e_line = el / (1.0 - w)
+            _blend_forces(blk, loc, a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
+                          dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
+            e = (1.0 - w) * e_line + w * e_point
+            if not rec[0] > 0.0:  # record_pair's test: no contact point carries a force
+                outcome = _CLOSE
+                break
+            outcome = _TOUCHING
+            for r in range(8):
+                for c in range(3):
+                    rows[ri, _R_BLOCK + 3 * r + c] = blk[r, c]
+            for c in range(8):
+                rows[ri, _R_REC + c] = rec[c]
+            rows[ri, _R_PHI] = phi
+        if _THREADS:
+            rows[ri, _R_OUTCOME] = outcome
+            rows[ri, _R_ENERGY] = e
+        else:  # one task: merged at once, in the same order
+            n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, ri, outcome, n_active, use_list,
+                                   use_share)
+            energy += e
+    return energy, n_active
+
+
 def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off, reach,
                 n_look, work):
     """The pairs of the look list (:func:`_look_list`) of :func:`contact_forces_pot`: one task
@@ -538,114 +646,28 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     # records are written in the merge: an array reached through a structure passed into a prange
     # body, or through a tuple holding it, loses the body's writes (numba 0.68). A pair listed as in
     # contact is written at a slot of the look list the merge has already read (n_active ≤ kk).
+    # Each task's pairs run in _pairs_range, compiled without reference counts in both passes: the
+    # prange body takes its counts once per task, not per pair and Gauss point.
+    rows, t_rec, t_geo, t_blk, t_gbuf, t_jgeo = work
+    if not _THREADS:
+        return _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
+                               c_off, (0, n_look, reach), rows, (t_rec[0], t_geo[0], t_blk[0], t_gbuf[0], t_jgeo[0]))
+    n_tasks = t_rec.shape[0]
+    for task in prange(n_tasks):
+        _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
+                        (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach), rows,
+                        (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))
     use_list = out.active.shape[0] > 0
     use_share = out.share.shape[0] > 0
     look = out.active
-    c_gap = out.gap
-    use_gap = c_gap.shape[0] > 0
     compact = _compact_look(out)
-    use_off = c_off.shape[0] > 0
-    rows, e_pair, outcomes, t_rec, t_geo, t_blk, t_gbuf, t_jgeo = work
     energy = 0.0
     n_active = 0
-    n_tasks = t_rec.shape[0]
-    for task in prange(n_tasks):
-        rec = t_rec[task]
-        a0 = t_geo[task, 0]
-        b0 = t_geo[task, 1]
-        ta = t_geo[task, 2]
-        tb = t_geo[task, 3]
-        blk = t_blk[task]
-        gbuf = t_gbuf[task]
-        jgeo = t_jgeo[task]
-        loc = (0, 1, 2, 3)  # the block's rows: the pair's nodes a0, a1, b0, b1
-        for kk in range(task * n_look // n_tasks, (task + 1) * n_look // n_tasks):
-            k = look[kk] if compact else kk
-            ri = kk if _THREADS else 0  # the pair's result row
-            outcome = _SKIPPED
-            e = 0.0
-            for _ in range(1):  # one pass; a break ends the pair's evaluation at its outcome
-                if use_gap and c_gap[k] > reach:
-                    break
-                i = pairs[k, 0]
-                j = pairs[k, 1]
-                ra = seg_radius[i]
-                rb = seg_radius[j]
-                rr = ra + rb
-                off = c_off[k] if use_off else 0.0
-                for c in range(3):
-                    a0[c] = x[seg_nodes[i, 0], c]
-                    b0[c] = x[seg_nodes[j, 0], c]
-                    ta[c] = x[seg_nodes[i, 1], c] - a0[c]
-                    tb[c] = x[seg_nodes[j, 1], c] - b0[c]
-                dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
-                                                     ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
-                if dist2 >= rr * rr:
-                    rows[ri, _R_GAP] = reach + math.sqrt(dist2) - rr
-                    outcome = _APART
-                    break
-                for c in range(8):
-                    rec[c] = 0.0
-                for r in range(8):
-                    for c in range(3):
-                        blk[r, c] = 0.0
-                aa = ta[0] * ta[0] + ta[1] * ta[1] + ta[2] * ta[2]
-                bb = tb[0] * tb[0] + tb[1] * tb[1] + tb[2] * tb[2]
-                ab = ta[0] * tb[0] + ta[1] * tb[1] + ta[2] * tb[2]
-                phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
-                d_own = math.sqrt(dist2)
-                delta = rr - d_own - off
-                n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
-                w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
-                e_point = 0.0   # s_joint Π_point (unweighted by w)
-                de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
-                if w > 0.0:
-                    ej = _JOINT_RAMP * delta + _JOINT_RAMP_FLOOR * rr  # the ramps' half-width
-                    wst = _joint_share(x, seg_nodes, i, j, d_own, ej, jgeo) if delta > 0.0 else 1.0
-                    if wst > 0.0 and delta > 0.0 and d_own > 1e-14 * rr:
-                        gp = onset(delta, ds)[1]
-                        e_point = wst * ep
-                        de_point = wst * dep
-                        inv = 1.0 / d_own  # the closest points' unit normal, B to A
-                        nx = (a0[0] + sc * ta[0] - b0[0] - tc * tb[0]) * inv
-                        ny = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
-                        nz = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
-                        _joint_share_forces(blk, jgeo, (sc, tc, nx, ny, nz), _JOINT_RAMP / ej, -w * ep)
-                        rec[7] += w * wst
-                        fm = w * wst * fp * gp
-                        apply_line_point(blk, loc, sc, tc, fm * nx, fm * ny, fm * nz, fm, delta, rec, 1.0)
-                e_line = 0.0  # Π_line (unweighted by 1 − w)
-                if w < 1.0:
-                    half = 0.5 * (1.0 - w)
-                    el = _line_part(gbuf, n_a, n_b, loc, (seg_arc[i, 1] - seg_arc[i, 0], seg_arc[j, 1] - seg_arc[j, 0]),
-                                    ra, rb, law_id, law_params, half, ds, blk, rec)
-                    e_line = el / (1.0 - w)
-                _blend_forces(blk, loc, a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
-                              dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
-                e = (1.0 - w) * e_line + w * e_point
-                if not rec[0] > 0.0:  # record_pair's test: no contact point carries a force
-                    outcome = _CLOSE
-                    break
-                outcome = _TOUCHING
-                for r in range(8):
-                    for c in range(3):
-                        rows[ri, _R_BLOCK + 3 * r + c] = blk[r, c]
-                for c in range(8):
-                    rows[ri, _R_REC + c] = rec[c]
-                rows[ri, _R_PHI] = phi
-            if _THREADS:
-                outcomes[kk] = outcome
-                e_pair[kk] = e
-            else:  # one task: merged at once, in the same order
-                n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, ri, outcome, n_active, use_list,
-                                       use_share)
-                energy += e
-    if _THREADS:
-        for kk in range(n_look):
-            k = look[kk] if compact else kk
-            n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, kk, outcomes[kk], n_active, use_list,
-                                   use_share)
-            energy += e_pair[kk]
+    for kk in range(n_look):
+        k = look[kk] if compact else kk
+        n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, kk, int(rows[kk, _R_OUTCOME]), n_active, use_list,
+                               use_share)
+        energy += rows[kk, _R_ENERGY]
     return energy, n_active
 
 
@@ -671,12 +693,12 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
 
 @njit(cache=True, _nrt=True)
 def _pass_work(n_rows, n_tasks, n_gauss):
-    """Scratch arrays of :func:`_pairs_pass`: ``n_rows`` result rows, energies and outcomes kept for the
-    merge after the tasks (0: one row, reused; the serial pass merges each pair at once), and per task
-    a pair's accumulator, its segments' start nodes and tangents (a0, b0, ta, tb), its force block, its
-    Gauss-point buffer and its joint share's rivals (:func:`_joint_share`)."""
+    """Scratch arrays of :func:`_pairs_pass`: ``n_rows`` result rows kept for the merge after the tasks
+    (0: one row, reused; the serial pass merges each pair at once), and per task a pair's accumulator,
+    its segments' start nodes and tangents (a0, b0, ta, tb), its force block, its Gauss-point buffer
+    and its joint share's rivals (:func:`_joint_share`)."""
     m = max(n_rows, 1)
-    return (np.empty((m, N_ROW)), np.zeros(m), np.zeros(m, np.int64), np.zeros((n_tasks, 8)),
+    return (np.empty((m, N_ROW)), np.zeros((n_tasks, 8)),
             np.empty((n_tasks, 4, 3)), np.empty((n_tasks, 8, 3)), np.empty((n_tasks, 2 * n_gauss, N_GP_COLUMNS)),
             np.empty((n_tasks, N_RIVALS, 8)))
 
@@ -691,11 +713,15 @@ _THREADS = False
 # results stay equal bit for bit. A function compiled from one without reference counts inherits
 # that unless it sets its own (numba's ``nrt`` flag), so every kernel here that allocates, or calls a
 # law's own functions, sets ``_nrt=True``.
+_pairs_range_of = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_pairs_range)
 _pairs_serial = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_pairs_pass)
 # Not cached (a parfor kernel linked into a step loop compiled in another process: see
-# _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it
-_pairs_tasks = specialise(_pairs_pass, "_pairs_tasks", {"_THREADS": True}, cache=False, fastmath=True,
-                          error_model="numpy", parallel=True, _nrt=True)
+# _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it. Its tasks' pairs run
+# in the rows variant of _pairs_range, without reference counts as in the serial pass.
+_pairs_range_rows = specialise(_pairs_range, "_pairs_range_rows", {"_THREADS": True}, cache=False, fastmath=True,
+                               error_model="numpy", _nrt=False)
+_pairs_tasks = specialise(_pairs_pass, "_pairs_tasks", {"_THREADS": True, "_pairs_range_of": _pairs_range_rows},
+                          cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=True)
 contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy", _nrt=True)(_contact_forces_pot)
 contact_forces_pot_threads = specialise(_contact_forces_pot, "contact_forces_pot_threads", {"_THREADS": True},
                                         cache=False, fastmath=True, error_model="numpy", _nrt=True)
@@ -722,11 +748,15 @@ def potential_kernels_for(law, threads: bool = False):
         blend = specialise(_pair_blend_point_of_law, f"_pair_blend_point_{tag}",
                            {"law_weight_point": weight_point, "law_point": point}, cache=False, _nrt=True, **flags)
         calls = {"_line_part": lh, "_pair_blend_point": blend}
-        passes = {"_pairs_serial": specialise(_pairs_pass, f"_pairs_serial_{tag}", calls, cache=False, _nrt=False,
-                                              **flags)}
+        pairs_range = specialise(_pairs_range, f"_pairs_range_{tag}", calls, cache=False, _nrt=False, **flags)
+        passes = {"_pairs_serial": specialise(_pairs_pass, f"_pairs_serial_{tag}", {"_pairs_range_of": pairs_range},
+                                              cache=False, _nrt=False, **flags)}
         if threads:
-            passes["_pairs_tasks"] = specialise(_pairs_pass, f"_pairs_tasks_{tag}", {**calls, "_THREADS": True},
-                                                cache=False, parallel=True, _nrt=True, **flags)
+            rows = specialise(_pairs_range, f"_pairs_range_rows_{tag}", {**calls, "_THREADS": True}, cache=False,
+                              _nrt=False, **flags)
+            passes["_pairs_tasks"] = specialise(_pairs_pass, f"_pairs_tasks_{tag}",
+                                                {"_pairs_range_of": rows, "_THREADS": True}, cache=False,
+                                                parallel=True, _nrt=True, **flags)
         _LAW_KERNELS[key] = specialise(_contact_forces_pot, f"contact_forces_pot{'_threads' if threads else ''}_{tag}",
                                        {**passes, "_THREADS": bool(threads)}, cache=False, _nrt=True, **flags)
     return _LAW_KERNELS[key]

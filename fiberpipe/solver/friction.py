@@ -7,14 +7,18 @@ a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto 
 1. history ``f_t`` (the elastic tangential force of the contact) is rotated into the current
    tangent plane: ``f_t ← f_t − (f_t·n)n``, rescaled to its old magnitude;
 2. trial ``f_t* = f_t − k_t Δu_t``, with ``Δu_t`` the tangential part of the relative displacement
-   increment of the contact points over the step, ``Δu = (v_A(s) − v_B(t)) Δt``;
+   increment of the contact points over the step, ``Δu = (v_A(s̄) − v_B(t̄)) Δt`` at the mean
+   ``s̄``, ``t̄`` of this step's contact parameters and those the previous force acted at;
 3. stick if ``|f_t*| ≤ μ f_n``; else slip: ``f_t = μ f_n f_t*/|f_t*|``;
 4. an open contact (``f_n = 0``) forgets its history.
 
 Dissipation (ALLFD), per contact and step: the energy the contact took from the fibers less what its
 spring stored, ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
 the relative displacement over the step at this step's contact point and ``Δu'`` at the point the
-previous force acted at (the contact point slides along the segments). The first term is the
+previous force acted at (the contact point slides along the segments). The spring itself stretches
+by the relative displacement at the middle of that path (step 2 above): a stuck contact whose
+point slides then books ``¼(f_{n−1} − f_n)·(Δu − Δu')``, second order in the step, where the
+contact point's own displacement would book ``½ f_{n−1}·(Δu − Δu')``. The first term is the
 friction forces' work as the step loop books it (``½Δt f_n·(v_{n−½} + v_{n+½})``, summed by parts),
 so ALLFD + the springs' energy equals minus that work and the state-function balance closes with
 friction on. In steady slip ``D = μ f_n × slip``; where the slip direction turns or the cone
@@ -152,14 +156,37 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
         i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
         s = c_s[k]
         t = c_t[k]
-        du0 = ((1.0 - s) * v[a0, 0] + s * v[a1, 0] - (1.0 - t) * v[b0, 0] - t * v[b1, 0]) * dt
-        du1 = ((1.0 - s) * v[a0, 1] + s * v[a1, 1] - (1.0 - t) * v[b0, 1] - t * v[b1, 1]) * dt
-        du2 = ((1.0 - s) * v[a0, 2] + s * v[a1, 2] - (1.0 - t) * v[b0, 2] - t * v[b1, 2]) * dt
-        ktp = k_t * c_share[k] if use_share else k_t
         # the force applied at the previous step and its spring's energy, as booked then
         p0 = hist[k, 0]
         p1 = hist[k, 1]
         p2 = hist[k, 2]
+        # the contact parameters it acted at (columns 5, 6; this step's for a new contact)
+        held = at_st and (p0 != 0.0 or p1 != 0.0 or p2 != 0.0)
+        sp = hist[k, 5] if held else s
+        tp = hist[k, 6] if held else t
+        # Δu(s, t) = u0 + s ga − t gb over the step: linear in the contact parameters
+        u0 = (v[a0, 0] - v[b0, 0]) * dt
+        u1 = (v[a0, 1] - v[b0, 1]) * dt
+        u2 = (v[a0, 2] - v[b0, 2]) * dt
+        ga0 = (v[a1, 0] - v[a0, 0]) * dt
+        ga1 = (v[a1, 1] - v[a0, 1]) * dt
+        ga2 = (v[a1, 2] - v[a0, 2]) * dt
+        gb0 = (v[b1, 0] - v[b0, 0]) * dt
+        gb1 = (v[b1, 1] - v[b0, 1]) * dt
+        gb2 = (v[b1, 2] - v[b0, 2]) * dt
+        du0 = u0 + s * ga0 - t * gb0
+        du1 = u1 + s * ga1 - t * gb1
+        du2 = u2 + s * ga2 - t * gb2
+        # the spring stretches by Δu at the middle of the contact point's path over the step:
+        # the previous force acted at (sp, tp), this one at (s, t), and with the midpoint their
+        # trapezoidal work and the spring's energy differ only by ¼(f_{n−1} − f_n)·(Δu − Δu'),
+        # second order in the step, instead of ½ f_{n−1}·(Δu − Δu')
+        sm = 0.5 * (sp + s)
+        tm = 0.5 * (tp + t)
+        dm0 = u0 + sm * ga0 - tm * gb0
+        dm1 = u1 + sm * ga1 - tm * gb1
+        dm2 = u2 + sm * ga2 - tm * gb2
+        ktp = k_t * c_share[k] if use_share else k_t
         k_prev = hist[k, 3] if keep_k and hist[k, 3] > 0.0 else ktp
         e_prev = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2) / k_prev if k_prev > 0.0 else 0.0
         f0 = 0.0
@@ -177,7 +204,7 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
                     hist[k, 1] *= sc
                     hist[k, 2] *= sc
                 hist[k, 3] = ktp
-            f0, f1, f2 = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], du0, du1, du2, fn, mu, ktp)
+            f0, f1, f2 = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], dm0, dm1, dm2, fn, mu, ktp)
             e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
             apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
         else:
@@ -186,14 +213,10 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
             hist[k, 1] = 0.0
             hist[k, 2] = 0.0
         d = _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2)
+        # the previous force's work is −½ p·Δu(sp, tp), not −½ p·Δu(s, t)
+        d -= 0.5 * (p0 * ((sp - s) * ga0 - (tp - t) * gb0) + p1 * ((sp - s) * ga1 - (tp - t) * gb1)
+                    + p2 * ((sp - s) * ga2 - (tp - t) * gb2))
         if at_st:
-            # the previous force acted at the contact parameters of its step, not this one's: its
-            # work is −½ p·Δu(s_prev, t_prev), and Δu is linear in s and t
-            ds = hist[k, 5] - s
-            dt_ = hist[k, 6] - t
-            d -= 0.5 * dt * (p0 * (ds * (v[a1, 0] - v[a0, 0]) - dt_ * (v[b1, 0] - v[b0, 0]))
-                             + p1 * (ds * (v[a1, 1] - v[a0, 1]) - dt_ * (v[b1, 1] - v[b0, 1]))
-                             + p2 * (ds * (v[a1, 2] - v[a0, 2]) - dt_ * (v[b1, 2] - v[b0, 2])))
             hist[k, 5] = s
             hist[k, 6] = t
         diss += d
