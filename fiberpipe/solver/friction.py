@@ -15,16 +15,16 @@ a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto 
 Dissipation (ALLFD), per contact and step: the energy the contact took from the fibers less what its
 spring stored, ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
 the relative displacement over the step at this step's contact point and ``Δu'`` at the point the
-previous force acted at (the contact point slides along the segments). The spring itself stretches
-by the relative displacement at the middle of that path (step 2 above): a stuck contact whose
-point slides then books ``¼(f_{n−1} − f_n)·(Δu − Δu')``, second order in the step, where the
-contact point's own displacement would book ``½ f_{n−1}·(Δu − Δu')``. The first term is the
+previous force acted at (the contact point slides along the segments). The first term is the
 friction forces' work as the step loop books it (``½Δt f_n·(v_{n−½} + v_{n+½})``, summed by parts),
 so ALLFD + the springs' energy equals minus that work and the state-function balance closes with
 friction on. In steady slip ``D = μ f_n × slip``; where the slip direction turns or the cone
 shrinks between steps (stick–slip chatter, a release) the end-of-step product ``μ f_n × slip``
 would over- or under-book the force's work by ``½(|f_t*| − μ f_n)(μ f_n − f_{n−1}·t̂)/k_t``.
-``D < 0`` would be friction giving energy back; its sum is kept apart (``returned``).
+The spring stretches at the middle of the contact point's path (step 2): a stuck contact whose
+point slides then books ``¼(f_{n−1} − f_n)·(Δu − Δu')``, second order in the step, where a
+spring stretched at this step's point would book ``½ f_{n−1}·(Δu − Δu')``. ``D < 0`` is friction
+giving energy back; its sum is kept apart (``returned``).
 
 Fiber–fiber: one history per segment pair, keyed ``i·E + j`` (the Verlet list's sorted keys), applied
 at the pair's force-weighted contact point (``c_s``, ``c_t`` from the contact kernel) along its

@@ -36,8 +36,9 @@ def test_sliding_fiber_is_stopped_by_friction_and_stays_stopped():
     ke = np.asarray(res.history["energy/kinetic"])
     # dissipation accumulates; ALLFD is the friction forces' work less the springs' energy, booked as
     # it is, and while the stuck pair vibrates its contact point slides under the loaded spring and
-    # the spring's force turns with the normal: that exchanges 1e-4 of ALLFD here, either way
-    assert np.max(np.maximum.accumulate(fd) - fd) < 1e-3 * fd[-1]
+    # the spring's force turns with the normal: that exchanges 8e-6 of ALLFD here, either way
+    # (1.3e-4 with the spring stretched at this step's contact point instead of the path's middle)
+    assert np.max(np.maximum.accumulate(fd) - fd) < 1e-4 * fd[-1]
     m_fiber = float(m.mass[a:b].sum())
     assert fd[-1] == pytest.approx(0.5 * m_fiber * v0**2, rel=0.25)  # the sliding energy went into friction
     # the suddenly applied load sets the pair vibrating (undamped): that energy may slosh between
