@@ -82,11 +82,11 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2):
+def _dissipated(p0, p1, p2, q0, q1, q2, e_prev, f0, f1, f2, du0, du1, du2, e_new):
     """Energy a contact dissipated over the step (module docstring): minus the trapezoidal work of its
-    force ``f_{n−1} = p`` → ``f_n = f`` on the relative displacement ``Δu``, less the change of its
-    spring's energy ``e_prev`` → ``e_new`` [J]."""
-    return -0.5 * ((p0 + f0) * du0 + (p1 + f1) * du1 + (p2 + f2) * du2) - (e_new - e_prev)
+    forces, ``f_{n−1} = p`` on the relative displacement ``Δu' = q`` at the point it acted at and
+    ``f_n = f`` on ``Δu`` at this step's, less the change of its spring's energy ``e_prev`` → ``e_new`` [J]."""
+    return -0.5 * (p0 * q0 + p1 * q1 + p2 * q2 + f0 * du0 + f1 * du1 + f2 * du2) - (e_new - e_prev)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -212,10 +212,9 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
             hist[k, 0] = 0.0
             hist[k, 1] = 0.0
             hist[k, 2] = 0.0
-        d = _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2)
-        # the previous force's work is −½ p·Δu(sp, tp), not −½ p·Δu(s, t)
-        d -= 0.5 * (p0 * ((sp - s) * ga0 - (tp - t) * gb0) + p1 * ((sp - s) * ga1 - (tp - t) * gb1)
-                    + p2 * ((sp - s) * ga2 - (tp - t) * gb2))
+        # the previous force works on Δu(sp, tp), the point it acted at
+        d = _dissipated(p0, p1, p2, u0 + sp * ga0 - tp * gb0, u1 + sp * ga1 - tp * gb1, u2 + sp * ga2 - tp * gb2,
+                        e_prev, f0, f1, f2, du0, du1, du2, e_new)
         if at_st:
             hist[k, 5] = s
             hist[k, 6] = t
@@ -322,20 +321,21 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
                 hflat[r, 0] = 0.0
                 hflat[r, 1] = 0.0
                 hflat[r, 2] = 0.0
-                dd = _dissipated(p0, p1, p2, e_prev, 0.0, 0.0, 0.0, 0.0, du0, du1, du2)
+                dd = _dissipated(p0, p1, p2, du0, du1, du2, e_prev, 0.0, 0.0, 0.0, du0, du1, du2, 0.0)
                 diss += dd
                 returned -= min(dd, 0.0)
                 continue
-            hflat[r, 0] = p0
-            hflat[r, 1] = p1
-            hflat[r, 2] = p2
+            if not touched:  # a stale entry starts afresh
+                hflat[r, 0] = 0.0
+                hflat[r, 1] = 0.0
+                hflat[r, 2] = 0.0
             if lazy:
                 hflat[r, 3] = step
             g, gp = plane_onset(d, onset[i])
             fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
             f0, f1, f2 = _return_map(hflat, r, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
             e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / k_t
-            dd = _dissipated(p0, p1, p2, e_prev, f0, f1, f2, e_new, du0, du1, du2)
+            dd = _dissipated(p0, p1, p2, du0, du1, du2, e_prev, f0, f1, f2, du0, du1, du2, e_new)
             diss += dd
             returned -= min(dd, 0.0)
             espring += e_new

@@ -328,7 +328,8 @@ def _friction_returned(effects, hist) -> dict:
         data = getattr(getattr(e, "setup_info", None), "data", None)
         if data is not None and getattr(e.setup_info, "friction_on", False):
             back = float(data.stats.friction_returned_J[0])
-            fd = float(np.asarray(hist.get("energy/friction", [0.0]))[-1]) if len(hist.get("energy/friction", [])) else 0.0
+            fd = np.asarray(hist.get("energy/friction", []), float)
+            fd = float(fd[-1]) if fd.size else 0.0
             return {"friction_returned_J": back, "friction_returned_over_dissipated": back / fd if fd > 0 else 0.0}
     return {}
 
