@@ -73,9 +73,13 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
         integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
         integ.advance(st, 300 if config else 10)  # compile (from rest: past the first contacts)
         runs[th] = (integ, st, m.n_elements)
+    # the row's label: the bench bundle's fiber count, or the scene and where it starts
     if config:
-        state = f"{os.path.basename(os.path.dirname(os.path.abspath(config)))} from rest"
-    n_fibers = m.n_fibers if state else n_fibers
+        label = f"{m.n_fibers} ({os.path.basename(os.path.dirname(os.path.abspath(config)))} from rest)"
+    elif state:
+        label = f"{m.n_fibers} (paper-40 state {os.path.basename(state)})"
+    else:
+        label = n_fibers
     t = {1: [], threads: []}
     load = [os.getloadavg()[0]]
     for r in range(rounds):
@@ -86,8 +90,7 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
             t[th].append(time.perf_counter() - t0)
         load.append(os.getloadavg()[0])
     per = [a / b for a, b in zip(t[1], t[threads])]
-    where = state if config else f"paper-40 state {os.path.basename(state or '')}"
-    return {"fibers": n_fibers if not state else f"{n_fibers} ({where})",
+    return {"fibers": label,
             "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
             "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
             "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
