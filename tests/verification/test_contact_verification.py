@@ -24,18 +24,13 @@ def _check_informational(r):
         assert d["frames_contact_lost"] > d["frames"] // 2 and 0 < d["max_gap_m"] < 0.05 * 0.25e-3, (
             f"undamped rearrangement: beams 2/3 off beam 1 in {d['frames_contact_lost']}/{d['frames']} frames, "
             f"gap up to {d['max_gap_m'] * 1e6:.3g} µm (measured 55/61 frames, 6.1–6.2 µm)")
-    elif r.case.startswith("3-beam static α = 0") and "energy gained" in r.case:
-        gained = r.data["max_energy_gained"]
-        # measured: +0.49 % of W (quick, 6 mm beams), up to +1.3 % (full, q/2) at the default step,
-        # +0.09 % at dt_safety 0.45 (the sudden impact's step error)
-        assert gained < 0.02, f"undamped 3-beam case gains {100 * gained:.2f} % of W (measured ≤ 1.3 %) ({r.note})"
-    elif r.case.startswith("3-beam static α = 0") and ": NF" in r.case:
-        lo, hi = r.data["nf_over_ref"]
-        mean = r.data["mean_nf_last_half_over_ref"]
-        # measured (quick, 6 mm beams): mean NF/ref 0.975 over the last half, swinging over [0.05, 2.5]
-        assert lo < 0.95 and hi > 1.05 and abs(mean - 1.0) < 0.05, (
-            f"undamped 3-beam quick case: mean NF/ref {mean:.4f} (measured 0.975), range [{lo:.3f}, {hi:.3f}]; "
-            f"if the mean is now within 2 %, make the row a checked one ({r.note})")
+    elif r.case.startswith("3-beam static α = 0") and "energy residual" in r.case:
+        resid = r.data["max_abs_residual"]
+        # measured over 16 T at the default step: 0.06–0.09 (quick), 0.057–0.074 (full); the energy goes
+        # missing (the checked row "energy gained" holds it ≤ 1 % above the loads' work)
+        assert 0.01 < resid < 0.15, (
+            f"undamped 3-beam case: |residual| up to {resid:.3g} (measured 0.06–0.09 at the default step); "
+            f"if it is now within 1e-2, make the row a checked one ({r.note})")
     elif r.case.startswith("3-beam static α = 0"):
         lo, hi = r.data["rf_over_ref"]
         # measured (quick): RF error 59 % over the last quarter of 0.6 ms
