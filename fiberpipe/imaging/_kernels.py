@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .. import _vectorise  # noqa: F401  (before any kernel compiles: the vector width)
+
 
 @njit(cache=True)
 def render_segments_max(out, starts, ends, radius, shape_zyx):

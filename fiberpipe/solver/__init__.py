@@ -4,7 +4,7 @@ Model (static) / State (dynamic) / Integrator (step loop) split; see docs/solver
 """
 
 from . import _jitcache  # noqa: F401  (first: cache freshness of every solver kernel)
-from . import _vectorise  # noqa: F401  (before any kernel compiles: the vectoriser's limits)
+from .. import _vectorise  # noqa: F401  (before any kernel compiles: the vectoriser's limits and width)
 from .effects import (Clamp, Clamps, ContactHook, Damping, Drive, Drives, Gravity, LineLoad, Loads,
                       Plates, PointLoad, Walls)
 from .integrator import (ENERGY_NAMES, Integrator, SimulationResult, SimulationSettings, advance,

@@ -33,13 +33,17 @@ def _digest(key) -> str:
     return h.hexdigest()
 
 
+# compiled into every kernel too: the LLVM options of fiberpipe/_vectorise.py
+_SHARED = (os.path.join(os.pardir, "_vectorise.py"),)
+
+
 def package_source_digest() -> str:
-    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` (re-hashed when one changes)."""
+    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` and of ``fiberpipe/_vectorise.py``
+    (re-hashed when one changes)."""
     key = []
-    for name in sorted(os.listdir(_PKG_DIR)):
-        if name.endswith(".py"):
-            st = os.stat(os.path.join(_PKG_DIR, name))
-            key.append((name, st.st_mtime_ns, st.st_size))
+    for name in sorted(n for n in os.listdir(_PKG_DIR) if n.endswith(".py")) + list(_SHARED):
+        st = os.stat(os.path.join(_PKG_DIR, name))
+        key.append((name, st.st_mtime_ns, st.st_size))
     return _digest(tuple(key))
 
 

@@ -20,7 +20,7 @@ class ElementForces(NamedTuple):
     force (N), ``m`` the moment (N·m), ``h = ½ (x_2 − x_1) × n`` (N·m). Node ``i`` gets ``(+n, m + h)``
     from entry ``i + 1`` and ``(−n, h − m)`` from entry ``i``; entries without an element stay 0. Nine
     separate arrays: the vectorised loops need their writes and strided reads in distinct arrays
-    (``fiberpipe.solver._vectorise``)."""
+    (``fiberpipe._vectorise``)."""
 
     n0: np.ndarray
     n1: np.ndarray
