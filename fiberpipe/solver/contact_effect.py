@@ -241,7 +241,15 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
     """Fiber–fiber and fiber–plane friction into ``fc`` (step 3); books the friction forces' work
     ``Δt f_n·v̄_n = ½Δt f_n·(v_{n−½} + v_{n+½})`` apart (ACC_WF), on the nodes the forces act on:
     ``fwork.ff`` still holds the previous step's friction forces on the listed nodes, and ``v`` now
-    holds their v_{n+½}. Returns the dissipated energy [J]."""
+    holds their v_{n+½}. Returns the dissipated energy [J]: the energy the friction forces took from
+    the fibers over the step less what their springs gained (``stats.e_spring_J``, fiber pairs and
+    planes), ``−ΔW_f − ΔE_springs``.
+
+    Why from the nodes' work and not from the contacts' own: the contacts' sum (the kernels' first
+    return, module ``friction``) is the same over the contacts they visit, but a contact that leaves
+    (out of contact, out of the neighbour list, off a plane's candidates) takes the work of its last
+    force's second half and its spring's energy with it unbooked. The contacts' negative parts are
+    still summed apart (``friction_returned_J``)."""
     prm, st, fw, fc = data.params, data.stats, data.fwork, data.fc
     ff, nodes = fw.ff, fw.nodes
     wf = 0.0
@@ -257,18 +265,16 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
         ff[i, 0] = -fc[i, 0]
         ff[i, 1] = -fc[i, 1]
         ff[i, 2] = -fc[i, 2]
-    diss = 0.0
+    e_springs = 0.0
     if prm.friction_on:
         dff, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
                                             prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
-        diss += dff
-        st.e_spring_J[0] = esp
+        e_springs += esp
         st.friction_returned_J[0] += back
     if plane_fric:
         dpl, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
-        diss += dpl
+        e_springs += espl
         st.friction_returned_J[0] += back
-        acc[ACC_STORED] += espl
     for kk in range(n_ff):
         i = nodes[kk]
         ff[i, 0] += fc[i, 0]
@@ -276,6 +282,8 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
         ff[i, 2] += fc[i, 2]
         wf += ff[i, 0] * v[i, 0] + ff[i, 1] * v[i, 1] + ff[i, 2] * v[i, 2]
     acc[ACC_WF] += 0.5 * dt * wf
+    diss = -0.5 * dt * wf - (e_springs - st.e_spring_J[0])
+    st.e_spring_J[0] = e_springs
     return diss
 
 
@@ -378,7 +386,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     if prm.friction_on or plane_fric:
         diss = _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
     # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
-    acc[ACC_STORED] += energy + (st.e_spring_J[0] if prm.friction_on else 0.0)
+    acc[ACC_STORED] += energy + st.e_spring_J[0]
     # the forces stay in fc: the step loop's update applies them, books their work and clears fc
     acc[ACC_PW] += diss
     acc[ACC_FD] += diss

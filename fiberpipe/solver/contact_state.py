@@ -57,7 +57,7 @@ class ContactStats(NamedTuple):
     fn_sum_n: np.ndarray      # Σ normal force of the pairs in contact at the last step, N
     delta_max_m: np.ndarray   # largest penetration at the last step, m
     e_contact_J: np.ndarray   # stored normal contact energy at the last step, J
-    e_spring_J: np.ndarray    # elastic energy of the fiber–fiber tangential springs, J
+    e_spring_J: np.ndarray    # elastic energy of the friction springs (fiber pairs and planes), J
     offset_max_m: np.ndarray  # largest initial-overlap offset still applied, m
     path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
     delta_peak_m: np.ndarray  # largest penetration since the caller last reset it (the run's slope watch), m
