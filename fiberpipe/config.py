@@ -650,7 +650,9 @@ class SolverConfig(Section):
     mass_scaling: float = 1.0
     threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (4 prange tasks "
                          "of contiguous nodes) and for the potential contact pass's pairs (up to 8 tasks once 64 pairs are "
-                         "within reach; the same forces bit for bit); the legacy contact pass and the friction stay serial; "
+                         "within reach; the same forces bit for bit) and the fiber–fiber friction's pairs (up to 8 tasks of at "
+                         "least 64 pairs in contact; the same forces bit for bit); the legacy contact pass and the plane "
+                         "friction stay serial; "
                          "> 1 uses a step loop compiled in every process (not cached); pays on an idle machine with a core "
                          "per thread (docs/benchmarks.md)")
     settle_time: Time = 0.0

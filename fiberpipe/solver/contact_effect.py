@@ -43,7 +43,7 @@ from .effects import ContactHook, register_effect
 from ._specialise import specialise
 from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
-from .friction import friction_forces_ex, plane_friction, remap_history
+from .friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
 from .geometry import pair_gap
 from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WF, ACC_WK
 from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2
@@ -518,11 +518,12 @@ def _potential_pass(forces, tag: str):
                       inline="always", **_SPEC)
 
 
-def _step_with(normal_pass, tag: str, overlaps, counts: bool = False):
-    """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass and ``overlaps`` recording
-    the initial overlaps (not cached); ``counts``: its forces part with reference counts (the legacy
-    formulation)."""
-    forces = specialise(_step_forces, f"_step_forces_{tag}", {"_normal_forces": normal_pass}, cache=False,
+def _step_with(normal_pass, tag: str, overlaps, counts: bool = False, friction_pass=_friction_pass):
+    """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass, ``friction_pass`` as its
+    friction and ``overlaps`` recording the initial overlaps (not cached); ``counts``: its forces part
+    with reference counts (the legacy formulation)."""
+    forces = specialise(_step_forces, f"_step_forces_{tag}",
+                        {"_normal_forces": normal_pass, "_friction_pass": friction_pass}, cache=False,
                         **(dict(_nrt=True) if counts else _NO_COUNTS), **_SPEC)
     first = specialise(_first_steps, f"_first_steps_{tag}",
                        {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, _nrt=True,
@@ -534,8 +535,13 @@ def _step_with(normal_pass, tag: str, overlaps, counts: bool = False):
 # solver.threads > 1 with the built-in laws and the potential formulation: the pairs in prange tasks
 # (a parfor kernel, not cached: see _kernels_beam.beam_pass_fibers); the initial overlaps, recorded
 # once, by the serial pass
+# the fiber–fiber friction's pairs in prange tasks too (friction.friction_forces_tasks: the same forces)
+_friction_pass_threads = specialise(_friction_pass, "_friction_pass_threads",
+                                    {"friction_forces_ex": friction_forces_tasks}, cache=False, inline="always",
+                                    **_SPEC)
 contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_threads, "potential_threads"),
-                                            "potential_threads", _record_initial_overlaps_potential)
+                                            "potential_threads", _record_initial_overlaps_potential,
+                                            friction_pass=_friction_pass_threads)
 
 
 def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
@@ -566,10 +572,13 @@ def contact_kernel_for(law, formulation: str = "potential", threads: bool = Fals
         # the initial overlaps, recorded once, by the law's serial pass (also with threads)
         overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
                               cache=False, **_SPEC)
+        friction = _friction_pass
         if threads:
             tag += "_threads"
             nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
-        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, counts=formulation != "potential")
+            friction = _friction_pass_threads
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, counts=formulation != "potential",
+                                          friction_pass=friction)
     return _CUSTOM_KERNELS[key], None
 
 

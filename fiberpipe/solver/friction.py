@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from .contact_state import PairRecords, PlaneFriction
@@ -130,7 +130,20 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
     Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J],
     energy given back [J]: the sum of the contacts' negative dissipations, module docstring).
     """
+    lazy = rec.active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0
+    n_visit = n_active if lazy else n_pairs
+    return _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, 0, n_visit, hist[:0, :3])
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lo, hi, fpair):
+    """The pairs ``lo … hi − 1`` of :func:`friction_forces_ex` (of its active list, or of the Verlet
+    list without one): their forces into ``f_out`` at once (``fpair`` of size 0, a view: the serial
+    pass runs without reference counts and allocates nothing), or into the rows
+    ``kk`` of ``fpair`` (N, 3) for a merge in pair order (:func:`friction_forces_tasks`); returns the
+    range's three sums."""
     c_fn, c_n, c_s, c_t, c_share, c_active = rec.fn, rec.normal, rec.s, rec.t, rec.share, rec.active
+    scatter = fpair.shape[0] == 0
     diss = 0.0
     espring = 0.0
     returned = 0.0
@@ -138,9 +151,12 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
     keep_k = use_share and hist.shape[1] > 3  # column 3: the pair's k_t at its last update
     lazy = c_active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0  # column 4: step of the last update
     at_st = hist.shape[1] > 6  # columns 5, 6: the contact parameters the force last acted at
-    n_visit = n_active if lazy else n_pairs
-    for kk in range(n_visit):
+    for kk in range(lo, hi):
         k = c_active[kk] if lazy else kk
+        if not scatter:
+            fpair[kk, 0] = 0.0
+            fpair[kk, 1] = 0.0
+            fpair[kk, 2] = 0.0
         fn = c_fn[k]
         if lazy:
             if hist[k, 4] != step - 1:
@@ -207,7 +223,12 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
                 hist[k, 3] = ktp
             f0, f1, f2 = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], dm0, dm1, dm2, fn, mu, ktp)
             e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
-            apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
+            if scatter:
+                apply_pair_force(f_out, (a0, a1, b0, b1), s, t, f0, f1, f2)
+            else:
+                fpair[kk, 0] = f0
+                fpair[kk, 1] = f1
+                fpair[kk, 2] = f2
         else:
             # no stiffness: the contact forgets its force (its energy, booked as dissipated)
             hist[k, 0] = 0.0
@@ -223,6 +244,50 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
         returned -= min(d, 0.0)
         espring += e_new
     return diss, espring, returned
+
+
+# tasks of the threaded friction (solver.threads > 1): consecutive pairs of the active list, at least
+# this many each (below two tasks' worth the pairs run in one, as in the serial pass)
+FRICTION_TASKS = 8
+FRICTION_TASK_MIN = 64
+
+
+def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step):
+    """:func:`friction_forces_ex` with its pairs in ``prange`` tasks (``solver.threads`` > 1): each
+    pair's force goes to its row, and the rows are added to ``f_out`` after the tasks in pair order,
+    so the forces are the serial pass's bit for bit; the sums are taken per task, then in order."""
+    # Strategy: a pair writes only its own history row and its force row, so the tasks share nothing;
+    # the scatter to the nodes (two pairs may share a node) stays serial, in the serial pass's order
+    lazy = rec.active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0
+    n_visit = n_active if lazy else n_pairs
+    n_tasks = max(1, min(FRICTION_TASKS, n_visit // FRICTION_TASK_MIN))
+    if n_tasks < 2:
+        return _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, 0, n_visit, hist[:0, :3])
+    fpair = np.empty((n_visit, 3))
+    sums = np.zeros((n_tasks, 3))
+    for task in prange(n_tasks):
+        d, e, r = _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step,
+                                  task * n_visit // n_tasks, (task + 1) * n_visit // n_tasks, fpair)
+        sums[task, 0] = d
+        sums[task, 1] = e
+        sums[task, 2] = r
+    c_s, c_t, c_active = rec.s, rec.t, rec.active
+    for kk in range(n_visit):
+        k = c_active[kk] if lazy else kk
+        i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
+        apply_pair_force(f_out, (a0, a1, b0, b1), c_s[k], c_t[k], fpair[kk, 0], fpair[kk, 1], fpair[kk, 2])
+    diss = 0.0
+    espring = 0.0
+    returned = 0.0
+    for task in range(n_tasks):
+        diss += sums[task, 0]
+        espring += sums[task, 1]
+        returned += sums[task, 2]
+    return diss, espring, returned
+
+
+# Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it
+friction_forces_tasks = njit(cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=True)(_friction_tasks)
 
 
 @njit(cache=True, error_model="numpy")

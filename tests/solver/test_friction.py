@@ -157,3 +157,37 @@ def test_spring_stretched_at_the_midpoint_of_a_sliding_contact_point():
     assert e_spring > 0.0 and scale > 1e-3 * e_spring  # the spring is loaded and its point moves
     assert abs(booked.sum()) < 0.01 * scale
     assert np.max(np.abs(booked)) < 0.01 * scale / len(booked) * 10
+
+
+def test_friction_in_tasks_gives_the_serial_forces_and_histories_bit_for_bit():
+    """solver.threads > 1 runs the fiber–fiber friction's pairs in prange tasks
+    (``friction_forces_tasks``); each pair's force goes to its row and the rows are added in pair
+    order, so forces and histories equal the serial pass's exactly; the sums only to rounding."""
+    from fiberpipe.solver.contact_state import PairRecords
+    from fiberpipe.solver.friction import FRICTION_TASK_MIN, friction_forces_ex, friction_forces_tasks
+
+    rng = np.random.default_rng(7)
+    n_seg, n_pairs = 200, 6 * FRICTION_TASK_MIN  # enough pairs for six tasks
+    seg_nodes = np.stack([np.arange(n_seg), np.arange(n_seg) + 1], axis=1).astype(np.int64)
+    pairs = np.sort(rng.choice(n_seg, size=(n_pairs, 2), replace=True), axis=1).astype(np.int64)
+    v = 1e-3 * rng.standard_normal((n_seg + 1, 3))
+    normal = rng.standard_normal((n_pairs, 3))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    rec = PairRecords(rng.uniform(0.01, 0.1, n_pairs), normal, rng.uniform(0, 1, n_pairs), rng.uniform(0, 1, n_pairs),
+                      np.zeros(n_pairs), np.zeros(n_pairs), rng.uniform(0.2, 1.0, n_pairs), np.zeros(0), np.zeros(0),
+                      np.arange(n_pairs, dtype=np.int64))
+    step = 5
+    hist = np.zeros((n_pairs, 7))
+    hist[:, :3] = 1e-3 * rng.standard_normal((n_pairs, 3))  # loaded springs, some beyond the cone: slip
+    hist[:, 3] = 1e4
+    hist[:, 4] = np.where(rng.uniform(size=n_pairs) < 0.8, step - 1, step - 3)  # a fifth start afresh
+    hist[:, 5:] = rng.uniform(0, 1, (n_pairs, 2))
+    out = []
+    for kernel in (friction_forces_ex, friction_forces_tasks):
+        h, f = hist.copy(), np.zeros_like(v)
+        sums = kernel(v, seg_nodes, pairs, n_pairs, rec, 0.2, 2e4, 1e-7, h, f, n_pairs, step)
+        out.append((h, f, sums))
+    (h1, f1, s1), (h2, f2, s2) = out
+    assert np.any(f1 != 0.0) and s1[0] != 0.0
+    assert np.array_equal(f1, f2) and np.array_equal(h1, h2)
+    assert s2 == pytest.approx(s1, rel=1e-12, abs=1e-30)
