@@ -267,12 +267,12 @@ def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
         ff[i, 2] = -fc[i, 2]
     e_springs = 0.0
     if prm.friction_on:
-        dff, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
-                                            prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
+        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
+                                          prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
         e_springs += esp
         st.friction_returned_J[0] += back
     if plane_fric:
-        dpl, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
+        _, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
         e_springs += espl
         st.friction_returned_J[0] += back
     for kk in range(n_ff):

@@ -130,15 +130,22 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
     Returns (dissipated energy [J], elastic energy of the tangential springs after the update [J],
     energy given back [J]: the sum of the contacts' negative dissipations, module docstring).
     """
+    lazy, n_visit = _visits(rec, hist, step, n_active, n_pairs)
+    return _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy, 0, n_visit, hist[:0, :3])
+
+
+@njit(cache=True, inline="always")
+def _visits(rec, hist, step, n_active, n_pairs):
+    """``(lazy, n_visit)`` of :func:`friction_forces_ex`: with an active list, time stamps (column 4)
+    and ``step`` ≥ 0 only the ``n_active`` pairs in contact are visited, else all ``n_pairs``."""
     lazy = rec.active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0
-    n_visit = n_active if lazy else n_pairs
-    return _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, 0, n_visit, hist[:0, :3])
+    return lazy, (n_active if lazy else n_pairs)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lo, hi, fpair):
-    """The pairs ``lo … hi − 1`` of :func:`friction_forces_ex` (of its active list, or of the Verlet
-    list without one): their forces into ``f_out`` at once (``fpair`` of size 0, a view: the serial
+def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy, lo, hi, fpair):
+    """The pairs ``lo … hi − 1`` of :func:`friction_forces_ex` (of its active list if ``lazy``, else of
+    the Verlet list): their forces into ``f_out`` at once (``fpair`` of size 0, a view: the serial
     pass runs without reference counts and allocates nothing), or into the rows
     ``kk`` of ``fpair`` (N, 3) for a merge in pair order (:func:`friction_forces_tasks`); returns the
     range's three sums."""
@@ -149,7 +156,6 @@ def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lo
     returned = 0.0
     use_share = c_share.shape[0] > 0
     keep_k = use_share and hist.shape[1] > 3  # column 3: the pair's k_t at its last update
-    lazy = c_active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0  # column 4: step of the last update
     at_st = hist.shape[1] > 6  # columns 5, 6: the contact parameters the force last acted at
     for kk in range(lo, hi):
         k = c_active[kk] if lazy else kk
@@ -258,15 +264,14 @@ def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out,
     so the forces are the serial pass's bit for bit; the sums are taken per task, then in order."""
     # Strategy: a pair writes only its own history row and its force row, so the tasks share nothing;
     # the scatter to the nodes (two pairs may share a node) stays serial, in the serial pass's order
-    lazy = rec.active.shape[0] > 0 and hist.shape[1] > 4 and step >= 0
-    n_visit = n_active if lazy else n_pairs
+    lazy, n_visit = _visits(rec, hist, step, n_active, n_pairs)
     n_tasks = max(1, min(FRICTION_TASKS, n_visit // FRICTION_TASK_MIN))
     if n_tasks < 2:
-        return _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, 0, n_visit, hist[:0, :3])
+        return friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step)
     fpair = np.empty((n_visit, 3))
     sums = np.zeros((n_tasks, 3))
     for task in prange(n_tasks):
-        d, e, r = _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step,
+        d, e, r = _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy,
                                   task * n_visit // n_tasks, (task + 1) * n_visit // n_tasks, fpair)
         sums[task, 0] = d
         sums[task, 1] = e
