@@ -37,10 +37,15 @@ def save_state(path, state) -> None:
 
 
 def load_state(path):
+    """A saved state; its energy accumulators fitted to this version's ``layout.ACC_SIZE`` (a state saved
+    by a version with fewer slots gets zeros in the new ones: the profiles need its motion only)."""
+    from fiberpipe.solver.layout import ACC_SIZE
     from fiberpipe.solver.state import State
     d = np.load(path)
-    return State(d["x"].copy(), d["q"].copy(), d["v"].copy(), d["w"].copy(), float(d["t"]), int(d["step"]),
-                 d["acc"].copy())
+    acc = np.zeros(ACC_SIZE)
+    n = min(ACC_SIZE, d["acc"].size)
+    acc[:n] = d["acc"][:n]
+    return State(d["x"].copy(), d["q"].copy(), d["v"].copy(), d["w"].copy(), float(d["t"]), int(d["step"]), acc)
 
 
 def main(argv=None) -> None:

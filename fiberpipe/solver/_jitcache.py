@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import pickle
 
 _PKG_DIR = os.path.dirname(os.path.abspath(__file__))
 
@@ -92,7 +93,29 @@ def _install() -> bool:
             return None
 
     impl._locator_classes.insert(0, SolverPackageLocator)
+    _tolerate_stale_index(caching)
     return True
+
+
+def _tolerate_stale_index(caching) -> None:
+    """Read an index that cannot be unpickled as an empty (stale) one. numba unpickles an index's
+    overloads before it compares the source stamp, so an index written by an older version of the
+    package, whose signatures name a structure the package no longer defines, raises instead of
+    being recompiled."""
+    cls = getattr(caching, "IndexDataCacheFile", None)
+    load = getattr(cls, "_load_index", None)
+    if load is None or getattr(load, "_fiberpipe_tolerant", False):  # pragma: no cover
+        return
+
+    @functools.wraps(load)
+    def _load_index(self):
+        try:
+            return load(self)
+        except (AttributeError, ImportError, EOFError, pickle.UnpicklingError):
+            return {}
+
+    _load_index._fiberpipe_tolerant = True
+    cls._load_index = _load_index
 
 
 INSTALLED = _install()

@@ -36,7 +36,7 @@ from ._specialise import specialise
 from ._kernels_beam import PARALLEL_CHUNKS, beam_pass_all, beam_pass_fibers, element_forces_exact
 from ._kernels_boundary import (path_delta, path_travel, penalty_power, plane_candidates, plane_contacts_listed,
                                 plane_position, ramp_fraction)
-from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WF_NEXT, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
                      H_CONTACTS, H_FD, H_KE, H_KE_LF, H_VD_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 
@@ -147,21 +147,18 @@ ROTATION_SERIES_MAX_H2 = 1e-2
 
 
 @njit(**_FLAGS)
-def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, lo, hi):
+def update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef, alpha, lo, hi):
     """The central-difference update (module docstring) of the nodes ``lo … hi − 1``: gathers each
     node's beam resultants from ``ef`` (:class:`~fiberpipe.solver.step_data.ElementForces`), adds the
-    constant and plane forces ``f``, the moments ``mom`` and the contact hook's forces ``fc`` (cleared
-    here), then imposes the fixed and driven degrees of freedom through ``fixity``'s factors. It
-    leaves ``f`` and ``mom`` ready for the next step: ``f`` = the constant loads ``f_ext`` (N, 3),
-    ``mom`` = 0 (what :func:`eval_external` sets).
+    constant and plane forces ``f``, the moments ``mom`` and the contact hook's forces and friction
+    forces ``hook_f = (fc, ff)`` (cleared here), then imposes the fixed and driven degrees of freedom
+    through ``fixity``'s factors. It leaves ``f`` = the constant loads ``f_ext`` (N, 3) and ``mom`` = 0
+    for the next step (what :func:`eval_external` sets).
 
-    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, n_large, v2_max)``: the kinetic energy at t_n (the mean of
-    the half-step energies), the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² for the
-    damping dissipation, the prescribed degrees of freedom's reaction work over the step, Σ fc·v̄ (the
-    hook's power), the nodes whose rotation increment exceeds the series (left unrotated for
-    :func:`rotate_large`) and the largest |v_{n+½}|² [m²/s²]. ``coef = (c_keep, dt_c)``
-    (:func:`damping_factors`).
-    """
+    Returns ``(ke, ke_lf, vd, wk_fix, pw_c, wf_0, wf_1, n_large, v2_max)``: K at t_n (the mean of the
+    half-step energies), ½ v_{n−½}·M v_{n+½}, Σ m|v̄|² + J|Ω̄|² (damping), the prescribed degrees of
+    freedom's reaction work, Σ fc·v̄, Σ ff·v_{n−½}, Σ ff·v_{n+½}, the nodes left for :func:`rotate_large`
+    and the largest |v_{n+½}|² [m²/s²]. ``coef = (c_keep, dt_c)`` (:func:`damping_factors`)."""
     # Strategy: one loop without branches over flat views of the (N, 3) and (N, 4) arrays, so that
     # LLVM vectorises it (_vectorise): fixity by 0/1 factors and a prescribed velocity, the gyroscopic
     # term as w × (J w) with exact zeros for isotropic J, the rotation's cos and sin by their series
@@ -169,7 +166,9 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, l
     # every array through a flat view starting at node lo, the loop counting from 0 (beam_pass_nodes)
     xs, qs = state.x.reshape(-1)[3 * lo:], state.q.reshape(-1)[4 * lo:]
     vs, ws = state.v.reshape(-1)[3 * lo:], state.w.reshape(-1)[3 * lo:]
+    fc, ff = hook_f
     fs, ms, fcs = f.reshape(-1)[3 * lo:], mom.reshape(-1)[3 * lo:], fc.reshape(-1)[3 * lo:]
+    ffs = ff.reshape(-1)[3 * lo:]
     fes = f_ext.reshape(-1)[3 * lo:]
     Js, iJs = model.J.reshape(-1)[3 * lo:], model.inv_J.reshape(-1)[3 * lo:]
     mass, inv_mass = model.mass[lo:], model.inv_mass[lo:]
@@ -185,6 +184,8 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, l
     vd = 0.0
     wk = 0.0
     pw = 0.0
+    wf0 = 0.0
+    wf1 = 0.0
     n_large = 0
     for i in range(hi - lo):
         j = i + 1  # the element starting at node i; entry i: the one ending there
@@ -194,9 +195,15 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, l
         fcs[3 * i] = 0.0
         fcs[3 * i + 1] = 0.0
         fcs[3 * i + 2] = 0.0
-        fx = fs[3 * i] + (n0[j] - n0[i]) + cfx
-        fy = fs[3 * i + 1] + (n1[j] - n1[i]) + cfy
-        fz = fs[3 * i + 2] + (n2[j] - n2[i]) + cfz
+        ffx = ffs[3 * i]
+        ffy = ffs[3 * i + 1]
+        ffz = ffs[3 * i + 2]
+        ffs[3 * i] = 0.0
+        ffs[3 * i + 1] = 0.0
+        ffs[3 * i + 2] = 0.0
+        fx = fs[3 * i] + (n0[j] - n0[i]) + (cfx + ffx)
+        fy = fs[3 * i + 1] + (n1[j] - n1[i]) + (cfy + ffy)
+        fz = fs[3 * i + 2] + (n2[j] - n2[i]) + (cfz + ffz)
         mx = ms[3 * i] + (m0[j] + h0[j]) + (h0[i] - m0[i])
         my = ms[3 * i + 1] + (m1[j] + h1[j]) + (h1[i] - m1[i])
         mz = ms[3 * i + 2] + (m2[j] + h2[j]) + (h2[i] - m2[i])
@@ -247,6 +254,8 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, l
         waz = 0.5 * (w0z + w1z)
         # contact work over the step, Δt f_n·v̄_n (in phase with the kinetic energy, as the plates')
         pw += cfx * vax + cfy * vay + cfz * vaz
+        wf0 += ffx * v0x + ffy * v0y + ffz * v0z
+        wf1 += ffx * v1x + ffy * v1y + ffz * v1z
         vd += m * (vax * vax + vay * vay + vaz * vaz) + jx * wax * wax + jy * way * way + jz * waz * waz
         # K_e at t_n: the mean of the half-step energies ½(K_{n−½} + K_{n+½}), not ½m v̄_n²:
         # K_{n+½} − K_{n−½} = Δt F_n·v̄_n exactly, so with every work booked as Δt f_n·v̄_n
@@ -286,7 +295,7 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha, l
     for i in range(hi - lo):
         v2 = vs[3 * i] * vs[3 * i] + vs[3 * i + 1] * vs[3 * i + 1] + vs[3 * i + 2] * vs[3 * i + 2]
         v2_max = max(v2_max, v2)
-    return ke, ke_lf, vd, wk, pw, n_large, v2_max
+    return ke, ke_lf, vd, wk, pw, wf0, wf1, n_large, v2_max
 
 
 @njit(inline="always", **_FLAGS)
@@ -347,7 +356,7 @@ def max_speed2(v):
     return vmax2, bad
 
 
-def _update_nodes(model, fixity, state, work, f_ext, fc, dt, coef, alpha):
+def _update_nodes(model, fixity, state, work, f_ext, fc, ff, dt, coef, alpha):
     """:func:`update_range` over every node: in the serial copy one call for all nodes; in the
     parallel one (``update_nodes_fibers``) ``PARALLEL_CHUNKS`` ``prange`` tasks of contiguous nodes, the
     sums taken per task and then in order. Returns the sums of :func:`update_range` (its largest speed²,
@@ -356,30 +365,33 @@ def _update_nodes(model, fixity, state, work, f_ext, fc, dt, coef, alpha):
     nf = offs.shape[0] - 1
     f, mom = work.f, work.mom
     if not _PARALLEL:
-        return update_range(model, fixity, state, f, mom, f_ext, work.ef, fc, dt, coef, alpha, 0, offs[nf])
+        return update_range(model, fixity, state, f, mom, f_ext, work.ef, (fc, ff), dt, coef, alpha, 0, offs[nf])
     # a parallel loop takes a tuple built in this function, not one nested in another structure
     n0, n1, n2, m0, m1, m2, h0, h1, h2 = work.ef
     ef = (n0, n1, n2, m0, m1, m2, h0, h1, h2)
+    hook_f = (fc, ff)
     n = offs[nf]
     nch = PARALLEL_CHUNKS
-    sums = np.empty((nch, 7))
+    sums = np.empty((nch, 9))
     for k in prange(nch):  # contiguous node ranges (beam_pass_fibers)
-        a, b, c, d, e, nl, v2 = update_range(model, fixity, state, f, mom, f_ext, ef, fc, dt, coef, alpha,
-                                             k * n // nch, (k + 1) * n // nch)
+        a, b, c, d, e, g0, g1, nl, v2 = update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef,
+                                                     alpha, k * n // nch, (k + 1) * n // nch)
         sums[k, 0] = a
         sums[k, 1] = b
         sums[k, 2] = c
         sums[k, 3] = d
         sums[k, 4] = e
-        sums[k, 5] = nl
-        sums[k, 6] = v2
-    out = np.zeros(6)
+        sums[k, 5] = g0
+        sums[k, 6] = g1
+        sums[k, 7] = nl
+        sums[k, 8] = v2
+    out = np.zeros(8)
     v2_max = 0.0
     for k in range(nch):
-        for c in range(6):
+        for c in range(8):
             out[c] += sums[k, c]
-        v2_max = max(v2_max, sums[k, 6])
-    return out[0], out[1], out[2], out[3], out[4], int(out[5]), v2_max
+        v2_max = max(v2_max, sums[k, 8])
+    return out[0], out[1], out[2], out[3], out[4], out[5], out[6], int(out[7]), v2_max
 
 
 _PARALLEL = False
@@ -488,6 +500,11 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
     has_fc = fc.shape[0] == N
     if not has_fc:
         fc = np.zeros((N, 3))  # the update reads it for every node
+    # the hook's friction force array, the same way; the update books its work as the friction's
+    ff = _hook_friction(contact_data)
+    has_ff = ff.shape[0] == N
+    if not has_ff:
+        ff = np.zeros((N, 3))
     fixity = scene.fixity
     f_ext = scene.f_ext
     if f_ext.shape[0] != N:
@@ -533,8 +550,8 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
                 fixity.v_pres[i, c] = scene.drives.v[scene.node_drive[i], c]
         # ---- update ----
         # (the fixity apart from the scene: a parallel loop takes no structure nested in another)
-        ke, ke_lf, vd, wk_fix, pw_c, n_spin, v2_max = _update_pass(model, fixity, state, work, f_ext, fc, dt, coef,
-                                                                   scene.alpha_per_s)
+        ke, ke_lf, vd, wk_fix, pw_c, wf_0, wf_1, n_spin, v2_max = _update_pass(model, fixity, state, work, f_ext,
+                                                                               fc, ff, dt, coef, scene.alpha_per_s)
         acc[ACC_V2_MAX] = v2_max
         if n_spin > 0:
             rotate_large(q, w, dt, 0, N)
@@ -544,6 +561,15 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             acc[ACC_PW] += 0.5 * dt * penalty_power(v, scene.planes.pen_idx, scene.planes.pen_f, n_pen)
         if has_fc:
             acc[ACC_PW] += dt * pw_c
+        if has_ff:
+            # the friction forces' work: to ALLPW as every contact force's, Δt f_n·v̄_n; to the
+            # friction work and, as a loss, to ALLFD as ½Δt (f_{n−1} + f_n)·v_{n−½}, the work over the
+            # displacement the friction springs' energy at t_n changed by (the hook books that change)
+            w_half = 0.5 * dt * wf_0 + acc[ACC_WF_NEXT]
+            acc[ACC_WF_NEXT] = 0.5 * dt * wf_1
+            acc[ACC_PW] += 0.5 * dt * (wf_0 + wf_1) - w_half
+            acc[ACC_WF] += w_half
+            acc[ACC_FD] -= w_half
         done = it + 1
         # ---- history and checks ----
         if record:
@@ -573,12 +599,13 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
 
 _hook = no_contact
 _hook_forces = no_contact_forces
+_hook_friction = no_contact_forces
 _update_pass = update_nodes
 
 
-def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False):
+def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False, friction_of=no_contact_forces):
     return specialise(_advance_template, name, {
-        "_hook": hook, "_hook_forces": forces_of,
+        "_hook": hook, "_hook_forces": forces_of, "_hook_friction": friction_of,
         "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
         "_update_pass": update_nodes_fibers if parallel else update_nodes,
     }, cache=cache, fastmath=True, error_model="numpy")
@@ -588,22 +615,24 @@ advance_plain = _specialise("advance_plain", no_contact, no_contact_forces, True
 _LOOPS: dict = {}
 
 
-def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1, cache_name: str | None = None):
+def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1, cache_name: str | None = None,
+                  friction_of=no_contact_forces):
     """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none).
 
     forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
-        adds into ``f``). cache_name : a built-in hook's name for the on-disk cache (None: compiled
+        adds into ``f``). friction_of : the same for its friction forces (their work booked to the
+        friction work and, as a loss, to ALLFD). cache_name : a built-in hook's name for the on-disk cache (None: compiled
         in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
         fiber; compiled in every process (see ``_kernels_beam.beam_pass_fibers``).
     """
     parallel = threads > 1
     if hook is no_contact and not parallel:
         return advance_plain
-    key = (hook, forces_of, parallel)
+    key = (hook, forces_of, friction_of, parallel)
     loop = _LOOPS.get(key)
     if loop is None:
         cache = cache_name is not None and not parallel
         name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
-        loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel)
+        loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel, friction_of)
         _LOOPS[key] = loop
     return loop

@@ -13,14 +13,17 @@ step on a :class:`fiberpipe.solver.contact_state.ContactData` (see ``docs/solver
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
    rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
-4. The contact and friction forces stay in the hook's force array (``data.fc``, declared by the hook's ``forces_of``): the
-   step loop's update adds them to the nodes, books their work ``Δt f_n·v̄_n`` to ALLPW and clears
-   the array, in the same pass over the nodes. The friction forces' own work, the same
-   ``Δt f_n·v̄_n``, is also booked apart (``ACC_WF``, history ``energy/friction_work``) by the hook:
-   half with ``v_{n−½}`` when the forces are made, half with ``v_{n+½}`` at the next call (their
-   values on the nodes they act on are kept in ``ff`` for it), so the step loop stays as it is. Energies: ALLPW += that work + the friction
-   dissipation; ALLFD += friction dissipation. With ETOTAL = KE + SE + VD + FD − WK − PW this keeps the balance (PW holds the
-   elastic contact energy and the friction loss, as Abaqus' ALLPW includes penalty friction).
+4. The normal contact forces stay in the hook's force array (``data.fc``, declared by the hook's
+   ``forces_of``), the friction forces in its friction array (``data.ff``, declared by its
+   ``friction_of``): the step loop's update adds both to the nodes, books their work
+   ``Δt f_n·v̄_n`` to ALLPW, and clears them, in the same pass over the nodes. The friction forces'
+   work is also booked to the friction work (``energy/friction_work``, W_f) and, as a loss, to
+   ALLFD, by halves over the displacement the friction springs' energy changes by:
+   ``½Δt (f_{n−1} + f_n)·v_{n−½}`` at step n (``layout.ACC_WF_NEXT`` carries the second half). The
+   hook books the springs' energy change: ALLFD −= ΔE_springs and ALLPW −= ΔE_springs, so ALLFD =
+   −W_f − ΔE_springs, and ALLPW = W_normal + W_f + ALLFD. With ETOTAL = KE + SE + VD + FD − WK − PW
+   this keeps the balance (PW holds the elastic contact energy and the friction loss, as Abaqus'
+   ALLPW includes penalty friction).
 
 Returns the number of fiber–fiber segment pairs in contact (history column ``contacts``).
 Forces act on the centre lines (no moments; friction does not make fibers roll): see
@@ -41,11 +44,11 @@ from .contact import contact_forces_ex, contact_kernels_for, gauss_points
 from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
-from .contact_state import (ContactData, ContactParams, FrictionWork, PlaneFriction, Segments, borrowed_item,
+from .contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
 from .friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
 from .geometry import pair_gap
-from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WF, ACC_WK
+from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
 from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
@@ -210,79 +213,27 @@ def _overlap_offsets(data, t, dt):
 
 
 @njit(inline="always", **_FLAGS)
-def _list_friction_nodes(data, plist, rec, n_active, plane_fric, calls):
-    """List the nodes the friction forces act on (those of the pairs in contact and the plane
-    candidates) in ``fwork.nodes``; returns their number."""
-    fw, segs, pairs, active = data.fwork, data.segs, plist.pairs, rec.active
-    n_ff = 0
-    if data.params.friction_on:
-        for kk in range(n_active):
-            k = active[kk]
-            for side in range(2):
-                for end in range(2):
-                    i = segs.nodes[pairs[k, side], end]
-                    if fw.mark[i] != calls:
-                        fw.mark[i] = calls
-                        fw.nodes[n_ff] = i
-                        n_ff += 1
-    if plane_fric:
-        pl = data.planes
-        for c in range(pl.cand_off[pl.axis.shape[0]]):
-            i = pl.cand_idx[c]
-            if fw.mark[i] != calls:
-                fw.mark[i] = calls
-                fw.nodes[n_ff] = i
-                n_ff += 1
-    return n_ff
+def _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls):
+    """Fiber–fiber and fiber–plane friction into ``ff`` (step 3). Returns the springs' part of the
+    dissipation: minus the change of their energy (``stats.e_spring_J``, fiber pairs and planes).
 
-
-@njit(inline="always", **_FLAGS)
-def _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls):
-    """Fiber–fiber and fiber–plane friction into ``fc`` (step 3); books the friction forces' work
-    ``Δt f_n·v̄_n = ½Δt f_n·(v_{n−½} + v_{n+½})`` apart (ACC_WF), on the nodes the forces act on:
-    ``fwork.ff`` still holds the previous step's friction forces on the listed nodes, and ``v`` now
-    holds their v_{n+½}. Returns the dissipated energy [J]: the energy the friction forces took from
-    the fibers over the step less what their springs gained (``stats.e_spring_J``, fiber pairs and
-    planes), ``−ΔW_f − ΔE_springs``.
-
-    Why from the nodes' work and not from the contacts' own: the contacts' sum (the kernels' first
-    return, module ``friction``) is the same over the contacts they visit, but a contact that leaves
-    (out of contact, out of the neighbour list, off a plane's candidates) takes the work of its last
-    force's second half and its spring's energy with it unbooked. The contacts' negative parts are
-    still summed apart (``friction_returned_J``)."""
-    prm, st, fw, fc = data.params, data.stats, data.fwork, data.fc
-    ff, nodes = fw.ff, fw.nodes
-    wf = 0.0
-    for kk in range(st.n_ff[0]):
-        i = nodes[kk]
-        wf += ff[i, 0] * v[i, 0] + ff[i, 1] * v[i, 1] + ff[i, 2] * v[i, 2]
-    n_ff = _list_friction_nodes(data, plist, rec, n_active, plane_fric, calls)
-    st.n_ff[0] = n_ff
-    # the friction kernels add into fc as the normal forces do (the same sums, so the same
-    # trajectory as without this bookkeeping); ff = fc after − fc before on the listed nodes
-    for kk in range(n_ff):
-        i = nodes[kk]
-        ff[i, 0] = -fc[i, 0]
-        ff[i, 1] = -fc[i, 1]
-        ff[i, 2] = -fc[i, 2]
+    The friction forces' work is booked by the step loop's update, which applies ``ff``
+    (:func:`contact_friction_of`; module docstring, item 4), on every node the forces act on, so a contact that leaves (out of contact, out of the neighbour list, off a
+    plane's candidates) leaves none of its work unbooked. ALLFD is then ``−W_f − ΔE_springs``. The
+    contacts' own sums (the kernels' first return, module ``friction``) are not used for it; their
+    negative parts are summed apart (``friction_returned_J``)."""
+    prm, st, ff = data.params, data.stats, data.ff
     e_springs = 0.0
     if prm.friction_on:
         _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
-                                          prm.kt_n_per_m, dt, plist.friction, fc, n_active, calls)
+                                          prm.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
         e_springs += esp
         st.friction_returned_J[0] += back
     if plane_fric:
-        _, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, fc, calls, True)
+        _, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, ff, calls, True)
         e_springs += espl
         st.friction_returned_J[0] += back
-    for kk in range(n_ff):
-        i = nodes[kk]
-        ff[i, 0] += fc[i, 0]
-        ff[i, 1] += fc[i, 1]
-        ff[i, 2] += fc[i, 2]
-        wf += ff[i, 0] * v[i, 0] + ff[i, 1] * v[i, 1] + ff[i, 2] * v[i, 2]
-    acc[ACC_WF] += 0.5 * dt * wf
-    diss = -0.5 * dt * wf - (e_springs - st.e_spring_J[0])
+    diss = -(e_springs - st.e_spring_J[0])
     st.e_spring_J[0] = e_springs
     return diss
 
@@ -319,12 +270,21 @@ def contact_forces_of(data):
     return data.fc
 
 
+@njit(cache=True)
+def contact_friction_of(data):
+    """The friction force array (N, 3) [N] :func:`contact_step` leaves its friction forces in (the
+    hook's ``friction_of``): the step loop's update adds it to the nodes, books its work (module
+    docstring, item 4) and clears it."""
+    return data.ff
+
+
 @njit(**_FLAGS, **_NO_COUNTS)
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring.
 
-    It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`),
-    which the step loop applies (a hook that wraps this one must add that array to ``f`` itself).
+    It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`)
+    and ``data.ff`` (:func:`contact_friction_of`), which the step loop applies (a hook that wraps
+    this one must add those arrays to ``f`` itself).
     """
     prm, st = data.params, data.stats
     calls = st.calls[0]
@@ -384,7 +344,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     st.e_contact_J[0] = energy
     diss = 0.0
     if prm.friction_on or plane_fric:
-        diss = _friction_pass(x, v, dt, acc, data, plist, rec, n_active, plane_fric, calls)
+        diss = _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls)
     # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
     acc[ACC_STORED] += energy + st.e_spring_J[0]
     # the forces stay in fc: the step loop's update applies them, books their work and clears fc
@@ -747,12 +707,12 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         used = segs if contact else Segments(*(a[:0] for a in segs))
         data = ContactData(params, new_stats(), used, np.array(model_.nodes_m, dtype=np.float64),
                            List([new_pair_list(cap), new_pair_list(cap)]), List([new_records(cap)]), np.zeros((N, 3)),
-                           _plane_friction_of(model_, scene),
-                           FrictionWork(np.zeros((N, 3)), np.zeros(N, np.int64), np.full(N, -1, np.int64)))
+                           _plane_friction_of(model_, scene), np.zeros((N, 3)))
         info.data = data
         return data
 
-    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name,
+    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, friction_of=contact_friction_of,
+                       cache_name=cache_name,
                        kernel_threads=contact_kernel_for(law, formulation, threads=True)[0])
     hook.setup_info = info
     hook.make_watch = lambda model_, dt, dt_safety=1.0: ContactSlopeWatch.for_hook(model_, dt, hook, dt_safety)

@@ -657,6 +657,16 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
         _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
                         (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach), rows,
                         (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))
+    return _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
+def _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look):
+    """The threaded pass's merge after its tasks (:func:`_pairs_pass`): the result rows of the look
+    list's pairs into the records and the forces, in pair order; returns ``(energy, n_active)``.
+    Compiled without reference counts, as the serial pass: with them, the row slice handed to the
+    records per pair costs the merge as much again (205 against ≈ 360 µs per step on the compacted
+    400-fiber bundle, 3511 pairs in contact)."""
     use_list = out.active.shape[0] > 0
     use_share = out.share.shape[0] > 0
     look = out.active

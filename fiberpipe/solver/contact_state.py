@@ -12,7 +12,7 @@
 - ``records``: a typed list holding one :class:`PairRecords` — this step's per-pair results;
 - ``fc``: the hook's force array (the step loop adds it to the nodes and clears it);
 - ``planes`` (:class:`PlaneFriction`): the plates and walls, for their friction;
-- ``fwork`` (:class:`FrictionWork`): the nodes the friction forces act on, for booking their work.
+- ``ff``: this step's friction forces, which the step loop's update applies and books.
 
 The kernel grows the buffers of ``lists`` and ``records`` itself when the neighbour list
 overflows (a new NamedTuple replaces the old one in its typed list).
@@ -53,7 +53,6 @@ class ContactStats(NamedTuple):
     n_active: np.ndarray      # int64, pairs in contact at the last step
     overlaps_done: np.ndarray  # int64, 1: the initial overlaps have been recorded
     calls: np.ndarray         # int64, calls so far (the friction histories' time stamps)
-    n_ff: np.ndarray          # int64, nodes in fwork.nodes
     fn_sum_n: np.ndarray      # Σ normal force of the pairs in contact at the last step, N
     delta_max_m: np.ndarray   # largest penetration at the last step, m
     e_contact_J: np.ndarray   # stored normal contact energy at the last step, J
@@ -118,14 +117,6 @@ class PlaneFriction(NamedTuple):
     pos_cand: np.ndarray     # (P,) m, plane positions when the candidates were listed
 
 
-class FrictionWork(NamedTuple):
-    """The nodes the last step's friction forces act on, for booking their work."""
-
-    ff: np.ndarray     # (N, 3) N, the friction forces on the listed nodes
-    nodes: np.ndarray  # (N,) int64, the listed nodes (first stats.n_ff)
-    mark: np.ndarray   # (N,) int64, call number at which each node was listed
-
-
 class ContactData(NamedTuple):
     params: ContactParams
     stats: ContactStats
@@ -133,13 +124,13 @@ class ContactData(NamedTuple):
     x_ref: np.ndarray  # (N, 3) m, positions at the last neighbour-list build
     lists: object      # numba typed List of 2 PairList: [in use, spare]
     records: object    # numba typed List of 1 PairRecords
-    fc: np.ndarray     # (N, 3) N, this step's contact and friction forces
+    fc: np.ndarray     # (N, 3) N, this step's normal contact forces
     planes: PlaneFriction
-    fwork: FrictionWork
+    ff: np.ndarray     # (N, 3) N, this step's friction forces (fiber pairs, plates, walls)
 
 
 def new_stats() -> ContactStats:
-    i = [np.zeros(1, np.int64) for _ in range(7)]
+    i = [np.zeros(1, np.int64) for _ in range(6)]
     f = [np.zeros(1) for _ in range(9)]
     return ContactStats(*i, *f)
 

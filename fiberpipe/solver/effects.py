@@ -128,6 +128,7 @@ class SceneArrays:
         self.contact_on = False
         self.contact_fn = no_contact
         self.contact_forces_of = no_contact_forces
+        self.contact_friction_of = no_contact_forces
         self.contact_cache_name = None
         self.contact_fn_threads = None  # the hook's variant for solver.threads > 1 (None: contact_fn)
         self.contact_hook_name = ""
@@ -704,6 +705,11 @@ class ContactHook(Effect):
         and its moments into ``mom``. Otherwise a jitted ``forces_of(data) -> (N, 3) array``: the
         kernel leaves its forces there and the step loop's update adds them to the nodes, books their
         work ``Δt f_n·v̄_n`` to ALLPW and clears the array (one pass over the nodes instead of three).
+    friction_of : optional, a jitted ``friction_of(data) -> (N, 3) array`` of the friction forces the
+        kernel leaves there: the update adds them to the nodes, books their work ``Δt f_n·v̄_n`` to
+        ALLPW, the same work as ``½Δt (f_{n−1} + f_n)·v_{n−½}`` (in phase with the friction springs)
+        to the friction work (``energy/friction_work``) and minus it to ALLFD, and clears the array.
+        The kernel books what its friction springs store: ALLFD and ALLPW −= their energy change.
     cache_name : a built-in hook's name for the on-disk compilation cache (None: the step loop
         specialised for this kernel is compiled once per process).
     kernel_threads : optional variant of ``kernel`` for ``solver.threads`` > 1 (parallel ``prange``
@@ -716,6 +722,7 @@ class ContactHook(Effect):
     data: tuple = (np.zeros(0),)
     prepare: Callable | None = None
     forces_of: Callable | None = None
+    friction_of: Callable | None = None
     cache_name: str | None = None
     kernel_threads: Callable | None = None
     name = "contact"
@@ -728,6 +735,7 @@ class ContactHook(Effect):
         scene.contact_hook_name = self.name
         scene.contact_fn = self.kernel
         scene.contact_forces_of = self.forces_of if self.forces_of is not None else no_contact_forces
+        scene.contact_friction_of = self.friction_of if self.friction_of is not None else no_contact_forces
         scene.contact_cache_name = self.cache_name
         scene.contact_fn_threads = self.kernel_threads
         scene.contact_data = self.prepare(model, scene) if self.prepare is not None else self.data

@@ -25,7 +25,7 @@ from ._kernels_beam import EB_SIZE, beam_forces, new_element_forces, node_beams
 from ._kernels_boundary import PLANE_LIST_MARGIN, plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
-from .layout import (ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_VD_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
+from .layout import (ACC_SIZE, ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_VD_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
                      H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
 from .model import Model
 from .state import State
@@ -273,7 +273,8 @@ class Integrator:
         hook = sc.contact_fn
         if self.threads > 1 and sc.contact_fn_threads is not None:
             hook = sc.contact_fn_threads
-        self._loop = step_loop_for(hook, sc.contact_forces_of, self.threads, sc.contact_cache_name)
+        self._loop = step_loop_for(hook, sc.contact_forces_of, self.threads, sc.contact_cache_name,
+                                   sc.contact_friction_of)
         self.model_arrays = ModelArrays(
             m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
             m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),
@@ -297,6 +298,8 @@ class Integrator:
         sc = self.scene
         # the step loop keeps |q| = 1 by one Newton step per step (exact for |q|² = 1 + O(1e-16)) and
         # the beam pass assumes unit quaternions: a state handed in with other norms is normalised here
+        if state.acc.shape != (ACC_SIZE,):  # the kernels index it without bounds checks
+            raise FiberpipeError(f"State.acc must have {ACC_SIZE} entries (layout.ACC_SIZE), got {state.acc.shape}")
         qn2 = np.einsum("ij,ij->i", state.q, state.q)
         if qn2.size and not np.all(np.abs(qn2 - 1.0) < 1e-12):
             if not np.all(qn2 > 0.0) or not np.all(np.isfinite(qn2)):

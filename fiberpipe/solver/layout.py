@@ -17,7 +17,11 @@ ACC_STORED0 = 6  # the hook's stored energy at the first step a run evaluates (�
 # not an energy: the largest |v_{n+½}|² of the nodes [m²/s²] after the step loop's last update, −1
 # until the first update of each step-loop call; the contact hook's path bound reads it
 ACC_V2_MAX = 7
-ACC_SIZE = 8
+# the second half of the friction forces' work over the last update, ½Δt f_n·v_{n+½}, which the next
+# step books to ACC_WF and ACC_FD with its own first half ½Δt f_{n+1}·v_{n+½}: the sum over the same
+# displacement the friction springs' energy changes by (their energy is booked at t_{n+1})
+ACC_WF_NEXT = 8
+ACC_SIZE = 9
 
 # history columns (one row per recorded step)
 H_TIME = 0

@@ -6,9 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .layout import ACC_SIZE
 from .model import Model
-
-ENERGY_SLOTS = 8
 
 
 @dataclass
@@ -22,8 +21,8 @@ class State:
     v : (N, 3) float64, m/s — translational velocities at t − Δt/2 (leapfrog half step).
     w : (N, 3) float64, rad/s — body-frame angular velocities at t − Δt/2.
     t : float, s.  step : int.
-    acc : (8,) float64, J — accumulated energies (see ``_kernels_integrate.ACC_*``: prescribed work,
-        damping dissipation, contact penalty work, friction dissipation).
+    acc : (layout.ACC_SIZE,) float64 — the step loop's accumulators (``layout.ACC_*``: prescribed
+        work, damping dissipation, contact penalty work, friction dissipation and work [J]...).
     """
 
     x: np.ndarray
@@ -32,7 +31,7 @@ class State:
     w: np.ndarray
     t: float = 0.0
     step: int = 0
-    acc: np.ndarray = field(default_factory=lambda: np.zeros(ENERGY_SLOTS))
+    acc: np.ndarray = field(default_factory=lambda: np.zeros(ACC_SIZE))
 
     @classmethod
     def at_rest(cls, model: Model) -> "State":

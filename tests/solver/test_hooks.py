@@ -55,7 +55,8 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     """solver.threads > 1 runs the hook's ``kernel_threads`` (the built-in hook's: the potential pass
     with its pairs in tasks); one thread, or a hook without one, its ``kernel``."""
     from fiberpipe.solver._kernels_integrate import step_loop_for
-    from fiberpipe.solver.contact_effect import contact_forces_of, contact_step_potential, contact_step_potential_threads
+    from fiberpipe.solver.contact_effect import (contact_forces_of, contact_friction_of, contact_step_potential,
+                                                 contact_step_potential_threads)
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.verification.case_config import contact_hook
 
@@ -64,6 +65,6 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     assert hook.kernel is contact_step_potential and hook.kernel_threads is contact_step_potential_threads
     integ = Integrator(m, [hook], 1e-8, threads=threads)
     expect = contact_step_potential_threads if threads > 1 else contact_step_potential
-    assert integ._loop is step_loop_for(expect, contact_forces_of, threads, hook.cache_name)
+    assert integ._loop is step_loop_for(expect, contact_forces_of, threads, hook.cache_name, contact_friction_of)
     plain = Integrator(m, [ContactHook(lift, (np.array([1e-4, 1.0]),))], 1e-8, threads=threads)
     assert plain._loop is step_loop_for(lift, threads=threads)

@@ -13,6 +13,34 @@ def test_solver_kernels_use_the_package_wide_cache_stamp():
         assert loc.get_source_stamp()[1] == _jitcache.package_source_digest()
 
 
+def test_an_index_naming_a_structure_gone_from_the_package_reads_as_stale(tmp_path):
+    """An index written by an older version of the package, whose signatures name a class it no
+    longer defines, is recompiled instead of raising."""
+    import pickle
+    import types
+
+    from numba.core import caching
+
+    gone = types.ModuleType("fiberpipe_gone_module")
+    exec("class Gone:\n    pass", gone.__dict__)
+    gone.Gone.__module__ = "fiberpipe_gone_module"
+    import sys
+    sys.modules["fiberpipe_gone_module"] = gone
+    try:
+        data = pickle.dumps((("stamp",), {("sig", gone.Gone()): "entry"}))
+    finally:
+        del sys.modules["fiberpipe_gone_module"]
+    index = tmp_path / "f.nbi"
+    cache_file = object.__new__(caching.IndexDataCacheFile)
+    cache_file._index_path = str(index)
+    cache_file._version = "v"
+    cache_file._source_stamp = ("stamp",)
+    with open(index, "wb") as fh:
+        pickle.dump("v", fh)
+        fh.write(data)
+    assert cache_file._load_index() == {}
+
+
 def test_step_loop_specialisations():
     assert K.step_loop_for(K.no_contact) is K.advance_plain
     args = (contact_effect.contact_step, contact_effect.contact_forces_of)
