@@ -485,9 +485,10 @@ _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="alwa
 # a0, a1, b0, b1 of the pair's nodes, then the far nodes of the segments before and after each,
 # 3 components each), its accumulator
 # (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle, its new skip threshold, and
-# for the merge after the tasks its energy and its outcome
-_R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME = 0, 24, 32, 33, 34, 35
-N_ROW = 36
+# for the merge after the tasks its energy and its outcome, and whether the joint share's forces
+# reach the far nodes (rows 4–7 of the block; zeros otherwise, which the merge then skips)
+_R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME, _R_FAR = 0, 24, 32, 33, 34, 35, 36
+N_ROW = 37
 # what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
 # row), within touch but no force, in contact
 _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
@@ -512,7 +513,10 @@ def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use
         f_out[seg_nodes[i, 1], c] += rows[r, _R_BLOCK + 3 + c]
         f_out[seg_nodes[j, 0], c] += rows[r, _R_BLOCK + 6 + c]
         f_out[seg_nodes[j, 1], c] += rows[r, _R_BLOCK + 9 + c]
-    # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient
+    # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient (only
+    # with the point part in touch: zeros for the other pairs, most of a bundle's line contacts)
+    if rows[r, _R_FAR] == 0.0:
+        return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
     for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
                            _next_node(seg_nodes, j))):
         if n >= 0:
@@ -591,6 +595,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
             e_point = 0.0   # s_joint Π_point (unweighted by w)
             de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
+            far = 0.0
             if w > 0.0:
                 ej = _JOINT_RAMP * delta + _JOINT_RAMP_FLOOR * rr  # the ramps' half-width
                 wst = _joint_share(x, seg_nodes, i, j, d_own, ej, jgeo) if delta > 0.0 else 1.0
@@ -603,6 +608,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
                     ny = (a0[1] + sc * ta[1] - b0[1] - tc * tb[1]) * inv
                     nz = (a0[2] + sc * ta[2] - b0[2] - tc * tb[2]) * inv
                     _joint_share_forces(blk, jgeo, (sc, tc, nx, ny, nz), _JOINT_RAMP / ej, -w * ep)
+                    far = 1.0
                     rec[7] += w * wst
                     fm = w * wst * fp * gp
                     apply_line_point(blk, loc, sc, tc, fm * nx, fm * ny, fm * nz, fm, delta, rec, 1.0)
@@ -625,6 +631,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             for c in range(8):
                 rows[ri, _R_REC + c] = rec[c]
             rows[ri, _R_PHI] = phi
+            rows[ri, _R_FAR] = far
         if _THREADS:
             rows[ri, _R_OUTCOME] = outcome
             rows[ri, _R_ENERGY] = e
