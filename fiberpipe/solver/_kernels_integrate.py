@@ -146,6 +146,17 @@ def damping_factors(alpha, dt):
 ROTATION_SERIES_MAX_H2 = 1e-2
 
 
+@njit(inline="always", **_FLAGS)
+def _take3(a, i):
+    """Entries 3i … 3i + 2 of the flat view ``a``, which it clears (the hook's force arrays, applied
+    once per step)."""
+    x, y, z = a[3 * i], a[3 * i + 1], a[3 * i + 2]
+    a[3 * i] = 0.0
+    a[3 * i + 1] = 0.0
+    a[3 * i + 2] = 0.0
+    return x, y, z
+
+
 @njit(**_FLAGS)
 def update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef, alpha, lo, hi):
     """The central-difference update (module docstring) of the nodes ``lo … hi − 1``: gathers each
@@ -189,18 +200,8 @@ def update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef, alph
     n_large = 0
     for i in range(hi - lo):
         j = i + 1  # the element starting at node i; entry i: the one ending there
-        cfx = fcs[3 * i]
-        cfy = fcs[3 * i + 1]
-        cfz = fcs[3 * i + 2]
-        fcs[3 * i] = 0.0
-        fcs[3 * i + 1] = 0.0
-        fcs[3 * i + 2] = 0.0
-        ffx = ffs[3 * i]
-        ffy = ffs[3 * i + 1]
-        ffz = ffs[3 * i + 2]
-        ffs[3 * i] = 0.0
-        ffs[3 * i + 1] = 0.0
-        ffs[3 * i + 2] = 0.0
+        cfx, cfy, cfz = _take3(fcs, i)
+        ffx, ffy, ffz = _take3(ffs, i)
         fx = fs[3 * i] + (n0[j] - n0[i]) + (cfx + ffx)
         fy = fs[3 * i + 1] + (n1[j] - n1[i]) + (cfy + ffy)
         fz = fs[3 * i + 2] + (n2[j] - n2[i]) + (cfz + ffz)
