@@ -539,7 +539,8 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         if P > 0:
             n_pen = eval_planes(scene.planes, x, v, model.radius_node, work.f, acc, t, dt)
         # the hook adds its forces (or leaves them in its own array) and moments at t_n from x_n, q_n
-        # and the half-step velocities v_{n−½}, w_{n−½}; books its work and friction dissipation
+        # and the half-step velocities v_{n−½}, w_{n−½}; books its work and friction dissipation (or,
+        # with a friction array, its springs' part: the update books the friction forces' work)
         stored_planes = acc[ACC_STORED]
         n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
         if acc[ACC_STORED0] < 0.0:  # −1: the run's first step; the hook's stored energy at t_0 (≥ 0)
@@ -591,10 +592,11 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
 # ---- specialisations of the step loop, one per contact hook -----------------------------------------
 #
 # The hook is NOT a first-class function argument: each specialisation is a copy of
-# ``_advance_template`` whose globals ``_hook`` and ``_hook_forces`` are bound to one hook kernel and
-# its force-array accessor, so numba compiles the call directly (inlined, no indirect call) and never
+# ``_advance_template`` whose globals ``_hook``, ``_hook_forces`` and ``_hook_friction`` are bound to
+# one hook kernel and its force arrays' accessors, so numba compiles the call directly (inlined, no indirect call) and never
 # pickles a dispatcher type into its cache. The built-in hooks are cached on disk under their own
-# names (``step_loop_for(cache_name=...)``); their freshness covers every module of the package
+# names (``step_loop_for(cache_name=...)``, with ``_nofriction`` appended for a loop without a friction
+# array: the name tells the accessors apart); their freshness covers every module of the package
 # (``_jitcache``), so an edit of a contact module recompiles them. Any other hook gets an uncached
 # specialisation, compiled once per process and hook.
 
@@ -622,8 +624,8 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
 
     forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
         adds into ``f``). friction_of : the same for its friction forces (their work booked to the
-        friction work and, as a loss, to ALLFD). cache_name : a built-in hook's name for the on-disk cache (None: compiled
-        in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
+        friction work and, as a loss, to ALLFD). cache_name : a built-in hook's name for the on-disk
+        cache (None: compiled in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
         fiber; compiled in every process (see ``_kernels_beam.beam_pass_fibers``).
     """
     parallel = threads > 1
@@ -634,6 +636,8 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
     if loop is None:
         cache = cache_name is not None and not parallel
         name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
+        if cache_name and friction_of is no_contact_forces and forces_of is not no_contact_forces:
+            name += "_nofriction"  # not the built-in hook's loop under its name: another cache entry
         loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel, friction_of)
         _LOOPS[key] = loop
     return loop

@@ -220,6 +220,12 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             "was written for a different config or mesh (the material, scene, solver sections, mesh.h5 or "
             "the solver's code changed since), so the run cannot be resumed from it; rerun with --force to "
             "discard it and start over", where=str(path))
+    from .layout import ACC_SIZE
+
+    if art["state/acc"].shape != (ACC_SIZE,):
+        raise ArtifactError(
+            f"was written by a version of fiberpipe with {art['state/acc'].shape[0]} energy accumulators (this one "
+            f"keeps {ACC_SIZE}), so the run cannot be resumed from it; rerun with --force to start over", where=str(path))
     try:
         spec = json.loads(a.get("contact_spec", "null"))
         contact = _unflatten(spec, art.data) if spec is not None else None

@@ -118,6 +118,20 @@ def test_checkpoint_of_another_config_is_refused(tmp_path):
         read_mesh(path)
 
 
+def test_checkpoint_with_another_energy_layout_is_refused(tmp_path):
+    """A checkpoint whose energy accumulators are not this version's layout is refused at read time
+    (the step loop indexes them without bounds checks)."""
+    import dataclasses
+
+    model = stack_model()
+    saved = []
+    simulate(model, scene(), SimulationSettings(**SETTINGS), on_checkpoint=saved.append)
+    old = dataclasses.replace(saved[0], acc=saved[0].acc[:-1])
+    path = write_checkpoint(tmp_path / "ck.h5", old)
+    with pytest.raises(ArtifactError, match="energy accumulators"):
+        read_checkpoint(path)
+
+
 def test_checkpoint_size_scales_with_the_model(tmp_path):
     model = stack_model()
     saved = []

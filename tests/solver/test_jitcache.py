@@ -44,9 +44,13 @@ def test_an_index_naming_a_structure_gone_from_the_package_reads_as_stale(tmp_pa
 def test_step_loop_specialisations():
     assert K.step_loop_for(K.no_contact) is K.advance_plain
     args = (contact_effect.contact_step, contact_effect.contact_forces_of)
-    loop = K.step_loop_for(*args, cache_name="advance_contact")
-    assert loop is K.step_loop_for(*args, cache_name="advance_contact")
+    friction = dict(friction_of=contact_effect.contact_friction_of)
+    loop = K.step_loop_for(*args, cache_name="advance_contact", **friction)
+    assert loop is K.step_loop_for(*args, cache_name="advance_contact", **friction)
     assert loop._cache._impl is not None  # the built-in contact loop is cached on disk
+    # without its friction array it is another loop, under another cache name
+    bare = K.step_loop_for(*args, cache_name="advance_contact")
+    assert bare is not loop and bare.py_func.__name__ != loop.py_func.__name__
 
 
 def test_threaded_loops_are_separate_and_not_cached():
