@@ -477,6 +477,15 @@ def check_row(model, state, row, ke, se, vmax2, ctl):
     return STATUS_OK, -1
 
 
+@njit(inline="always", **_FLAGS)
+def _node_array(a, n):
+    """``(a, True)`` for an (n, 3) force array of the scene or the hook, else ``(zeros, False)``: the
+    update reads one for every node."""
+    if a.shape[0] == n:
+        return a, True
+    return np.zeros((n, 3)), False
+
+
 def _advance_template(model, scene, state, work, ctl, contact_data):
     """Advance ``state`` by up to ``ctl.n_steps`` steps of ``ctl.dt_s`` (s).
 
@@ -496,20 +505,12 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
     coef = damping_factors(scene.alpha_per_s, dt)
     acc_before = np.zeros(ACC_SIZE)
     # the hook's own force array (a hook that declares one leaves its forces there; the update adds
-    # them, books their work Δt f_n·v̄_n and clears the array); (0, 3) for hooks that add into f
-    fc = _hook_forces(contact_data)
-    has_fc = fc.shape[0] == N
-    if not has_fc:
-        fc = np.zeros((N, 3))  # the update reads it for every node
-    # the hook's friction force array, the same way; the update books its work as the friction's
-    ff = _hook_friction(contact_data)
-    has_ff = ff.shape[0] == N
-    if not has_ff:
-        ff = np.zeros((N, 3))
+    # them, books their work Δt f_n·v̄_n and clears the array; (0, 3) for hooks that add into f),
+    # and its friction force array, whose work the update books as the friction's
+    fc, has_fc = _node_array(_hook_forces(contact_data), N)
+    ff, has_ff = _node_array(_hook_friction(contact_data), N)
     fixity = scene.fixity
-    f_ext = scene.f_ext
-    if f_ext.shape[0] != N:
-        f_ext = np.zeros((N, 3))  # the update resets f to it for every node
+    f_ext, _ = _node_array(scene.f_ext, N)  # the update resets f to it for every node
     # the forces of the first step; the update resets f and mom for each next one
     eval_external(work.f, work.mom, f_ext)
     # the largest node speed is not known until the first update (the state may have been set
@@ -595,8 +596,8 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
 # ``_advance_template`` whose globals ``_hook``, ``_hook_forces`` and ``_hook_friction`` are bound to
 # one hook kernel and its force arrays' accessors, so numba compiles the call directly (inlined, no indirect call) and never
 # pickles a dispatcher type into its cache. The built-in hooks are cached on disk under their own
-# names (``step_loop_for(cache_name=...)``, with ``_nofriction`` appended for a loop without a friction
-# array: the name tells the accessors apart); their freshness covers every module of the package
+# names (``step_loop_for(cache_name=...)`` followed by the names of the force arrays' accessors, so a
+# cache entry is found only with the accessors it was compiled with); their freshness covers every module of the package
 # (``_jitcache``), so an edit of a contact module recompiles them. Any other hook gets an uncached
 # specialisation, compiled once per process and hook.
 
@@ -636,8 +637,8 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
     if loop is None:
         cache = cache_name is not None and not parallel
         name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
-        if cache_name and friction_of is no_contact_forces and forces_of is not no_contact_forces:
-            name += "_nofriction"  # not the built-in hook's loop under its name: another cache entry
+        if cache:
+            name += f"_{forces_of.__name__}_{friction_of.__name__}"
         loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel, friction_of)
         _LOOPS[key] = loop
     return loop
