@@ -40,6 +40,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._prefetch import prefetch_row
 from ._specialise import specialise
 from .contact import record_pair
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
@@ -525,6 +526,8 @@ def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use
     return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
 
 
+# pairs ahead whose nodes' positions the pass prefetches (their segments' node rows twice as far)
+_AHEAD = 2
 # pairs per task of the threaded pass, at least: a task costs its start and its scratch arrays
 PAIR_TASK_MIN = 32
 # tasks of the threaded pass: more than the threads, so a task that meets many contacts is
@@ -558,6 +561,18 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
     for kk in range(lo, hi):
         k = look[kk] if compact else kk
         ri = kk if _THREADS else 0  # the pair's result row
+        # the positions of the pairs a few places ahead, on their way while this one is evaluated
+        # (fiberpipe._prefetch; a hint, without effect on the results)
+        if kk + 2 * _AHEAD < hi:
+            k2 = look[kk + 2 * _AHEAD] if compact else kk + 2 * _AHEAD
+            prefetch_row(seg_nodes, pairs[k2, 0])
+            prefetch_row(seg_nodes, pairs[k2, 1])
+        if kk + _AHEAD < hi:
+            k1 = look[kk + _AHEAD] if compact else kk + _AHEAD
+            prefetch_row(x, seg_nodes[pairs[k1, 0], 0])
+            prefetch_row(x, seg_nodes[pairs[k1, 0], 1])
+            prefetch_row(x, seg_nodes[pairs[k1, 1], 0])
+            prefetch_row(x, seg_nodes[pairs[k1, 1], 1])
         outcome = _SKIPPED
         e = 0.0
         for _ in range(1):  # one pass; a break ends the pair's evaluation at its outcome
