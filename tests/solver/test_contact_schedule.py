@@ -7,6 +7,11 @@
   clearing a history whenever its contact opens.
 """
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -123,6 +128,11 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     from fiberpipe.solver.contact_potential import PAIR_TASK_MIN, contact_forces_pot, contact_forces_pot_threads
     from fiberpipe.solver.contact_state import new_records
 
+    if os.environ.get(_THREADS_ENV):  # the run of test_tasks_on_two_threads_... below
+        import numba
+
+        assert numba.get_num_threads() == int(os.environ[_THREADS_ENV])
+
     rng = np.random.default_rng(7)
     x, seg, rad, pairs, arc, law, gxi, gw = _potential_bundle(rng)
     n = len(pairs)
@@ -145,6 +155,25 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
         assert np.array_equal(kept[0].active[:na1], kept[1].active[:na2])
     assert na1 > 0
     assert most_looked >= 2 * PAIR_TASK_MIN  # two tasks or more ran
+
+
+# set by test_tasks_on_two_threads_equal_the_serial_passes, which checks that its run got them
+_THREADS_ENV = "FIBERPIPE_TEST_THREADS"
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs two CPUs")
+def test_tasks_on_two_threads_equal_the_serial_passes():
+    """The threaded contact pass's check above and the threaded friction's
+    (tests/solver/test_friction.py) with two threads running the tasks, in a process of their own:
+    the suite itself runs numba on one thread (tests/conftest.py), where the tasks run in turn."""
+    env = dict(os.environ, NUMBA_NUM_THREADS="2", **{_THREADS_ENV: "2"})
+    here = Path(__file__)
+    tests = [f"{here}::test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit",
+             f"{here.with_name('test_friction.py')}::test_friction_in_tasks_gives_the_serial_forces_and_histories_bit_for_bit"]
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert "2 passed" in r.stdout
 
 
 def _pair_in_contact(delta):
