@@ -2,10 +2,10 @@
 the cache line of ``a[i, 0]`` (or ``a[i]``) towards the core, and does nothing else (LLVM's
 ``llvm.prefetch``; a hint: it neither faults nor changes a result).
 
-The contact passes visit their pairs in list order and read the positions of each pair's nodes,
-which lie anywhere in the node arrays; a pair's evaluation is long enough that the CPU's
-out-of-order window does not reach the next pair's loads, so each pair would wait for its own
-misses. Asking for the nodes of the pairs a few places ahead overlaps those waits with the work.
+The potential contact pass (``solver.contact_potential``) visits its pairs in list order and reads
+the positions of each pair's nodes, which lie anywhere in the node arrays; a pair's evaluation is
+long enough that the CPU's out-of-order window does not reach the next pair's loads, so each pair
+would wait for its own misses. Asking for the nodes of the pairs a few places ahead overlaps those waits with the work.
 """
 
 from __future__ import annotations

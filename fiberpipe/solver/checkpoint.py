@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FiberpipeError
+from .layout import ACC_SIZE
 
 CHECKPOINT_NAME = "simulation.checkpoint.h5"
 
@@ -220,8 +221,6 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             "was written for a different config or mesh (the material, scene, solver sections, mesh.h5 or "
             "the solver's code changed since), so the run cannot be resumed from it; rerun with --force to "
             "discard it and start over", where=str(path))
-    from .layout import ACC_SIZE
-
     if art["state/acc"].shape != (ACC_SIZE,):
         raise ArtifactError(
             f"was written by a version of fiberpipe with {art['state/acc'].shape[0]} energy accumulators (this one "
