@@ -24,7 +24,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
+from ._kernels_beam import beam_forces
 from .model import Model
 
 
@@ -137,17 +139,44 @@ def _free_dofs(n_nodes: int, fix_mask: np.ndarray, axis_bits) -> np.ndarray:
     return free
 
 
-def _rotate(q: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """``exp(φ) ⊗ q`` for spatial spins φ (N, 3) and unit quaternions q (N, 4) (w, x, y, z)."""
-    a = np.linalg.norm(phi, axis=1)
-    half = 0.5 * a
-    s = np.where(a > 0, np.sin(half) / np.where(a > 0, a, 1.0), 0.5)
-    pw = np.cos(half)
-    px, py, pz = (s * phi[:, k] for k in range(3))
-    qw, qx, qy, qz = q.T
-    out = np.column_stack([pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
-                           pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw])
-    return out / np.linalg.norm(out, axis=1)[:, None]
+@njit(cache=True, error_model="numpy")
+def _rotate_into(q, phi, out):
+    """``out = exp(φ) ⊗ q`` for spatial spins φ (N, 3) and unit quaternions q (N, 4) (w, x, y, z),
+    renormalised."""
+    for i in range(q.shape[0]):
+        a = math.sqrt(phi[i, 0] * phi[i, 0] + phi[i, 1] * phi[i, 1] + phi[i, 2] * phi[i, 2])
+        half = 0.5 * a
+        s = math.sin(half) / a if a > 0.0 else 0.5
+        pw = math.cos(half)
+        px, py, pz = s * phi[i, 0], s * phi[i, 1], s * phi[i, 2]
+        qw, qx, qy, qz = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        ow = pw * qw - px * qx - py * qy - pz * qz
+        ox = pw * qx + px * qw + py * qz - pz * qy
+        oy = pw * qy - px * qz + py * qw + pz * qx
+        oz = pw * qz + px * qy - py * qx + pz * qw
+        inv = 1.0 / math.sqrt(ow * ow + ox * ox + oy * oy + oz * oz)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = ow * inv, ox * inv, oy * inv, oz * inv
+
+
+@njit(cache=True, error_model="numpy")
+def _beam_force_difference(x0, q0, u, h, beams, out):
+    """``out`` (N, 6) = F(+h u) − F(−h u): the beam forces and moments (:func:`beam_forces`) at the
+    positions ``x0 ± h u[:, :3]`` and the rotations ``exp(±h u[:, 3:]) ⊗ q0``."""
+    el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest = beams
+    n = x0.shape[0]
+    x = np.empty((n, 3))
+    q = np.empty((n, 4))
+    f = np.empty((n, 3))
+    mom = np.empty((n, 3))
+    no_strain = np.zeros((0, 6))
+    for sign in (1.0, -1.0):
+        x[:] = x0 + (sign * h) * u[:, :3]
+        _rotate_into(q0, (sign * h) * u[:, 3:], q)
+        f[:] = 0.0
+        mom[:] = 0.0
+        beam_forces(x, q, el_n1, el_invL0, el_C, el_Dk, gamma_rest, theta_rest, f, mom, False, 0.0, no_strain)
+        out[:, :3] += sign * f
+        out[:, 3:] += sign * mom
 
 
 def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, penalty_factor: float = 0.0,
@@ -176,25 +205,14 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     """
     from scipy.sparse.linalg import LinearOperator, eigsh
 
-    from ._kernels_beam import beam_forces
-
     n = model.n_nodes
     x0 = np.ascontiguousarray(model.nodes_m if x is None else x, dtype=np.float64)
     q0 = np.ascontiguousarray(model.quats0 if q is None else q, dtype=np.float64)
     free = _free_dofs(n, np.asarray(fix_mask), None).ravel()
     inv_sqrt_m = np.column_stack([np.repeat(1.0 / np.sqrt(model.mass)[:, None], 3, axis=1),
                                   1.0 / np.sqrt(model.J)]).ravel()
-    args = (model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest)
-
-    def forces(u):
-        u = u.reshape(n, 6)
-        f = np.zeros((n, 3))
-        mom = np.zeros((n, 3))
-        beam_forces(x0 + u[:, :3], _rotate(q0, u[:, 3:]), *args, f, mom, False, 0.0, np.zeros((0, 6)))
-        if extra_forces is not None:
-            f += extra_forces(x0 + u[:, :3])
-        return np.column_stack([f, mom]).ravel()
-
+    beams = (model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest)
+    L = float(np.min(model.el_L0))
     calls = [0]
 
     def matvec(y):
@@ -202,7 +220,6 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
         u = np.zeros(6 * n)
         u[free] = y
         u *= inv_sqrt_m
-        L = float(np.min(model.el_L0))
         uu = u.reshape(n, 6)
         nrm = max(float(np.max(np.abs(uu[:, :3]))) / L, float(np.max(np.abs(uu[:, 3:]))))
         if nrm == 0.0:
@@ -210,9 +227,12 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
         # one scalar step: at most 1e-6 of an element in translation and 1e-6 rad in rotation
         # (K u = −(F(+h u) − F(−h u)) / (2h), exact for the linear tangent up to O(h²))
         h = 1e-6 / nrm
-        g = -(forces(h * u) - forces(-h * u)) / (2.0 * h)
+        diff = np.zeros((n, 6))
+        _beam_force_difference(x0, q0, uu, h, beams, diff)
+        if extra_forces is not None:
+            diff[:, :3] += extra_forces(x0 + h * uu[:, :3]) - extra_forces(x0 - h * uu[:, :3])
         calls[0] += 1
-        return (g * inv_sqrt_m)[free]
+        return ((-diff.ravel() / (2.0 * h)) * inv_sqrt_m)[free]
 
     nf = int(free.sum())
     op = LinearOperator((nf, nf), matvec=matvec, dtype=np.float64)
