@@ -68,3 +68,41 @@ def test_curve_window_error_is_the_largest_window_mean_difference():
     ref = [(tk, float(int(tk * 5) + 1)) for tk in t]
     new = [(tk, f + (0.1 if 0.4 <= tk < 0.6 else 0.0)) for tk, f in ref]
     assert abs(ba.curve_window_error(ref, new, 1.0) - 0.02) < 1e-12
+
+
+def test_fast_ensemble_gravity_factors_alternate_around_one():
+    from fiberpipe.benchmarks.bench_fast_ensemble import gravity_factor
+    assert [round((gravity_factor(r) - 1.0) * 1e8) for r in range(5)] == [0, 1, -1, 2, -2]
+
+
+def test_fast_ensemble_setting_parses_numbers_and_unit_strings():
+    from fiberpipe.benchmarks.bench_fast_ensemble import parse_setting
+    name, over = parse_setting("ms100:solver.mass_scaling=100,scene.damping.alpha=1e3 1/s,solver.stable_step=modes")
+    assert name == "ms100"
+    assert over == {"solver.mass_scaling": 100, "scene.damping.alpha": "1e3 1/s", "solver.stable_step": "modes"}
+    assert parse_setting("study:") == ("study", {})
+
+
+def test_fast_ensemble_error_is_ensemble_mean_against_ensemble_mean(tmp_path):
+    import numpy as np
+
+    from fiberpipe.benchmarks.bench_fast_ensemble import report, window_means
+
+    U = np.linspace(0.0, 1e-3, 101)
+    assert np.allclose(window_means(U, 2.0 * U, 0.5e-3, 1e-3), [0.49e-3, 1.49e-3], rtol=0.02)
+
+    def save(name, F):
+        np.savez(tmp_path / f"{name}.npz", U=U, F_cell=F, wall_s=1.0, wall_steady_s=1.0, steps=10, completed=True)
+
+    # two reference runs scattered ±10 % around F = 1 N, two fast runs at 1.05 N: 5 % off the
+    # reference ensemble although each fast run is within the reference runs' own scatter
+    save("ref_00", np.full_like(U, 1.1))
+    save("ref_01", np.full_like(U, 0.9))
+    save("fast_00", np.full_like(U, 1.05))
+    save("fast_01", np.full_like(U, 1.05))
+    table = report(tmp_path, ["ref", "fast"], 0.5e-3)
+    rows = {line.split("|")[1].strip(): line.split("|") for line in table.splitlines() if line.startswith("| ref")
+            or line.startswith("| fast")}
+    assert rows["fast"][6].strip() == "5.00 %"
+    assert rows["ref"][6].strip() == "0.00 %"
+    assert rows["ref"][7].strip() == "18.18–22.22 %"  # 0.2 / 1.1 and 0.2 / 0.9

@@ -373,9 +373,9 @@ def _update_nodes(model, fixity, state, work, f_ext, fc, ff, dt, coef, alpha):
     hook_f = (fc, ff)
     n = offs[nf]
     nch = PARALLEL_CHUNKS
-    sums = np.empty((nch, 9))
+    sums = work.task_sums
     for k in prange(nch):  # contiguous node ranges (beam_pass_fibers)
-        a, b, c, d, e, g0, g1, nl, v2 = update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef,
+        a, b, c, d, e, g0, g1, nl, v2 = _update_task(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef,
                                                      alpha, k * n // nch, (k + 1) * n // nch)
         sums[k, 0] = a
         sums[k, 1] = b
@@ -386,20 +386,29 @@ def _update_nodes(model, fixity, state, work, f_ext, fc, ff, dt, coef, alpha):
         sums[k, 6] = g1
         sums[k, 7] = nl
         sums[k, 8] = v2
-    out = np.zeros(8)
+    ke = ke_lf = vd = wk = pw = wf0 = wf1 = 0.0
+    n_large = 0
     v2_max = 0.0
     for k in range(nch):
-        for c in range(8):
-            out[c] += sums[k, c]
+        ke += sums[k, 0]
+        ke_lf += sums[k, 1]
+        vd += sums[k, 2]
+        wk += sums[k, 3]
+        pw += sums[k, 4]
+        wf0 += sums[k, 5]
+        wf1 += sums[k, 6]
+        n_large += int(sums[k, 7])
         v2_max = max(v2_max, sums[k, 8])
-    return out[0], out[1], out[2], out[3], out[4], out[5], out[6], int(out[7]), v2_max
+    return ke, ke_lf, vd, wk, pw, wf0, wf1, n_large, v2_max
 
 
 _PARALLEL = False
 update_nodes = njit(inline="always", **_FLAGS)(_update_nodes)
+# the parallel copy's tasks without reference counts, as _kernels_beam.beam_pass_fibers's (its comment)
+_update_task = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(update_range.py_func)
 # Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it.
 update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {"_PARALLEL": True}, cache=False,
-                                 fastmath=True, error_model="numpy", parallel=True)
+                                 fastmath=True, error_model="numpy", parallel=True, _nrt=False)
 
 
 @njit(**_FLAGS)

@@ -752,8 +752,10 @@ _pairs_serial = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
 # in the rows variant of _pairs_range, without reference counts as in the serial pass.
 _pairs_range_rows = specialise(_pairs_range, "_pairs_range_rows", {"_THREADS": True}, cache=False, fastmath=True,
                                error_model="numpy", _nrt=False)
+# The tasks' loop without reference counts too: both cores counting on the same arrays' records (each
+# task's scratch views and arguments) send those cache lines back and forth between them.
 _pairs_tasks = specialise(_pairs_pass, "_pairs_tasks", {"_THREADS": True, "_pairs_range_of": _pairs_range_rows},
-                          cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=True)
+                          cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=False)
 contact_forces_pot = njit(cache=True, fastmath=True, error_model="numpy", _nrt=True)(_contact_forces_pot)
 contact_forces_pot_threads = specialise(_contact_forces_pot, "contact_forces_pot_threads", {"_THREADS": True},
                                         cache=False, fastmath=True, error_model="numpy", _nrt=True)
@@ -788,7 +790,7 @@ def potential_kernels_for(law, threads: bool = False):
                               _nrt=False, **flags)
             passes["_pairs_tasks"] = specialise(_pairs_pass, f"_pairs_tasks_{tag}",
                                                 {"_pairs_range_of": rows, "_THREADS": True}, cache=False,
-                                                parallel=True, _nrt=True, **flags)
+                                                parallel=True, _nrt=False, **flags)
         _LAW_KERNELS[key] = specialise(_contact_forces_pot, f"contact_forces_pot{'_threads' if threads else ''}_{tag}",
                                        {**passes, "_THREADS": bool(threads)}, cache=False, _nrt=True, **flags)
     return _LAW_KERNELS[key]

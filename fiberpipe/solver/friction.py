@@ -270,12 +270,7 @@ def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out,
         return friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step)
     fpair = np.empty((n_visit, 3))
     sums = np.zeros((n_tasks, 3))
-    for task in prange(n_tasks):
-        d, e, r = _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy,
-                                  task * n_visit // n_tasks, (task + 1) * n_visit // n_tasks, fpair)
-        sums[task, 0] = d
-        sums[task, 1] = e
-        sums[task, 2] = r
+    _friction_task_pass(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy, n_visit, fpair, sums)
     c_s, c_t, c_active = rec.s, rec.t, rec.active
     for kk in range(n_visit):
         k = c_active[kk] if lazy else kk
@@ -284,15 +279,30 @@ def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out,
     diss = 0.0
     espring = 0.0
     returned = 0.0
-    for task in range(n_tasks):
+    for task in range(sums.shape[0]):
         diss += sums[task, 0]
         espring += sums[task, 1]
         returned += sums[task, 2]
     return diss, espring, returned
 
 
+# Not cached, as _kernels_beam.beam_pass_fibers (its comment). Without reference counts: both cores
+# counting on the same arrays' records send those cache lines back and forth between them.
+@njit(cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=False)
+def _friction_task_pass(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy, n_visit, fpair, sums):
+    """The tasks of :func:`_friction_tasks`: ``sums.shape[0]`` spans of the ``n_visit`` pairs, each
+    pair's force into its row of ``fpair``, each task's sums into its row of ``sums``."""
+    n_tasks = sums.shape[0]
+    for task in prange(n_tasks):
+        d, e, r = _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy,
+                                  task * n_visit // n_tasks, (task + 1) * n_visit // n_tasks, fpair)
+        sums[task, 0] = d
+        sums[task, 1] = e
+        sums[task, 2] = r
+
+
 # Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it
-friction_forces_tasks = njit(cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=True)(_friction_tasks)
+friction_forces_tasks = njit(cache=False, fastmath=True, error_model="numpy", _nrt=True)(_friction_tasks)
 
 
 @njit(cache=True, error_model="numpy")

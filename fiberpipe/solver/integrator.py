@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
 from ._kernels_integrate import step_loop_for
-from ._kernels_beam import EB_SIZE, beam_forces, new_element_forces, node_beams
+from ._kernels_beam import EB_SIZE, PARALLEL_CHUNKS, beam_forces, new_element_forces, node_beams
 from ._kernels_boundary import PLANE_LIST_MARGIN, plane_contacts
 from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
 from .effects import ContactHook, Effect, SceneArrays
@@ -267,6 +267,7 @@ class Integrator:
             raise FiberpipeError("the model's elements are not in the CSR order of build_model "
                                  "(fiber k: nodes node_offsets[k]…, elements node − k)")
         self.eb = np.zeros((model.n_elements, EB_SIZE))
+        self.task_sums = np.zeros((PARALLEL_CHUNKS, 9))
         self.ef = new_element_forces(n)
         # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
         self.threads = max(1, int(threads))
@@ -290,7 +291,7 @@ class Integrator:
         drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
         scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes,
                             fixity_of(sc.fix_mask, self.model.n_nodes))
-        work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist)
+        work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist, self.task_sums)
         return scene, work
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:

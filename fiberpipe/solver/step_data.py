@@ -132,6 +132,7 @@ class WorkArrays(NamedTuple):
     eb: np.ndarray           # (E, EB_SIZE) scratch of the exact element pass (large rotations, β > 0)
     strain_prev: np.ndarray  # (E, 6) last step's strains (stiffness-proportional damping) or (0, 6)
     hist: np.ndarray         # (rows, layout.H_WALL + walls) history rows
+    task_sums: np.ndarray    # (tasks, 9) the parallel node passes' sums per task (solver.threads > 1)
 
 
 class StepControl(NamedTuple):
