@@ -41,6 +41,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._prefetch import prefetch_row
+from .._tasks import task_count
 from ._specialise import specialise
 from .contact import record_pair
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
@@ -716,7 +717,7 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
     forces, records and energy bit for bit."""
     n_look = _look_list(out, n_pairs, reach)
     if _THREADS and n_look >= 2 * PAIR_TASK_MIN:
-        work = _pass_work(n_look, max(1, min(_PAIR_TASKS, n_look // PAIR_TASK_MIN)), gxi.shape[0])
+        work = _pass_work(n_look, task_count(n_look, PAIR_TASK_MIN, _PAIR_TASKS), gxi.shape[0])
         return _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
                             c_off, reach, n_look, work)
     return _pairs_serial(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,

@@ -40,6 +40,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._tasks import task_count
+
 from ._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from .contact_state import PairRecords, PlaneFriction
 from .geometry import apply_pair_force, pair_nodes
@@ -265,7 +267,7 @@ def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out,
     # Strategy: a pair writes only its own history row and its force row, so the tasks share nothing;
     # the scatter to the nodes (two pairs may share a node) stays serial, in the serial pass's order
     lazy, n_visit = _visits(rec, hist, step, n_active, n_pairs)
-    n_tasks = max(1, min(FRICTION_TASKS, n_visit // FRICTION_TASK_MIN))
+    n_tasks = task_count(n_visit, FRICTION_TASK_MIN, FRICTION_TASKS)
     if n_tasks < 2:
         return friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step)
     fpair = np.empty((n_visit, 3))
