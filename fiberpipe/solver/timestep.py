@@ -108,7 +108,8 @@ class ModalTimeStep:
     ``omega_max_rad_s``: √λ_max of M⁻¹K with the fixed degrees of freedom removed;
     ``dt_beams_s = 2/ω_max`` (with the damping reduction); ``dt_stable_s`` = that × √(1 − c_pen)
     (the plane penalty's share, c_pen = penalty factor: module docstring of :func:`modal_time_step`);
-    ``iterations``: Lanczos matrix–vector products.
+    ``iterations``: the tangent's finite-difference probes (18 for the banded beam tangent) or
+    Lanczos matrix–vector products (with extra forces).
     """
 
     dt_stable_s: float
@@ -190,21 +191,23 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     the scene fixes the translation along the fibers (``scene.constraints.lock_axial: all``) the axial
     mode of an element along that axis has no free degree of freedom, and ω_max is the next mode's
     (shear for the study's 0.3 mm elements). ``K`` is the tangent of the beam forces at ``(x, q)``
-    (default: the rest state, where it is the material stiffness), applied matrix-free by central
-    differences of :func:`fiberpipe.solver._kernels_beam.beam_forces` in positions and spatial spins;
-    the symmetric ``M^{-1/2} K M^{-1/2}`` goes to Lanczos (``scipy.sparse.linalg.eigsh``).
+    (default: the rest state, where it is the material stiffness), by central differences of
+    :func:`fiberpipe.solver._kernels_beam.beam_forces` in positions and spatial spins.
+
+    An element couples its two nodes only, so ``K`` is block-tridiagonal along each fiber: it is
+    assembled column by column from 18 probes (each of the six degrees of freedom of every third node
+    at once, :func:`_beam_tangent_banded`), and ω_max² is the top eigenvalue of the symmetric banded
+    ``M^{-1/2} K M^{-1/2}`` (LAPACK ``dsbevx``). With ``extra_forces(x) -> (N, 3)``, further
+    position-dependent forces whose tangent is added to K (e.g. the fiber–fiber contact at a state,
+    for the measurements of docs/benchmarks.md), which couple any nodes, the operator is applied
+    matrix-free to Lanczos vectors instead (``scipy.sparse.linalg.eigsh``, relative tolerance ``tol``).
 
     Penalties on top: a plane penalty ``k_i = c m_i (2/Δt)²`` adds at most ``4c/Δt²`` to ω² (a
     diagonal, positive term: Weyl's inequality), so ``(ω_max² + 4c/Δt²) Δt² ≤ 4`` holds for
     ``Δt ≤ (2/ω_max) √(1 − c)``. Fiber–fiber contact stiffness is not in the bound: it is small
     against the beams' at the study's loads (docs/benchmarks.md, "Stable step per active mode",
     measured) and ``solver.dt_safety`` keeps a margin for it.
-
-    ``extra_forces(x) -> (N, 3)`` (optional): further position-dependent forces whose tangent is
-    added to K (e.g. the fiber–fiber contact at a state, for the measurements of docs/benchmarks.md).
     """
-    from scipy.sparse.linalg import LinearOperator, eigsh
-
     n = model.n_nodes
     x0 = np.ascontiguousarray(model.nodes_m if x is None else x, dtype=np.float64)
     q0 = np.ascontiguousarray(model.quats0 if q is None else q, dtype=np.float64)
@@ -213,6 +216,102 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
                                   1.0 / np.sqrt(model.J)]).ravel()
     beams = (model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest)
     L = float(np.min(model.el_L0))
+    if extra_forces is None:
+        lam, calls = _top_eigenvalue_banded(x0, q0, beams, L, free, inv_sqrt_m, model.node_offsets)
+    else:
+        lam, calls = _top_eigenvalue_lanczos(x0, q0, beams, L, free, inv_sqrt_m, extra_forces, tol)
+    om = math.sqrt(max(lam, 0.0))
+    xi = 0.5 * beta_s * om
+    dt_b = 2.0 / om * (math.sqrt(1.0 + xi * xi) - xi) if om > 0 else math.inf
+    # rounded down to 6 significant digits: the eigenvalue may differ in its last bits between
+    # machines or BLAS builds, and a resumed run must find the checkpoint's step again
+    dt_s = _round_down(dt_b * math.sqrt(1.0 - penalty_factor), 6)
+    return ModalTimeStep(dt_s, dt_b, om, float(penalty_factor), int(free.sum()), calls)
+
+
+def _probe_steps(L: float) -> np.ndarray:
+    """The finite-difference step of each of a node's six degrees of freedom: 1e-6 of the shortest
+    element in translation, 1e-6 rad in rotation (K e = −(F(+h e) − F(−h e)) / (2h), exact for the
+    linear tangent up to O(h²))."""
+    return np.array([1e-6 * L] * 3 + [1e-6] * 3)
+
+
+def _beam_tangent_banded(x0, q0, beams, L: float) -> np.ndarray:
+    """The beam tangent K (6N × 6N) in LAPACK's lower band storage ``band[d, c] = K[c + d, c]``,
+    d = 0 … 11, symmetrised as (K + Kᵀ)/2 (K is symmetric at rest; the spatial-spin tangent of a
+    deformed state nearly so).
+
+    Strategy: a node's force depends on its own and its two neighbours' degrees of freedom, and
+    three consecutive nodes have different colours ``node % 3``; perturbing degree of freedom a of
+    every node of one colour at once, the force change at node r comes from the one perturbed node
+    among r − 1, r, r + 1 (nodes of different fibers do not interact), so 3 × 6 probes give every
+    column."""
+    n = x0.shape[0]
+    h = _probe_steps(L)
+    K_rows = np.zeros((3, n, 6, 6))  # K_rows[o, c, b, a] = K[6(c + o − 1) + b, 6c + a]
+    u = np.zeros((n, 6))
+    diff = np.zeros((n, 6))
+    nodes = np.arange(n)
+    for colour in range(3):
+        cols = nodes[colour::3]
+        for a in range(6):
+            u[:] = 0.0
+            u[cols, a] = 1.0
+            diff[:] = 0.0
+            _beam_force_difference(x0, q0, u, h[a], beams, diff)
+            col = -diff / (2.0 * h[a])
+            for o in range(3):  # rows c − 1, c, c + 1 of column (c, a)
+                r = cols + o - 1
+                ok = (r >= 0) & (r < n)
+                K_rows[o, cols[ok], :, a] = col[r[ok]]
+    # lower band: column j = 6c + a, row i = 6(c + o − 1) + b ≥ j for o = 1 (the node itself, b ≥ a)
+    # and o = 2 (the next node); (K[i, j] + K[j, i]) / 2 with K[j, i] = K_rows[2 − o, c + o − 1, a, b]
+    band = np.zeros((12, 6 * n))
+    a_idx, b_idx = np.meshgrid(np.arange(6), np.arange(6), indexing="ij")  # [a, b]
+    for o in (1, 2):
+        c = np.arange(n - (o - 1))
+        rr = c + o - 1
+        kij = K_rows[o, c][:, :, :].transpose(0, 2, 1)   # [c, a, b] = K[6rr + b, 6c + a]
+        kji = K_rows[2 - o, rr]                           # [c, a, b] = K[6c + a, 6rr + b]
+        d = 6 * (o - 1) + b_idx - a_idx                   # i − j
+        keep = d >= 0
+        j = (6 * c)[:, None, None] + a_idx[None]
+        band[np.broadcast_to(d, kij.shape)[:, keep], j[:, keep]] = 0.5 * (kij[:, keep] + kji[:, keep])
+    return band
+
+
+def _top_eigenvalue_banded(x0, q0, beams, L, free, inv_sqrt_m, node_offsets) -> tuple[float, int]:
+    """λ_max of M^{-1/2} K M^{-1/2} on the free degrees of freedom from the banded tangent, fiber by
+    fiber (the beams couple no two fibers: K is block-diagonal by fiber); returns (λ_max, probes)."""
+    from scipy.linalg import eigvals_banded
+
+    band = _beam_tangent_banded(x0, q0, beams, L)
+    lam_max = 0.0
+    for f in range(len(node_offsets) - 1):
+        lo, hi = 6 * int(node_offsets[f]), 6 * int(node_offsets[f + 1])
+        idx = lo + np.flatnonzero(free[lo:hi])
+        if idx.size == 0:
+            continue
+        # the free degrees of freedom keep their order, so the band (offset ≤ 11) stays one
+        pos = np.full(hi - lo, -1)
+        pos[idx - lo] = np.arange(idx.size)
+        sub = np.zeros((12, idx.size))
+        for d in range(12):
+            j = np.arange(lo, hi - d)
+            i = j + d
+            keep = free[i] & free[j]
+            i, j = i[keep], j[keep]
+            sub[pos[i - lo] - pos[j - lo], pos[j - lo]] = band[d, j] * inv_sqrt_m[i] * inv_sqrt_m[j]
+        lam_max = max(lam_max, float(np.max(eigvals_banded(sub, lower=True))))
+    return lam_max, 18
+
+
+def _top_eigenvalue_lanczos(x0, q0, beams, L, free, inv_sqrt_m, extra_forces, tol) -> tuple[float, int]:
+    """λ_max of M^{-1/2} (K + K_extra) M^{-1/2} on the free degrees of freedom by Lanczos, the
+    operator applied matrix-free; returns (λ_max, products)."""
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    n = x0.shape[0]
     calls = [0]
 
     def matvec(y):
@@ -225,12 +324,10 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
         if nrm == 0.0:
             return np.zeros_like(y)
         # one scalar step: at most 1e-6 of an element in translation and 1e-6 rad in rotation
-        # (K u = −(F(+h u) − F(−h u)) / (2h), exact for the linear tangent up to O(h²))
         h = 1e-6 / nrm
         diff = np.zeros((n, 6))
         _beam_force_difference(x0, q0, uu, h, beams, diff)
-        if extra_forces is not None:
-            diff[:, :3] += extra_forces(x0 + h * uu[:, :3]) - extra_forces(x0 - h * uu[:, :3])
+        diff[:, :3] += extra_forces(x0 + h * uu[:, :3]) - extra_forces(x0 - h * uu[:, :3])
         calls[0] += 1
         return ((-diff.ravel() / (2.0 * h)) * inv_sqrt_m)[free]
 
@@ -238,13 +335,7 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     op = LinearOperator((nf, nf), matvec=matvec, dtype=np.float64)
     lam = float(eigsh(op, k=1, which="LA", tol=tol, return_eigenvectors=False, ncv=min(nf, 40),
                       v0=np.random.default_rng(0).standard_normal(nf))[0])
-    om = math.sqrt(max(lam, 0.0))
-    xi = 0.5 * beta_s * om
-    dt_b = 2.0 / om * (math.sqrt(1.0 + xi * xi) - xi) if om > 0 else math.inf
-    # rounded down to 6 significant digits: the Lanczos result may differ in its last bits between
-    # machines or BLAS builds, and a resumed run must find the checkpoint's step again
-    dt_s = _round_down(dt_b * math.sqrt(1.0 - penalty_factor), 6)
-    return ModalTimeStep(dt_s, dt_b, om, float(penalty_factor), nf, calls[0])
+    return lam, calls[0]
 
 
 def _round_down(x: float, digits: int) -> float:
