@@ -199,18 +199,23 @@ def _reference_part(reference: Path | None, quick: bool, echo) -> list[str]:
         if not need.exists():
             raise FileNotFoundError(f"--reference {reference}: no {need.relative_to(reference)} (a checkout of the "
                                     "reference commit after `make setup` there)")
-    cases = [("12 ms", 12e-3, 4 if quick else 10, [])]
+    modes = [f"{k}={v}" for k, v in MODES_OVERRIDES.items()]
+    cases = [("12 ms", 12e-3, 4 if quick else 10, [], 1)]
     if not quick:
-        cases += [("U = 1.15 mm", None, 10, []), ("U = 1.15 mm", None, 10, [f"{k}={v}" for k, v in MODES_OVERRIDES.items()])]
+        # the last case on two threads against the reference's one: compare its wall times
+        cases += [("U = 1.15 mm", None, 10, [], 1), ("U = 1.15 mm", None, 10, modes, 1),
+                  ("U = 1.15 mm", None, 10, modes + ["solver.threads=2"], 2)]
     rows = []
-    for name, until, spans, new in cases:
+    for name, until, spans, new, threads in cases:
         echo(f"bench: against {reference}: paper-40 to {name} {' '.join(new)} ...")
-        rows.append(ba.measure(reference, cfg, ref_cfg, until, spans, new))
+        rows.append(ba.measure(reference, cfg, ref_cfg, until, spans, new, new_threads=threads))
     cmd = f"python -m fiberpipe.benchmarks.bench_ab --reference {reference}"
     return (["## Against the reference commit", "",
-             f"`{cmd} --until 12ms --spans 10` and `{cmd} --spans 10 [--new solver.stable_step=modes]`: "
+             f"`{cmd} --until 12ms --spans 10` and `{cmd} --spans 10 [--new solver.stable_step=modes "
+             "--new solver.dt_safety=0.85 [--new solver.threads=2 --threads 2]]`: "
              f"the reference checkout `{reference}` and this code advance paper-40 alternately by equal spans "
-             "of simulated time; CPU seconds of each worker (both see the same load).", ""]
+             "of simulated time; CPU seconds of each worker (both see the same load), and their wall times "
+             "(the ratio to compare for two threads, on an idle machine).", ""]
             + ba.HEADER + [l for r in rows for l in ba.lines(r, str(reference))] + [""])
 
 

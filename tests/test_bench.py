@@ -106,3 +106,16 @@ def test_fast_ensemble_error_is_ensemble_mean_against_ensemble_mean(tmp_path):
     assert rows["fast"][6].strip() == "5.00 %"
     assert rows["ref"][6].strip() == "0.00 %"
     assert rows["ref"][7].strip() == "18.18–22.22 %"  # 0.2 / 1.1 and 0.2 / 0.9
+
+
+def test_fast_ensemble_report_keeps_settings_whose_names_share_a_prefix_apart(tmp_path):
+    import numpy as np
+
+    from fiberpipe.benchmarks.bench_fast_ensemble import report
+
+    U = np.linspace(0.0, 1e-3, 11)
+    for name, f in (("m_00", 1.0), ("m_s1_00", 2.0)):
+        np.savez(tmp_path / f"{name}.npz", U=U, F_cell=np.full_like(U, f), wall_s=1.0, wall_steady_s=1.0, steps=10,
+                 completed=True)
+    rows = [line.split("|") for line in report(tmp_path, ["m", "m_s1"], 0.5e-3).splitlines() if line.startswith("| m")]
+    assert [(r[1].strip(), r[2].strip()) for r in rows] == [("m", "1"), ("m_s1", "1")]

@@ -75,7 +75,7 @@ def run_one(overrides: dict, run: int, path: Path, gravity_step: float = 1e-8) -
 
 def report(out: Path, names: list[str], window_m: float) -> str:
     """The table: per setting its runs, steps, wall time and error against the first setting."""
-    runs = {n: [np.load(p) for p in sorted(out.glob(f"{n}_*.npz"))] for n in names}
+    runs = {n: [np.load(p) for p in sorted(out.glob(f"{n}_[0-9][0-9].npz"))] for n in names}
     u_end = max(float(r["U"].max()) for rs in runs.values() for r in rs)
     means = {n: np.array([window_means(r["U"], r["F_cell"], window_m, u_end) for r in rs]) for n, rs in runs.items()
              if rs}
