@@ -34,13 +34,14 @@ def _digest(key) -> str:
     return h.hexdigest()
 
 
-# compiled into every kernel too: the LLVM options of fiberpipe/_vectorise.py
-_SHARED = (os.path.join(os.pardir, "_vectorise.py"),)
+# modules outside the solver package compiled into the solver's cached kernels: the LLVM options of
+# fiberpipe/_vectorise.py, the kernels of _prefetch.py and _tasks.py
+_SHARED = tuple(os.path.join(os.pardir, name) for name in ("_vectorise.py", "_prefetch.py", "_tasks.py"))
 
 
 def package_source_digest() -> str:
-    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` and of ``fiberpipe/_vectorise.py``
-    (re-hashed when one changes)."""
+    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` and of the modules in ``_SHARED``
+    (``fiberpipe/_vectorise.py``, ``_prefetch.py``, ``_tasks.py``; re-hashed when one changes)."""
     key = []
     for name in sorted(n for n in os.listdir(_PKG_DIR) if n.endswith(".py")) + list(_SHARED):
         st = os.stat(os.path.join(_PKG_DIR, name))
@@ -79,6 +80,10 @@ def _install() -> bool:
 
         def get_disambiguator(self):
             return self._inner.get_disambiguator()
+
+        @property
+        def _py_file(self):  # numba's warning that a function cannot be cached names the file
+            return self._inner._py_file
 
         @classmethod
         def from_function(cls, py_func, py_file):

@@ -577,9 +577,10 @@ _PARALLEL = False
 # with the counts, 9.0 without, 12.7 serial)
 beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_beam_pass_nodes)
 _beam_pass_task = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(beam_pass_nodes.py_func)
-# Not cached: a parallel (parfor) kernel loaded from numba's disk cache and linked into a step loop
-# compiled in another process makes that loop's own cache entry crash when it is loaded (numba
-# 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2, load it
-# in 3 -> SIGSEGV). Only the solver.threads > 1 loops use it, and those are compiled per process.
+# Not cached on its own: a parallel (parfor) kernel loaded from numba's disk cache and linked into a
+# step loop compiled in another process makes that loop's own cache entry crash when it is loaded
+# (numba 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2,
+# load it in 3 -> SIGSEGV). The solver.threads > 1 loops that use it are cached whole (compiled
+# with it in one process, loaded as one library; tests/solver/test_jitcache.py).
 beam_pass_fibers = specialise(_beam_pass_nodes, "beam_pass_fibers", {"_PARALLEL": True}, cache=False,
                               fastmath=True, error_model="numpy", parallel=True, _nrt=False)

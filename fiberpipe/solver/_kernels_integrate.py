@@ -406,7 +406,7 @@ _PARALLEL = False
 update_nodes = njit(inline="always", **_FLAGS)(_update_nodes)
 # the parallel copy's tasks without reference counts, as _kernels_beam.beam_pass_fibers's (its comment)
 _update_task = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(update_range.py_func)
-# Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it.
+# Not cached on its own, as _kernels_beam.beam_pass_fibers (its comment).
 update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {"_PARALLEL": True}, cache=False,
                                  fastmath=True, error_model="numpy", parallel=True, _nrt=False)
 
@@ -635,8 +635,9 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
     forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
         adds into ``f``). friction_of : the same for its friction forces (their work booked to the
         friction work and, as a loss, to ALLFD). cache_name : a built-in hook's name for the on-disk
-        cache (None: compiled in every process). ``threads > 1``: the variant whose beam pass runs one prange task per
-        fiber; compiled in every process (see ``_kernels_beam.beam_pass_fibers``).
+        cache (None: compiled in every process). ``threads > 1``: the variant whose beam pass and update
+        run as prange tasks of contiguous nodes; cached whole under its own name, its parallel kernels
+        never on their own (see ``_kernels_beam.beam_pass_fibers``).
     """
     parallel = threads > 1
     if hook is no_contact and not parallel:
@@ -644,7 +645,7 @@ def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1
     key = (hook, forces_of, friction_of, parallel)
     loop = _LOOPS.get(key)
     if loop is None:
-        cache = cache_name is not None and not parallel
+        cache = cache_name is not None
         name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
         if cache:
             name += f"_{forces_of.__name__}_{friction_of.__name__}"

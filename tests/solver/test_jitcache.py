@@ -53,8 +53,9 @@ def test_step_loop_specialisations():
     assert bare is not loop and bare.py_func.__name__ != loop.py_func.__name__
 
 
-def test_threaded_loops_are_separate_and_not_cached():
-    """The prange beam pass is only in the solver.threads > 1 variants, which are never cached."""
+def test_threaded_loops_are_separate_and_cached_whole():
+    """The prange beam pass is only in the solver.threads > 1 variants and is never cached on its own;
+    the threaded loop of a built-in hook is cached whole, under its own name."""
     from fiberpipe.solver import _kernels_beam as B
 
     assert type(B.beam_pass_fibers._cache).__name__ == "NullCache"
@@ -62,6 +63,10 @@ def test_threaded_loops_are_separate_and_not_cached():
     assert par is not K.advance_plain and par is K.step_loop_for(K.no_contact, threads=2)
     assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_pass_all
     assert par.py_func.__globals__["_beam_pass"] is B.beam_pass_fibers
+    args = (contact_effect.contact_step, contact_effect.contact_forces_of)
+    loop = K.step_loop_for(*args, threads=2, cache_name="advance_contact", friction_of=contact_effect.contact_friction_of)
+    assert loop is not K.step_loop_for(*args, cache_name="advance_contact", friction_of=contact_effect.contact_friction_of)
+    assert loop._cache._impl is not None and loop.py_func.__name__.endswith("_threads")
 
 
 _PLAIN = """
@@ -85,13 +90,25 @@ print(simulate(m, [Damping(1e5), contact_hook(m)], SimulationSettings(end_time_s
 @pytest.mark.slow
 def test_step_loops_cached_by_different_processes_load_cleanly(tmp_path):
     """Regression: with the prange beam kernel cached and linked into the loops, a loop compiled in
-    a second process crashed (SIGSEGV) when a third loaded it. Plain, contact, contact, plain in
-    four processes sharing one fresh cache directory must all succeed."""
+    a second process crashed (SIGSEGV) when a third loaded it. Plain, contact and the threaded
+    contact loop (cached whole, its parallel kernels never on their own) compiled and loaded in turn
+    by seven processes sharing one fresh cache directory must all succeed."""
     import os
     import subprocess
     import sys
 
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    for name, code in (("plain", _PLAIN), ("contact", _CONTACT), ("contact", _CONTACT), ("plain", _PLAIN)):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_NUM_THREADS": "2"}
+    threaded = _CONTACT.replace("output_frames=2)", "output_frames=2, threads=2)")
+    for name, code in (("plain", _PLAIN), ("contact", _CONTACT), ("threaded", threaded), ("contact", _CONTACT),
+                       ("threaded", threaded), ("plain", _PLAIN), ("threaded", threaded)):
         r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=900)
         assert r.returncode == 0 and r.stdout.strip() == "True", (name, r.returncode, r.stderr[-2000:])
+
+
+def test_package_stamp_covers_the_shared_modules_the_cached_loops_link():
+    """A change of fiberpipe/_prefetch.py or _tasks.py (compiled into the contact pass and its
+    threaded loop) must recompile the cached loops, as one of the solver's own modules does."""
+    import os
+
+    names = {os.path.basename(p) for p in _jitcache._SHARED}
+    assert {"_vectorise.py", "_prefetch.py", "_tasks.py"} <= names
