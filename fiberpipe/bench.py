@@ -169,20 +169,26 @@ def curve_error_binned(ref: dict, other: dict, window_m: float = 0.05e-3) -> flo
     window means and 4.4 % in 0.23 mm ones (docs/benchmarks.md, "Fast settings").
     """
     import numpy as np
-    u_ref, f_ref = ref["U_curve"], ref["F_curve"]
-    u, f = other["U_curve"], other["F_curve"]
-    k = int(np.argmax(u_ref)) + 1
-    kk = int(np.argmax(u)) + 1
-    edges = np.arange(0.0, float(u_ref[k - 1]) + window_m, window_m)
-    mr, mo = [], []
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        a = (u_ref[:k] >= lo) & (u_ref[:k] < hi)
-        b = (u[:kk] >= lo) & (u[:kk] < hi)
-        if a.any() and b.any():
-            mr.append(f_ref[:k][a].mean())
-            mo.append(f[:kk][b].mean())
-    mr, mo = np.asarray(mr), np.asarray(mo)
+    u_ref = ref["U_curve"]
+    edges = np.arange(0.0, float(np.max(u_ref)) + window_m, window_m)
+    mr = window_means(u_ref, ref["F_curve"], edges)
+    mo = window_means(other["U_curve"], other["F_curve"], edges)
+    both = ~(np.isnan(mr) | np.isnan(mo))
+    mr, mo = mr[both], mo[both]
     return float(np.max(np.abs(mo - mr)) / max(np.max(np.abs(mr)), 1e-30))
+
+
+def window_means(U, F, edges):
+    """Mean of F over the samples of the loading branch (up to the largest U) in each window
+    ``[edges[w], edges[w + 1])`` of U; NaN where a window has none."""
+    import numpy as np
+    k = int(np.argmax(U)) + 1
+    out = np.full(len(edges) - 1, np.nan)
+    for w, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        sel = (U[:k] >= lo) & (U[:k] < hi)
+        if sel.any():
+            out[w] = F[:k][sel].mean()
+    return out
 
 
 def _reference_part(reference: Path | None, quick: bool, echo) -> list[str]:

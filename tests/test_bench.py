@@ -86,10 +86,11 @@ def test_fast_ensemble_setting_parses_numbers_and_unit_strings():
 def test_fast_ensemble_error_is_ensemble_mean_against_ensemble_mean(tmp_path):
     import numpy as np
 
-    from fiberpipe.benchmarks.bench_fast_ensemble import report, window_means
+    from fiberpipe.bench import window_means
+    from fiberpipe.benchmarks.bench_fast_ensemble import report
 
     U = np.linspace(0.0, 1e-3, 101)
-    assert np.allclose(window_means(U, 2.0 * U, 0.5e-3, 1e-3), [0.49e-3, 1.49e-3], rtol=0.02)
+    assert np.allclose(window_means(U, 2.0 * U, np.array([0.0, 0.5e-3, 1.0e-3])), [0.49e-3, 1.49e-3], rtol=0.02)
 
     def save(name, F):
         np.savez(tmp_path / f"{name}.npz", U=U, F_cell=F, wall_s=1.0, wall_steady_s=1.0, steps=10, completed=True)

@@ -50,18 +50,6 @@ def parse_setting(text: str) -> tuple[str, dict]:
     return name, overrides
 
 
-def window_means(U: np.ndarray, F: np.ndarray, window_m: float, u_end_m: float) -> np.ndarray:
-    """Mean of F over the samples of the loading branch in each window of U (NaN where empty)."""
-    k = int(np.argmax(U)) + 1
-    edges = np.arange(0.0, u_end_m + 0.5 * window_m, window_m)
-    out = np.full(len(edges) - 1, np.nan)
-    for w, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-        sel = (U[:k] >= lo) & (U[:k] < hi)
-        if sel.any():
-            out[w] = F[:k][sel].mean()
-    return out
-
-
 def run_one(overrides: dict, run: int, path: Path, gravity_step: float = 1e-8) -> None:
     from fiberpipe.artifacts import atomic_path
     from fiberpipe.bench import paper40_run
@@ -75,10 +63,12 @@ def run_one(overrides: dict, run: int, path: Path, gravity_step: float = 1e-8) -
 
 def report(out: Path, names: list[str], window_m: float) -> str:
     """The table: per setting its runs, steps, wall time and error against the first setting."""
+    from fiberpipe.bench import window_means
+
     runs = {n: [np.load(p) for p in sorted(out.glob(f"{n}_[0-9][0-9].npz"))] for n in names}
     u_end = max(float(r["U"].max()) for rs in runs.values() for r in rs)
-    means = {n: np.array([window_means(r["U"], r["F_cell"], window_m, u_end) for r in rs]) for n, rs in runs.items()
-             if rs}
+    edges = np.arange(0.0, u_end + 0.5 * window_m, window_m)
+    means = {n: np.array([window_means(r["U"], r["F_cell"], edges) for r in rs]) for n, rs in runs.items() if rs}
     ref = names[0]
     ref_mean = np.nanmean(means[ref], axis=0)
     scale = np.nanmax(np.abs(ref_mean))

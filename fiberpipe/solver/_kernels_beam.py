@@ -554,7 +554,7 @@ def _beam_pass_nodes(x, q, model, work):
     nch = PARALLEL_CHUNKS
     sums = work.task_sums
     for k in prange(nch):
-        se_k, nl_k = _beam_pass_task(x, q, beams, ef, k * n_el // nch, (k + 1) * n_el // nch)
+        se_k, nl_k = beam_pass_nodes(x, q, beams, ef, k * n_el // nch, (k + 1) * n_el // nch)
         sums[k, 0] = se_k
         sums[k, 1] = nl_k
     se = 0.0
@@ -570,13 +570,12 @@ def _beam_pass_nodes(x, q, model, work):
 # pass takes 70, 67, 78 and 84 µs with 2, 4, 16 and 64 tasks (serial: 110 µs)
 PARALLEL_CHUNKS = 4
 _PARALLEL = False
-# Both copies run without reference counts (``_nrt=False``; the per-task sums go to ``work.task_sums``):
-# numba takes and releases a reference, an atomic count, for each view it makes of the state and of
-# model.beams (≈ 46 a step on paper-40), and in the parallel copy both cores count on the same
-# arrays' records, whose cache lines then travel between them (paper-40's pass on 2 threads: 11.0 µs
-# with the counts, 9.0 without, 12.7 serial)
+# Both copies run without reference counts (``_nrt=False``, inherited by beam_pass_nodes; the per-task
+# sums go to ``work.task_sums``): numba takes and releases a reference, an atomic count, for each view
+# it makes of the state and of model.beams (≈ 46 a step on paper-40), and in the parallel copy both
+# cores count on the same arrays' records, whose cache lines then travel between them (paper-40's
+# pass on 2 threads: 11.0 µs with the counts, 9.0 without, 12.7 serial)
 beam_pass_all = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_beam_pass_nodes)
-_beam_pass_task = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(beam_pass_nodes.py_func)
 # Not cached on its own: a parallel (parfor) kernel loaded from numba's disk cache and linked into a
 # step loop compiled in another process makes that loop's own cache entry crash when it is loaded
 # (numba 0.68; reproduced: cache a prange beam kernel in process 1, compile the contact loop in 2,

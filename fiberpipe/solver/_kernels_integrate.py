@@ -375,7 +375,7 @@ def _update_nodes(model, fixity, state, work, f_ext, fc, ff, dt, coef, alpha):
     nch = PARALLEL_CHUNKS
     sums = work.task_sums
     for k in prange(nch):  # contiguous node ranges (beam_pass_fibers)
-        a, b, c, d, e, g0, g1, nl, v2 = _update_task(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef,
+        a, b, c, d, e, g0, g1, nl, v2 = update_range(model, fixity, state, f, mom, f_ext, ef, hook_f, dt, coef,
                                                      alpha, k * n // nch, (k + 1) * n // nch)
         sums[k, 0] = a
         sums[k, 1] = b
@@ -404,9 +404,8 @@ def _update_nodes(model, fixity, state, work, f_ext, fc, ff, dt, coef, alpha):
 
 _PARALLEL = False
 update_nodes = njit(inline="always", **_FLAGS)(_update_nodes)
-# the parallel copy's tasks without reference counts, as _kernels_beam.beam_pass_fibers's (its comment)
-_update_task = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(update_range.py_func)
-# Not cached on its own, as _kernels_beam.beam_pass_fibers (its comment).
+# Not cached on its own, and without reference counts (update_range inherits it), as
+# _kernels_beam.beam_pass_fibers (its comments).
 update_nodes_fibers = specialise(_update_nodes, "update_nodes_fibers", {"_PARALLEL": True}, cache=False,
                                  fastmath=True, error_model="numpy", parallel=True, _nrt=False)
 

@@ -41,7 +41,6 @@ import numpy as np
 from numba import njit, prange
 
 from .._tasks import task_count
-
 from ._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from .contact_state import PairRecords, PlaneFriction
 from .geometry import apply_pair_force, pair_nodes
@@ -303,7 +302,8 @@ def _friction_task_pass(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step
         sums[task, 2] = r
 
 
-# Not cached, as _kernels_beam.beam_pass_fibers (its comment): only the solver.threads > 1 loops use it
+# Not cached: it links the parallel _friction_task_pass (see _kernels_beam.beam_pass_fibers's comment);
+# only the solver.threads > 1 loops use it
 friction_forces_tasks = njit(cache=False, fastmath=True, error_model="numpy", _nrt=True)(_friction_tasks)
 
 

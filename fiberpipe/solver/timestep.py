@@ -197,7 +197,7 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     An element couples its two nodes only, so ``K`` is block-tridiagonal along each fiber: it is
     assembled column by column from 18 probes (each of the six degrees of freedom of every third node
     at once, :func:`_beam_tangent_banded`), and ω_max² is the top eigenvalue of the symmetric banded
-    ``M^{-1/2} K M^{-1/2}`` (LAPACK ``dsbevx``). With ``extra_forces(x) -> (N, 3)``, further
+    ``M^{-1/2} K M^{-1/2}``, fiber by fiber (``scipy.linalg.eigvals_banded``, LAPACK). With ``extra_forces(x) -> (N, 3)``, further
     position-dependent forces whose tangent is added to K (e.g. the fiber–fiber contact at a state,
     for the measurements of docs/benchmarks.md), which couple any nodes, the operator is applied
     matrix-free to Lanczos vectors instead (``scipy.sparse.linalg.eigsh``, relative tolerance ``tol``).
@@ -227,6 +227,10 @@ def modal_time_step(model: Model, fix_mask: np.ndarray, *, beta_s: float = 0.0, 
     # machines or BLAS builds, and a resumed run must find the checkpoint's step again
     dt_s = _round_down(dt_b * math.sqrt(1.0 - penalty_factor), 6)
     return ModalTimeStep(dt_s, dt_b, om, float(penalty_factor), int(free.sum()), calls)
+
+
+# probes of the banded beam tangent: three colours of nodes × six degrees of freedom
+BANDED_PROBES = 3 * 6
 
 
 def _probe_steps(L: float) -> np.ndarray:
@@ -271,7 +275,7 @@ def _beam_tangent_banded(x0, q0, beams, L: float) -> np.ndarray:
     for o in (1, 2):
         c = np.arange(n - (o - 1))
         rr = c + o - 1
-        kij = K_rows[o, c][:, :, :].transpose(0, 2, 1)   # [c, a, b] = K[6rr + b, 6c + a]
+        kij = K_rows[o, c].transpose(0, 2, 1)             # [c, a, b] = K[6rr + b, 6c + a]
         kji = K_rows[2 - o, rr]                           # [c, a, b] = K[6c + a, 6rr + b]
         d = 6 * (o - 1) + b_idx - a_idx                   # i − j
         keep = d >= 0
@@ -303,7 +307,7 @@ def _top_eigenvalue_banded(x0, q0, beams, L, free, inv_sqrt_m, node_offsets) -> 
             i, j = i[keep], j[keep]
             sub[pos[i - lo] - pos[j - lo], pos[j - lo]] = band[d, j] * inv_sqrt_m[i] * inv_sqrt_m[j]
         lam_max = max(lam_max, float(np.max(eigvals_banded(sub, lower=True))))
-    return lam_max, 18
+    return lam_max, BANDED_PROBES
 
 
 def _top_eigenvalue_lanczos(x0, q0, beams, L, free, inv_sqrt_m, extra_forces, tol) -> tuple[float, int]:
