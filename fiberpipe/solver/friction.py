@@ -254,9 +254,12 @@ def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, la
 
 
 # tasks of the threaded friction (solver.threads > 1): consecutive pairs of the active list, at least
-# this many each (below two tasks' worth the pairs run in one, as in the serial pass)
+# this many each (below two tasks' worth the pairs run in one, as in the serial pass). A pair costs
+# about 65 ns, and below a few hundred pairs the tasks cost more than they save: the second core
+# reads the records and histories the first one wrote. paper-40 (140–250 pairs in contact) took 23
+# instead of 9 µs per step in two tasks of 64 or more pairs each
 FRICTION_TASKS = 8
-FRICTION_TASK_MIN = 64
+FRICTION_TASK_MIN = 256
 
 
 def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out, n_active, step):
