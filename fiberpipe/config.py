@@ -760,6 +760,9 @@ class SpecimenConfig(Section):
     y_tilt_scale: float = Field(1.0, gt=0, description="vertical tilt drawn for the drop, × σ")
     candidates: int = Field(2, ge=1, description="trial drops per fiber, the lowest kept (denser piles)")
     gap: Length = Field(1e-6, description="contact clearance in the pile")
+    strain: Optional[float] = Field(
+        None, gt=0, lt=1, description="nominal compaction strain U/h0 of the ready config: its "
+        "scene.loading.displacement becomes strain × the plate gap (none: the base config's displacement)")
     bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
     waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
     settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)

@@ -173,15 +173,18 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     out.mkdir(parents=True, exist_ok=True)
     write_fibers(out / "fibers.h5", fibers)
     write_text_atomic(out / "specimen.json", json.dumps(info, indent=2) + "\n")
-    write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, sp.width, where))
+    write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, sp.width, where, strain=sp.strain))
     if settle:
         info["settle_wall_time_s"] = settle["wall_time_s"]
     return info
 
 
-def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, where: str) -> str:
+def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, where: str,
+                      strain: float | None = None) -> str:
     """``raw`` without its specimen section, its input the specimen (``fibers.h5`` next to it), its
-    plates at 0 and ``height_m`` and its x walls at ±``width_m``/2; paths relative to ``out``."""
+    plates at 0 and ``height_m`` and its x walls at ±``width_m``/2; paths relative to ``out``.
+    ``strain``: the loading's displacement set to ``strain × height_m`` (the specimen compacted by
+    the same nominal strain U/h0 as another of a different height)."""
     ready = copy.deepcopy(raw)
     ready.pop("specimen", None)
     source = (ready.get("input") or {}).get("fibers")
@@ -198,8 +201,13 @@ def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, whe
         sc["plates"] = {**sc["plates"], "lower_position": 0.0, "upper_position": float(height_m)}
     if isinstance(sc.get("walls"), dict) or "walls" in sc.get("effects", []):
         sc["walls"] = {**(sc.get("walls") or {}), "x": [-width_m / 2, width_m / 2]}
+    loading = ""
+    if strain is not None:
+        sc["loading"] = {**(sc.get("loading") or {}), "displacement": float(strain * height_m)}
+        loading = f" loading U = {strain:.6g} × the gap = {strain * height_m * 1e3:.6g} mm."
     head = (f"# Made by `fiberpipe specimen` from {where}: the specimen in fibers.h5 (specimen.json: its\n"
-            f"# box, generator settings and statistics); plate gap {height_m * 1e3:.6g} mm, cassette {width_m * 1e3:.6g} mm.\n")
+            f"# box, generator settings and statistics); plate gap {height_m * 1e3:.6g} mm, cassette {width_m * 1e3:.6g} mm."
+            f"{loading}\n")
     return head + yaml.safe_dump(ready, sort_keys=False, default_flow_style=None, width=110)
 
 

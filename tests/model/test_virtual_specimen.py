@@ -165,3 +165,14 @@ def test_a_400_fiber_specimen_builds(tmp_path):
     # settled with gravity × 100 (and mass × 100): contacts and plates pressed a few tenths of a µm
     assert info["statistics"]["min_gap_m"] >= -1e-6 and info["statistics"]["max_outside_m"] <= 0.1e-6
     assert info["settle"]["kinetic_energy_end_J"] < 0.05 * info["settle"]["kinetic_energy_max_J"]
+
+
+def test_specimen_strain_sets_the_loading_to_that_strain_of_its_plate_gap(tmp_path):
+    """``specimen.strain``: the ready config compacts the specimen by U = strain × its plate gap (a
+    specimen of another height at the base config's nominal strain U/h0); without it, the base's U."""
+    _, info = _build(tmp_path, "strain", n_fibers=6, width="1.5 mm", volume_fraction=0.3, strain=0.175)
+    cfg = load_config(tmp_path / "strain" / "config.yaml")
+    assert cfg.scene.loading.displacement == pytest.approx(0.175 * info["height_m"], rel=1e-12)
+    assert cfg.scene.plates.upper_position == pytest.approx(info["height_m"])
+    _build(tmp_path, "base", n_fibers=6, width="1.5 mm", volume_fraction=0.3)
+    assert load_config(tmp_path / "base" / "config.yaml").scene.loading.displacement == pytest.approx(1.15e-3)
