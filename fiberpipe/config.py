@@ -651,7 +651,7 @@ class SolverConfig(Section):
     threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (4 prange tasks "
                          "of contiguous nodes) and for the potential contact pass's pairs (up to 8 tasks once 64 pairs are "
                          "within reach; the same forces bit for bit) and the fiber–fiber friction's pairs (up to 8 tasks of at "
-                         "least 64 pairs in contact; the same forces bit for bit); the legacy contact pass and the plane "
+                         "least 256 pairs in contact, once 512 are; the same forces bit for bit); the legacy contact pass and the plane "
                          "friction stay serial; "
                          "> 1 uses a step loop of its own (with the built-in contact: compiled once and cached, ≈ 1 min); "
                          "pays on an idle machine with a core per thread (docs/benchmarks.md)")
