@@ -20,7 +20,7 @@ from fiberpipe.post.energies import contact_energy_created_figures, energy_balan
 from fiberpipe.post.geometry import fiber_volume_m3, projected_curvature, volume_fraction
 from fiberpipe.post.phases import compaction_phases, describe
 from fiberpipe.post.history import load_simulation
-from fiberpipe.post.positions import position_error
+from fiberpipe.post.positions import ReferenceMidlines, position_error
 from fiberpipe.post.tables import write_csv  # noqa: F401  (the post stage's CSV writer)
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -144,8 +144,9 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
     ref = None
     if cfg.post.reference_fibers:
         ref = read_fibers(cfg.post.reference_fibers)
+        ref_lines = ReferenceMidlines(ref.points_m, ref.offsets)  # densified once for every frame
         geo["position_error_m"] = np.array(
-            [position_error(frames[k], mesh.node_offsets, ref.points_m, ref.offsets)["mean_m"] for k in range(len(ft))]
+            [position_error(frames[k], mesh.node_offsets, reference=ref_lines)["mean_m"] for k in range(len(ft))]
         )
     confined = has_plates or bool(walls)
     if not confined:  # without plates or walls there is no box, hence no volume fraction
