@@ -107,8 +107,8 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
         rows, cols = linear_sum_assignment(finite)
         if exact[rows, cols].all():
             break
-        # the thresholds double, and each pair the assignment took at its bound enters the next
-        # round (so the rounds end: every round computes at least one more pair)
+        # the thresholds double, and each pair the assignment took at its bound is computed next
+        # (so the loop ends: every pass computes at least one more pair)
         threshold = 2.0 * threshold
         took = ~exact[rows, cols]
         threshold[rows[took]] = np.maximum(threshold[rows[took]], bound[rows[took], cols[took]])

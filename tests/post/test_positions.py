@@ -49,7 +49,7 @@ def test_matching_equals_the_full_cost_matrix_on_a_shifted_shuffled_bundle():
 
 def test_matching_takes_far_reference_lines_when_the_near_ones_are_taken():
     # ten simulated fibers crowd around the first three of ten reference lines in a row: seven
-    # of them must be matched to lines beyond their four nearest boxes, found in later rounds
+    # of them must be matched to lines beyond their four nearest boxes, computed once the assignment asks
     rng = np.random.default_rng(5)
     ref_points, ref_offsets = _wavy_bundle([(1e-3 * i, 0.0) for i in range(10)], rng)
     sim_points, sim_offsets = _wavy_bundle([(0.2e-3 * i, 0.1e-3) for i in range(10)], rng)
