@@ -7,15 +7,19 @@ import math
 import numpy as np
 from numba import njit
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial import cKDTree
 
 from fiberpipe.polylines import resample_arclength
 
 
+# densified points per block of a reference line (the nearest-point search's unit, see _nearest)
+_BLOCK = 16
+
+
 class ReferenceMidlines:
     """Reference mid-lines prepared once for :func:`position_error`: each polyline densified (step:
-    a tenth of the median segment length unless given), with a k-d tree and a bounding box of its
-    points. Build it once when several frames are compared with the same reference."""
+    a tenth of the median segment length unless given), its points in blocks of ``_BLOCK``
+    consecutive ones with their bounding boxes, and the bounding box of each line. Build it once
+    when several frames are compared with the same reference."""
 
     def __init__(self, ref_points, ref_offsets, *, step_m: float | None = None):
         ref_points = np.asarray(ref_points, float)
@@ -26,12 +30,89 @@ class ReferenceMidlines:
         self.step_m = float(step_m)
         dense = [resample_arclength(ref_points[ref_offsets[j] : ref_offsets[j + 1]], step_m)
                  for j in range(len(ref_offsets) - 1)]
-        self.trees = [cKDTree(d) for d in dense]
-        self.lo = np.array([d.min(axis=0) for d in dense]).reshape(-1, 3)
-        self.hi = np.array([d.max(axis=0) for d in dense]).reshape(-1, 3)
+        self.points = np.ascontiguousarray(np.concatenate(dense) if dense else np.zeros((0, 3)))
+        counts = np.array([len(d) for d in dense], np.int64)
+        self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        # blocks: each line's points cut every _BLOCK from its start, with their bounding boxes
+        starts = [np.arange(self.offsets[j], self.offsets[j + 1], _BLOCK, dtype=np.int64) for j in range(len(dense))]
+        self.block_offsets = np.concatenate([[0], np.cumsum([len(b) for b in starts])]).astype(np.int64)
+        self.block_start = np.concatenate(starts) if starts else np.zeros(0, np.int64)
+        self.block_end = np.append(self.block_start[1:], len(self.points)).astype(np.int64)
+        self.block_lo, self.block_hi, self.lo, self.hi = (np.zeros((0, 3)),) * 4
+        if len(self.points):
+            self.block_lo = np.minimum.reduceat(self.points, self.block_start, axis=0)
+            self.block_hi = np.maximum.reduceat(self.points, self.block_start, axis=0)
+            self.lo = np.minimum.reduceat(self.points, self.offsets[:-1], axis=0)
+            self.hi = np.maximum.reduceat(self.points, self.offsets[:-1], axis=0)
 
     def __len__(self) -> int:
-        return len(self.trees)
+        return len(self.offsets) - 1
+
+    def distances(self, points, j: int) -> np.ndarray:
+        """Distance [m] of each of ``points`` to the nearest densified point of reference line j."""
+        points = np.ascontiguousarray(points, dtype=float)
+        out = np.empty(len(points))
+        _distances_to_line(points, j, self.points, self.block_start, self.block_end, self.block_offsets,
+                           self.block_lo, self.block_hi, out)
+        return out
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _box_distance2(p0, p1, p2, lo, hi, b):
+    """Squared distance of a point to box ``b`` of ``lo``, ``hi`` (0 inside)."""
+    g0 = max(lo[b, 0] - p0, p0 - hi[b, 0], 0.0)
+    g1 = max(lo[b, 1] - p1, p1 - hi[b, 1], 0.0)
+    g2 = max(lo[b, 2] - p2, p2 - hi[b, 2], 0.0)
+    return g0 * g0 + g1 * g1 + g2 * g2
+
+
+@njit(cache=True, error_model="numpy")
+def _nearest(p0, p1, p2, j, pts, b_start, b_end, b_off, b_lo, b_hi):
+    """Distance of the point to the nearest densified point of line j, exactly: its blocks' boxes
+    bound each block's points from below, so a block whose box is not nearer than the best point
+    found so far is skipped; the search starts from the block with the nearest box."""
+    first = b_off[j]
+    best_b = first
+    best_box = np.inf
+    for b in range(first, b_off[j + 1]):
+        d2 = _box_distance2(p0, p1, p2, b_lo, b_hi, b)
+        if d2 < best_box:
+            best_box = d2
+            best_b = b
+    best = np.inf
+    for q in range(b_start[best_b], b_end[best_b]):
+        d0 = pts[q, 0] - p0
+        d1 = pts[q, 1] - p1
+        d2 = pts[q, 2] - p2
+        best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+    for b in range(first, b_off[j + 1]):
+        if b == best_b or _box_distance2(p0, p1, p2, b_lo, b_hi, b) >= best:
+            continue
+        for q in range(b_start[b], b_end[b]):
+            d0 = pts[q, 0] - p0
+            d1 = pts[q, 1] - p1
+            d2 = pts[q, 2] - p2
+            best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+    return math.sqrt(best)
+
+
+@njit(cache=True, error_model="numpy")
+def _distances_to_line(points, j, pts, b_start, b_end, b_off, b_lo, b_hi, out):
+    for q in range(points.shape[0]):
+        out[q] = _nearest(points[q, 0], points[q, 1], points[q, 2], j, pts, b_start, b_end, b_off, b_lo, b_hi)
+
+
+@njit(cache=True, error_model="numpy")
+def _mean_distances(sim_points, sim_offsets, rows, cols, pts, b_start, b_end, b_off, b_lo, b_hi, cost):
+    """``cost[rows[k], cols[k]]``: the mean distance of simulated fiber rows[k]'s nodes to the
+    nearest densified points of reference line cols[k]."""
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        acc = 0.0
+        for q in range(sim_offsets[i], sim_offsets[i + 1]):
+            acc += _nearest(sim_points[q, 0], sim_points[q, 1], sim_points[q, 2], cols[k], pts, b_start, b_end,
+                            b_off, b_lo, b_hi)
+        cost[i, cols[k]] = acc / max(sim_offsets[i + 1] - sim_offsets[i], 1)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -46,25 +127,17 @@ def _mean_box_distance(points, offsets, lo, hi):
         for b in range(lo.shape[0]):
             acc = 0.0
             for q in range(offsets[i], offsets[i + 1]):
-                g2 = 0.0
-                for c in range(3):
-                    g = max(lo[b, c] - points[q, c], points[q, c] - hi[b, c], 0.0)
-                    g2 += g * g
-                acc += math.sqrt(g2)
+                acc += math.sqrt(_box_distance2(points[q, 0], points[q, 1], points[q, 2], lo, hi, b))
             out[i, b] = acc / max(n, 1)
     return out
 
 
-def _fill_costs(cost, todo, sim_points, fiber_of_node, n_nodes, ref):
-    """The mean distances ``cost[i, j]`` of simulated fiber i's nodes to reference j's points, for
-    the pairs ``todo`` (bool (F_sim, F_ref)): one tree query per reference line over the nodes of
-    every simulated fiber it is asked for."""
-    for j in np.nonzero(todo.any(axis=0))[0]:
-        take = todo[fiber_of_node, j]
-        d = ref.trees[j].query(sim_points[take])[0]
-        sums = np.bincount(fiber_of_node[take], weights=d, minlength=len(n_nodes))
-        rows = np.nonzero(todo[:, j])[0]
-        cost[rows, j] = sums[rows] / n_nodes[rows]
+def _fill_costs(cost, todo, sim_points, sim_offsets, ref):
+    """The mean distances ``cost[i, j]`` of simulated fiber i's nodes to reference line j's
+    densified points, for the pairs ``todo`` (bool (F_sim, F_ref))."""
+    rows, cols = np.nonzero(todo)
+    _mean_distances(sim_points, sim_offsets, rows.astype(np.int64), cols.astype(np.int64), ref.points,
+                    ref.block_start, ref.block_end, ref.block_offsets, ref.block_lo, ref.block_hi, cost)
 
 
 def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *, step_m: float | None = None,
@@ -72,14 +145,14 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
     """Mean distance from each simulated mid-line to its reference mid-line, m.
 
     # Strategy: the reference polylines densified (step = a tenth of the median segment length) in
-    # one k-d tree each (:class:`ReferenceMidlines`, or ``reference`` prepared once); fibers are
+    # blocks of points (:class:`ReferenceMidlines`, or ``reference`` prepared once); fibers are
     # matched one to one by the Hungarian method on the mean distance of a fiber's nodes to a
     # reference line. The mean distance of the nodes to a reference line's bounding box bounds that
     # mean from below, so the means are computed only for each fiber's pairs below a threshold (at
     # first its four nearest boxes), the others enter the assignment at their bound; while the
     # assignment takes a pair at its bound, the thresholds double and it is solved again. The pairs
     # it keeps are then exact and no other assignment costs less, since every cost is at least its
-    # bound: the assignment of the full cost matrix, at a fraction of its k-d tree queries.
+    # bound: the assignment of the full cost matrix, at a fraction of its cost.
 
     Returns
     -------
@@ -91,9 +164,8 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
     sim_points = np.asarray(sim_points, float)
     sim_offsets = np.asarray(sim_offsets)
     n_sim, n_ref = len(sim_offsets) - 1, len(ref)
-    n_nodes = np.diff(sim_offsets)
-    fiber_of_node = np.repeat(np.arange(n_sim), n_nodes)
-    bound = _mean_box_distance(sim_points, sim_offsets.astype(np.int64), ref.lo, ref.hi)
+    sim_offsets = sim_offsets.astype(np.int64)
+    bound = _mean_box_distance(sim_points, sim_offsets, ref.lo, ref.hi)
     cost = bound.copy()
     exact = np.zeros(bound.shape, bool)
     # first thresholds: each simulated fiber's 4 nearest reference boxes
@@ -101,7 +173,7 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
     threshold = np.partition(bound, k, axis=1)[:, k] if n_sim and n_ref else np.zeros(n_sim)
     while True:
         todo = (bound <= threshold[:, None]) & ~exact
-        _fill_costs(cost, todo, sim_points, fiber_of_node, n_nodes, ref)
+        _fill_costs(cost, todo, sim_points, sim_offsets, ref)
         exact |= todo
         finite = np.where(np.isfinite(cost), cost, 1e9)
         rows, cols = linear_sum_assignment(finite)
@@ -118,7 +190,7 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
     for r, c in zip(rows, cols):
         per[r] = cost[r, c]
         if np.isfinite(cost[r, c]):
-            d = ref.trees[c].query(sim_points[sim_offsets[r] : sim_offsets[r + 1]])[0]
+            d = ref.distances(sim_points[sim_offsets[r] : sim_offsets[r + 1]], c)
             per95[r] = float(np.percentile(d, 95))
             nodes.append(d)
     ok = np.isfinite(per)

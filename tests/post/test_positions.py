@@ -70,3 +70,16 @@ def test_a_prepared_reference_gives_the_same_result_as_the_raw_polylines():
     assert a["matched"] == b["matched"] == [(i, i) for i in range(6)]
     assert a["mean_m"] == b["mean_m"] and a["p95_m"] == b["p95_m"]
     np.testing.assert_allclose(a["mean_m"], 0.1e-3, rtol=0.02)
+
+
+def test_distances_to_a_line_equal_the_nearest_densified_point_by_brute_force():
+    # a curled line (it turns back on itself, so a block far along the line can hold the nearest
+    # point) and points all around it
+    rng = np.random.default_rng(11)
+    s = np.linspace(0.0, 3 * np.pi, 40)
+    line = np.column_stack([np.cos(s), np.sin(s), 0.05 * s]) * 1e-3
+    ref = ReferenceMidlines(line, np.array([0, len(line)]))
+    dense = resample_arclength(line, ref.step_m)
+    queries = rng.uniform(-1.5e-3, 1.5e-3, (500, 3))
+    brute = np.sqrt(((queries[:, None, :] - dense[None]) ** 2).sum(axis=2)).min(axis=1)
+    np.testing.assert_allclose(ref.distances(queries, 0), brute, rtol=1e-14, atol=0.0)
