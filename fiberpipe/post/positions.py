@@ -66,6 +66,17 @@ def _box_distance2(p0, p1, p2, lo, hi, b):
     return g0 * g0 + g1 * g1 + g2 * g2
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _block_min2(p0, p1, p2, pts, a, e, best):
+    """The smaller of ``best`` and the squared distances of the point to ``pts[a:e]``."""
+    for q in range(a, e):
+        d0 = pts[q, 0] - p0
+        d1 = pts[q, 1] - p1
+        d2 = pts[q, 2] - p2
+        best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+    return best
+
+
 @njit(cache=True, error_model="numpy")
 def _nearest(p0, p1, p2, j, pts, b_start, b_end, b_off, b_lo, b_hi):
     """Distance of the point to the nearest densified point of line j, exactly: its blocks' boxes
@@ -79,20 +90,10 @@ def _nearest(p0, p1, p2, j, pts, b_start, b_end, b_off, b_lo, b_hi):
         if d2 < best_box:
             best_box = d2
             best_b = b
-    best = np.inf
-    for q in range(b_start[best_b], b_end[best_b]):
-        d0 = pts[q, 0] - p0
-        d1 = pts[q, 1] - p1
-        d2 = pts[q, 2] - p2
-        best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+    best = _block_min2(p0, p1, p2, pts, b_start[best_b], b_end[best_b], np.inf)
     for b in range(first, b_off[j + 1]):
-        if b == best_b or _box_distance2(p0, p1, p2, b_lo, b_hi, b) >= best:
-            continue
-        for q in range(b_start[b], b_end[b]):
-            d0 = pts[q, 0] - p0
-            d1 = pts[q, 1] - p1
-            d2 = pts[q, 2] - p2
-            best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+        if b != best_b and _box_distance2(p0, p1, p2, b_lo, b_hi, b) < best:
+            best = _block_min2(p0, p1, p2, pts, b_start[b], b_end[b], best)
     return math.sqrt(best)
 
 
@@ -162,9 +163,8 @@ def position_error(sim_points, sim_offsets, ref_points=None, ref_offsets=None, *
     """
     ref = reference if reference is not None else ReferenceMidlines(ref_points, ref_offsets, step_m=step_m)
     sim_points = np.asarray(sim_points, float)
-    sim_offsets = np.asarray(sim_offsets)
+    sim_offsets = np.asarray(sim_offsets, dtype=np.int64)
     n_sim, n_ref = len(sim_offsets) - 1, len(ref)
-    sim_offsets = sim_offsets.astype(np.int64)
     bound = _mean_box_distance(sim_points, sim_offsets, ref.lo, ref.hi)
     cost = bound.copy()
     exact = np.zeros(bound.shape, bool)
