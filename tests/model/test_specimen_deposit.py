@@ -120,3 +120,41 @@ def test_shipped_paper40_rests_under_gravity():
                       {"solver.settle_time": "5 ms", "scene.damping.alpha": "300 1/s"})
     mesh = mesh_polylines(read_fibers(SAMPLE / "fibers.h5"), cfg.mesh.element_length, radius_m=cfg.fiber.radius)
     assert settle_under_gravity(mesh, cfg)["max_displacement_m"] < 0.1 * R
+
+
+def _pair_geometry_numpy(x, y, X, Y, z, need, reach=2):
+    """The deposit's pair geometry written with numpy's vectorised segment distances (the reference
+    for the jitted loop: the same operations, so the same numbers to the bit)."""
+    m, ns = len(X), len(z) - 1
+    p = np.stack([x, y, z], axis=1)
+    q = np.stack([X, Y, np.broadcast_to(z, X.shape)], axis=2)
+    i = np.repeat(np.arange(ns), 2 * reach + 1)
+    kk = i + np.tile(np.arange(-reach, reach + 1), ns)
+    ok = (kk >= 0) & (kk < ns)
+    i, kk = i[ok], kk[ok]
+    a0, a1 = p[i][None], p[i + 1][None]
+    b0, b1 = q[:, kk], q[:, kk + 1]
+    d, s, t = segment_distances(a0, a1, b0, b1)
+    pa = a0 + s[..., None] * (a1 - a0)
+    pb = b0 + t[..., None] * (b1 - b0)
+    nvec = (pa - pb) / np.maximum(d, 1e-300)[..., None]
+    return (d - need).ravel(), nvec.reshape(-1, 3), pa[..., 2].ravel(), np.repeat(np.arange(m), len(i))
+
+
+def test_pair_geometry_equals_numpy_segment_distances_to_the_bit():
+    from fiberpipe.model.specimen import _pair_geometry
+
+    rng = np.random.default_rng(3)
+    z = np.linspace(0.0, 15e-3, 31)
+    for trial in range(40):
+        m = int(rng.integers(1, 12))
+        x = np.cumsum(rng.normal(0, 1e-5, z.size)) + rng.normal(0, 1e-3)
+        y = np.cumsum(rng.normal(0, 1e-5, z.size))
+        X = np.cumsum(rng.normal(0, 1e-5, (m, z.size)), axis=1) + rng.normal(0, 1e-3, (m, 1))
+        Y = np.cumsum(rng.normal(0, 1e-5, (m, z.size)), axis=1)
+        if trial % 4 == 0:  # a parallel neighbour: segments' closest points at their ends (clamped)
+            X[0], Y[0] = x, y + 2 * R + GAP
+        got = _pair_geometry(x, y, X, Y, z, 2 * R + GAP)
+        want = _pair_geometry_numpy(x, y, X, Y, z, 2 * R + GAP)
+        for g, w in zip(got, want):
+            assert np.array_equal(g, w)
