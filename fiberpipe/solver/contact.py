@@ -278,34 +278,27 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def write_record(fn, normal, s, t, phi_k, delta, share, fsum, k, rec, phi, use_share):
-    """Pair ``k``'s records (the arrays of :class:`~fiberpipe.solver.contact_state.PairRecords`) from
-    its accumulator ``rec`` (Σ|f| > 0, Σf, Σ|f|·s, Σ|f|·t, max δ, share) and crossing angle ``phi``."""
-    fsum_k = rec[0]
-    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-    fn[k] = fv
-    if fv > 0.0:
-        normal[k, 0] = rec[1] / fv
-        normal[k, 1] = rec[2] / fv
-        normal[k, 2] = rec[3] / fv
-    s[k] = rec[4] / fsum_k
-    t[k] = rec[5] / fsum_k
-    phi_k[k] = phi
-    delta[k] = rec[6]
-    if use_share:
-        share[k] = rec[7]
-        fsum[k] = fsum_k
-
-
-@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def record_pair(out, k, rec, phi, n_active, use_list, use_share):
     """The pair's records in ``out`` (:class:`~fiberpipe.solver.contact_state.PairRecords`) from its
     accumulator ``rec`` (Σ|f|, Σf, Σ|f|·s, Σ|f|·t, max δ, share); returns the count of pairs in contact."""
-    if not rec[0] > 0.0:
+    fsum = rec[0]
+    if not fsum > 0.0:
         return n_active
     if use_list:
         out.active[n_active] = k
-    write_record(out.fn, out.normal, out.s, out.t, out.phi, out.delta, out.share, out.fsum, k, rec, phi, use_share)
+    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
+    out.fn[k] = fv
+    if fv > 0.0:
+        out.normal[k, 0] = rec[1] / fv
+        out.normal[k, 1] = rec[2] / fv
+        out.normal[k, 2] = rec[3] / fv
+    out.s[k] = rec[4] / fsum
+    out.t[k] = rec[5] / fsum
+    out.phi[k] = phi
+    out.delta[k] = rec[6]
+    if use_share:
+        out.share[k] = rec[7]
+        out.fsum[k] = fsum
     return n_active + 1
 
 

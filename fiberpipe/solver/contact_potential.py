@@ -43,7 +43,7 @@ from numba import njit, prange
 from .._prefetch import prefetch_row
 from .._tasks import task_count
 from ._specialise import specialise
-from .contact import record_pair, write_record
+from .contact import record_pair
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
@@ -680,8 +680,6 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
         _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
                         (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach), rows,
                         (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))
-    if n_look >= MERGE_TASK_MIN:
-        return _merge_rows_split(f_out, seg_nodes, pairs, out, rows, n_look)
     return _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look)
 
 
@@ -703,88 +701,6 @@ def _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look):
         n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, kk, int(rows[kk, _R_OUTCOME]), n_active, use_list,
                                use_share)
         energy += rows[kk, _R_ENERGY]
-    return energy, n_active
-
-
-# look lists from this long on, the threaded pass merges its rows in two parallel parts (below); a
-# shorter merge costs less than the parallel region's start (1.5–2.4 µs) saves
-MERGE_TASK_MIN = 1024
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _merge_forces_range(f_out, seg_nodes, pairs, look, compact, rows, n_look, lo, hi):
-    """The force blocks of the result rows onto the nodes ``lo`` … ``hi − 1`` of ``f_out``, in pair
-    order (the rows of :func:`_merge_pair`, the far nodes' rows only where the joint share acted)."""
-    for kk in range(n_look):
-        if rows[kk, _R_OUTCOME] != _TOUCHING:
-            continue
-        k = look[kk] if compact else kk
-        i = pairs[k, 0]
-        j = pairs[k, 1]
-        for q, n in enumerate((seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1])):
-            if lo <= n < hi:
-                for c in range(3):
-                    f_out[n, c] += rows[kk, _R_BLOCK + 3 * q + c]
-        if rows[kk, _R_FAR] == 0.0:
-            continue
-        for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
-                               _next_node(seg_nodes, j))):
-            if n >= 0 and lo <= n < hi:
-                for c in range(3):
-                    f_out[n, c] += rows[kk, _R_BLOCK + 12 + 3 * q + c]
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _merge_records_range(records, look, compact, rows, lo, hi, use_share, use_gap):
-    """The records of the look list's entries ``lo`` … ``hi − 1`` from their result rows (as
-    :func:`_merge_pair`: fn reset, a new skip threshold, the records of a pair in contact);
-    ``records``: the arrays of :class:`~fiberpipe.solver.contact_state.PairRecords` but ``active``."""
-    fn, normal, s, t, phi, delta, share, fsum, gap = records
-    for kk in range(lo, hi):
-        k = look[kk] if compact else kk
-        outcome = rows[kk, _R_OUTCOME]
-        fn[k] = 0.0
-        if outcome == _APART:
-            if use_gap:
-                gap[k] = rows[kk, _R_GAP]
-        elif outcome == _TOUCHING and rows[kk, _R_REC] > 0.0:
-            write_record(fn, normal, s, t, phi, delta, share, fsum, k, rows[kk, _R_REC:_R_REC + 8], rows[kk, _R_PHI],
-                         use_share)
-
-
-def _merge_rows_split(f_out, seg_nodes, pairs, out, rows, n_look):
-    """:func:`_merge_rows` in four ``prange`` tasks: the forces in two node ranges (each adds, in pair
-    order, the rows' blocks onto its half of the nodes: the serial merge's sums, bit for bit) and the
-    records in two ranges of the look list (each pair's own entries); then, in order, the list of
-    pairs in contact and the energy. Returns ``(energy, n_active)``."""
-    # Strategy: the serial merge's cost is its scattered writes (four to eight node rows and eight
-    # record arrays per pair in contact); split by node and by pair, no two parts write one entry.
-    # The force part with the lower nodes runs on the thread that updates them (numba hands the
-    # first thread the first tasks, as the node update's).
-    look = out.active
-    compact = _compact_look(out)
-    use_list = out.active.shape[0] > 0
-    use_share = out.share.shape[0] > 0
-    use_gap = out.gap.shape[0] > 0
-    # a parallel loop takes a tuple built in this function, not a structure passed in (numba 0.68)
-    records = (out.fn, out.normal, out.s, out.t, out.phi, out.delta, out.share, out.fsum, out.gap)
-    n_nodes = f_out.shape[0]
-    for task in prange(4):
-        half = task // 2
-        if task % 2 == 0:
-            _merge_forces_range(f_out, seg_nodes, pairs, look, compact, rows, n_look, half * n_nodes // 2,
-                                (half + 1) * n_nodes // 2)
-        else:
-            _merge_records_range(records, look, compact, rows, half * n_look // 2, (half + 1) * n_look // 2,
-                                 use_share, use_gap)
-    energy = 0.0
-    n_active = 0
-    for kk in range(n_look):  # each pair in contact is listed at a slot the loop has already read
-        energy += rows[kk, _R_ENERGY]
-        if rows[kk, _R_OUTCOME] == _TOUCHING and rows[kk, _R_REC] > 0.0:
-            if use_list:
-                look[n_active] = look[kk] if compact else kk
-            n_active += 1
     return energy, n_active
 
 
@@ -832,8 +748,6 @@ _THREADS = False
 # law's own functions, sets ``_nrt=True``.
 _pairs_range_of = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_pairs_range)
 _pairs_serial = njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)(_pairs_pass)
-# Not cached, as _pairs_tasks below: the threaded pass's merge of long look lists.
-_merge_rows_split = njit(cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=False)(_merge_rows_split)
 # Not cached (a parfor kernel linked into a step loop compiled in another process: see
 # _kernels_beam.beam_pass_fibers); only the solver.threads > 1 loops use it. Its tasks' pairs run
 # in the rows variant of _pairs_range, without reference counts as in the serial pass.
