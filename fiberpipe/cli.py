@@ -392,7 +392,7 @@ def specimen(config, out, seed, sets):
     created = not out.exists()
     ensure_output_dir(out)
     try:
-        run_specimen_command(config, out, seed=seed, overrides=overrides, echo=click.echo)
+        run_specimen_command(config, out, seed=seed, overrides=overrides, echo=click.echo, progress=_progress())
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a refused specimen leaves no empty folder behind

@@ -41,6 +41,7 @@ def cassette_specimen(
     wave_modes: int = 2,
     bow_plane: str = "random",
     curvatures_per_m=None,
+    progress=None,
 ) -> tuple[Polylines, dict]:
     """Quasi-parallel fibers along z in a box of ``width_m`` (x) × height (y) × ``length_m`` (z).
 
@@ -80,7 +81,8 @@ def cassette_specimen(
     360°, :func:`_bow_planes`), ``"flat"`` (horizontal, x-z: the fiber lies on its bow) or
     ``"upright"`` (vertical, y-z); the same draws are made for each, so the other draws stay the
     same. ``curvatures_per_m`` (one per fiber) replaces ``curvature_per_m`` fiber by fiber (a
-    spool radius distribution).
+    spool radius distribution). ``progress`` (``placement="deposit"`` only): called as
+    ``progress(fibers placed, n_fibers)`` after each fiber comes to rest.
 
     Returns
     -------
@@ -101,7 +103,7 @@ def cassette_specimen(
             z=np.linspace(0.0, length_m, points_per_fiber), gap_m=gap_m, y_tilt_scale=y_tilt_scale, top=top,
             settle=settle, slide_cost=slide_cost, candidates=candidates,
             wave=(wave_curvature_per_m, wave_lengths_m, wave_modes), bow_plane=bow_plane,
-            curvatures_per_m=curvatures_per_m,
+            curvatures_per_m=curvatures_per_m, progress=progress,
         )
     rows = int(np.ceil(n_fibers / columns))
     px, py = width_m / columns, height / rows
@@ -319,7 +321,7 @@ def _relax_rigid(ends, bows, z, lo, hi, min_distance, *, max_iterations, coarse=
 
 def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad, curvature_per_m,
                       z, gap_m, y_tilt_scale, top="plate", settle="slide", slide_cost=1e-3, candidates=1,
-                      wave=(0.0, None, 0), bow_plane="random", curvatures_per_m=None):
+                      wave=(0.0, None, 0), bow_plane="random", curvatures_per_m=None, progress=None):
     """``placement="deposit"`` of :func:`cassette_specimen`: a gravity-deposited loose pile.
 
     # Strategy: random sequential deposition of rigid fibers, each the smooth arc of the
@@ -373,6 +375,8 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
                 best = (xk, yk, contact)
         X[k], Y[k], contact = best
         supports.append(contact)
+        if progress is not None:
+            progress(k + 1, n)
     pts = np.stack([X, Y, np.broadcast_to(z, X.shape)], axis=2)
     top_m = float((Y + r).max())
     if top == "pile":

@@ -19,6 +19,7 @@ import copy
 import json
 import math
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -83,12 +84,16 @@ def fiber_curvatures(sp, seed: int):
     return 1.0 / rr, float(np.mean(1.0 / rr))
 
 
-def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print) -> dict:
-    """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict."""
+def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print,
+                   progress: bool = False) -> dict:
+    """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict.
+    ``progress``: bars for the deposit and the settling on a terminal
+    (:func:`fiberpipe.progress.terminal_bar`)."""
     from fiberpipe.artifacts import write_fibers, write_text_atomic
     from fiberpipe.model.specimen import cassette_specimen
     from fiberpipe.model.specimen_settle import fiber_contacts, settle_pile
     from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
+    from fiberpipe.progress import terminal_bar
 
     cfg, sp = specimen_config(raw, where)
     seed = sp.seed if seed is None else int(seed)
@@ -105,22 +110,33 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     if sp.waviness.curvature_per_m > 0:
         params.update(wave_curvature_per_m=sp.waviness.curvature_per_m,
                       wave_lengths_m=tuple(sp.waviness.wavelengths), wave_modes=sp.waviness.modes)
+    t0 = time.perf_counter()
+    bar = terminal_bar("deposit") if progress else None
     try:
-        fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures)
+        fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures, progress=bar)
     except ValueError as exc:
         if "does not fit the cassette" in str(exc):
             raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
                               f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
                               where=where) from None
         raise
+    finally:
+        if bar is not None:
+            bar.close()
     deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
+    deposit["wall_time_s"] = time.perf_counter() - t0
     settle = None
     if sp.settle.enabled:
         st = sp.settle
-        fibers, settle = settle_pile(
-            fibers, raw, width_m=sp.width, alpha_per_s=st.damping_alpha, time_s=st.time, mu=st.mu,
-            lock=None if st.lock_axial == "none" else st.lock_axial, frames=st.frames,
-            mass_scaling=st.mass_scaling, gravity_scale=st.gravity_scale, where=where)
+        bar = terminal_bar("settle") if progress else None
+        try:
+            fibers, settle = settle_pile(
+                fibers, raw, width_m=sp.width, alpha_per_s=st.damping_alpha, time_s=st.time, mu=st.mu,
+                lock=None if st.lock_axial == "none" else st.lock_axial, frames=st.frames,
+                mass_scaling=st.mass_scaling, gravity_scale=st.gravity_scale, where=where, progress=bar)
+        finally:
+            if bar is not None:
+                bar.close()
     pts = fibers.points_m
     top = float(np.max(pts[:, 1] + r))
     lowest = float(np.min(pts[:, 1] - r))
@@ -212,17 +228,16 @@ def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, whe
 
 
 def run_specimen_command(config: str, out: Path, *, seed: int | None = None, overrides: dict | None = None,
-                         echo=print) -> dict:
-    """``fiberpipe specimen``: load ``config`` (dotted ``overrides`` applied), build, report."""
+                         echo=print, progress: bool = False) -> dict:
+    """``fiberpipe specimen``: load ``config`` (dotted ``overrides`` applied), build, report
+    (``progress``: bars on a terminal, :func:`build_specimen`)."""
     from fiberpipe.config import set_dotted
-
-    import time
 
     wall0, cpu0 = time.perf_counter(), time.process_time()
     raw = load_raw(config)
     for k, v in (overrides or {}).items():
         set_dotted(raw, k, v)
-    info = build_specimen(raw, out, where=str(config), seed=seed, echo=echo)
+    info = build_specimen(raw, out, where=str(config), seed=seed, echo=echo, progress=progress)
     echo(specimen_report(info, out))
     echo(f"  built in {time.perf_counter() - wall0:.0f} s wall, {time.process_time() - cpu0:.0f} s CPU (one process)")
     return info
@@ -246,6 +261,8 @@ def specimen_report(info: dict, out: Path) -> str:
             if k),
         f"  Table 4 curvatures at U = 0: XZ {st['curvature_xz_per_m']:.4g} 1/m, YZ {st['curvature_yz_per_m']:.4g} 1/m",
     ]
+    if "wall_time_s" in info.get("deposit", {}):
+        lines.append(f"  deposited {n} fibers in {info['deposit']['wall_time_s']:.0f} s wall")
     if "settle" in info:
         s = info["settle"]
         lines.append(f"  settled {s['time_s'] * 1e3:.3g} ms ({s['steps']} steps, "

@@ -365,26 +365,16 @@ def settle_under_gravity(mesh, cfg: Config) -> dict:
 
 
 def _progress_callback():
-    """A rich progress bar on a terminal, nothing otherwise (CI, logs)."""
-    import sys
+    """The simulation's progress (simulated time against the end time) as a bar on a terminal
+    (:func:`fiberpipe.progress.terminal_bar`); None otherwise (CI, logs)."""
+    from fiberpipe.progress import terminal_bar
 
-    if not sys.stderr.isatty():
+    bar = terminal_bar("simulate")
+    if bar is None:
         return None
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    state = {}
 
     def callback(t_s: float, end_time_s: float, steps: int):
-        if "bar" not in state:
-            bar = Progress(TextColumn("simulate"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"), TimeRemainingColumn(), transient=True)
-            bar.start()
-            state["bar"] = bar
-            state["task"] = bar.add_task("simulate", total=end_time_s)
-        state["bar"].update(state["task"], completed=min(t_s, end_time_s))
+        bar(t_s, end_time_s)
 
-    def close():
-        if "bar" in state:
-            state["bar"].stop()
-
-    callback.close = close
+    callback.close = bar.close
     return callback

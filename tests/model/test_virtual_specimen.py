@@ -118,12 +118,43 @@ def test_settled_specimen_reports_the_settling(tmp_path):
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(raw))
     r = CliRunner().invoke(main, ["specimen", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "o")])
     assert r.exit_code == 0, r.output
-    for words in ("v_f0", "contacts at U = 0", "Phi histogram", "Table 4 curvatures", "settled 1 ms"):
+    for words in ("v_f0", "contacts at U = 0", "Phi histogram", "Table 4 curvatures", "settled 1 ms",
+                  "deposited 6 fibers in"):
         assert words in r.output
     info = json.loads((tmp_path / "o" / "specimen.json").read_text())
     assert info["settle"]["lock_axial"] == "all" and info["settle"]["steps"] > 0
     fibers = read_fibers(tmp_path / "o" / "fibers.h5")
     assert info["height_m"] == pytest.approx(float(np.max(fibers.points_m[:, 1] + R)) + 1e-6)
+
+
+def test_specimen_progress_follows_the_deposit_and_the_settling(tmp_path, monkeypatch):
+    """With progress asked for (the command line on a terminal), the deposit's bar advances fiber by
+    fiber and the settling's in simulated time up to its end; each bar is closed."""
+    from fiberpipe.config import load_raw
+
+    seen = {}
+
+    def bar(label):
+        calls = seen.setdefault(label, [])
+
+        def update(done, total):
+            calls.append((done, total))
+
+        update.close = lambda: calls.append("closed")
+        return update
+
+    monkeypatch.setattr("fiberpipe.progress.terminal_bar", bar)
+    raw = base(n_fibers=6, width="1.5 mm", volume_fraction=0.2, candidates=2, upper_plate="pile",
+               settle={"enabled": True, "time": "1 ms", "frames": 3})
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(raw))
+    info = build_specimen(load_raw(tmp_path / "c.yaml"), tmp_path / "o", where="c", progress=True)
+    assert info["deposit"]["wall_time_s"] > 0
+    assert seen["deposit"] == [(k, 6) for k in range(1, 7)] + ["closed"]
+    settle = seen["settle"]
+    assert settle[-1] == "closed" and len(settle) >= 2
+    t_last, end = settle[-2]
+    assert end == pytest.approx(1e-3) and end <= t_last < 1.01 * end  # the last step reaches the end
+    assert all(a[0] <= b[0] for a, b in zip(settle[:-2], settle[1:-1]))  # simulated time only grows
 
 
 @pytest.mark.parametrize("specimen, words", [
