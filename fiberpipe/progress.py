@@ -4,6 +4,7 @@ logs, where the commands' own summary lines say what was done."""
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 
 
 def terminal_bar(label: str):
@@ -30,3 +31,15 @@ def terminal_bar(label: str):
 
     update.close = close
     return update
+
+
+@contextmanager
+def progress_bar(label: str, enabled: bool = True):
+    """:func:`terminal_bar` for a ``with`` block (None unless ``enabled`` and on a terminal), closed
+    when the block ends, however it ends."""
+    bar = terminal_bar(label) if enabled else None
+    try:
+        yield bar
+    finally:
+        if bar is not None:
+            bar.close()

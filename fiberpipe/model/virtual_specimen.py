@@ -88,12 +88,12 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
                    progress: bool = False) -> dict:
     """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict.
     ``progress``: bars for the deposit and the settling on a terminal
-    (:func:`fiberpipe.progress.terminal_bar`)."""
+    (:func:`fiberpipe.progress.progress_bar`)."""
     from fiberpipe.artifacts import write_fibers, write_text_atomic
     from fiberpipe.model.specimen import cassette_specimen
     from fiberpipe.model.specimen_settle import fiber_contacts, settle_pile
     from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
-    from fiberpipe.progress import terminal_bar
+    from fiberpipe.progress import progress_bar
 
     cfg, sp = specimen_config(raw, where)
     seed = sp.seed if seed is None else int(seed)
@@ -111,32 +111,25 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
         params.update(wave_curvature_per_m=sp.waviness.curvature_per_m,
                       wave_lengths_m=tuple(sp.waviness.wavelengths), wave_modes=sp.waviness.modes)
     t0 = time.perf_counter()
-    bar = terminal_bar("deposit") if progress else None
-    try:
-        fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures, progress=bar)
-    except ValueError as exc:
-        if "does not fit the cassette" in str(exc):
-            raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
-                              f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
-                              where=where) from None
-        raise
-    finally:
-        if bar is not None:
-            bar.close()
+    with progress_bar("deposit", progress) as bar:
+        try:
+            fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures, progress=bar)
+        except ValueError as exc:
+            if "does not fit the cassette" in str(exc):
+                raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
+                                  f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
+                                  where=where) from None
+            raise
     deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
     deposit["wall_time_s"] = time.perf_counter() - t0
     settle = None
     if sp.settle.enabled:
         st = sp.settle
-        bar = terminal_bar("settle") if progress else None
-        try:
+        with progress_bar("settle", progress) as bar:
             fibers, settle = settle_pile(
                 fibers, raw, width_m=sp.width, alpha_per_s=st.damping_alpha, time_s=st.time, mu=st.mu,
                 lock=None if st.lock_axial == "none" else st.lock_axial, frames=st.frames,
                 mass_scaling=st.mass_scaling, gravity_scale=st.gravity_scale, where=where, progress=bar)
-        finally:
-            if bar is not None:
-                bar.close()
     pts = fibers.points_m
     top = float(np.max(pts[:, 1] + r))
     lowest = float(np.min(pts[:, 1] - r))
