@@ -8,15 +8,16 @@ from contextlib import contextmanager
 
 
 def terminal_bar(label: str):
-    """``update(done, total)``, drawing a transient rich progress bar labelled ``label`` while
-    standard error is a terminal; None otherwise. ``update.close()`` removes the bar."""
+    """``update(done, total, *more)``, drawing a transient rich progress bar labelled ``label`` while
+    standard error is a terminal; None otherwise. ``update.close()`` removes the bar. Further
+    arguments are ignored, so the bar is also the solver's ``progress(t_s, end_time_s, steps)``."""
     if not sys.stderr.isatty():
         return None
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     state = {}
 
-    def update(done: float, total: float) -> None:
+    def update(done: float, total: float, *_more) -> None:
         if "bar" not in state:
             bar = Progress(TextColumn(label), BarColumn(), TextColumn("{task.percentage:>5.1f}%"), TimeRemainingColumn(),
                            transient=True)

@@ -8,6 +8,8 @@ below 40 % area fraction for wavy fibers of this aspect, so fibers start from a 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
@@ -452,11 +454,8 @@ def _pair_geometry(x, y, X, Y, z, need, reach=2):
     (X, Y)(z), over segment pairs at most ``reach`` segments apart; the unit separation (new minus
     placed, (M, 3)), the z of the closest point on the new fiber and the placed fiber's index.
     Rows are placed fiber by placed fiber, then by the new fiber's segment and the placed one's."""
-    m, ns = len(X), len(z) - 1
-    i = np.repeat(np.arange(ns), 2 * reach + 1)
-    kk = i + np.tile(np.arange(-reach, reach + 1), ns)
-    ok = (kk >= 0) & (kk < ns)
-    i, kk = i[ok], kk[ok]
+    m = len(X)
+    i, kk = _segment_pairs(len(z) - 1, reach)
     g = np.empty(m * len(i))
     nvec = np.empty((m * len(i), 3))
     zp = np.empty(m * len(i))
@@ -465,6 +464,19 @@ def _pair_geometry(x, y, X, Y, z, need, reach=2):
     _pair_geometry_kernel(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(y, dtype=float), X, Y,
                           np.ascontiguousarray(z, dtype=float), float(need), i, kk, g, nvec, zp)
     return g, nvec, zp, np.repeat(np.arange(m), len(i))
+
+
+@functools.lru_cache(maxsize=8)
+def _segment_pairs(ns: int, reach: int):
+    """The segment pairs (i of the new fiber, k of a placed one) with |i − k| ≤ ``reach`` of two
+    fibers of ``ns`` segments on the same z grid, by i then k (read-only: shared by every call)."""
+    i = np.repeat(np.arange(ns), 2 * reach + 1)
+    kk = i + np.tile(np.arange(-reach, reach + 1), ns)
+    ok = (kk >= 0) & (kk < ns)
+    i, kk = i[ok], kk[ok]
+    i.flags.writeable = False
+    kk.flags.writeable = False
+    return i, kk
 
 
 @njit(cache=True)

@@ -59,7 +59,7 @@ def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: fl
     """Settle ``fibers`` (a deposited pile) in the solver (:func:`settle_scene` of ``raw``); returns
     the settled Polylines (the node positions of the last frame, per fiber) and the settling
     figures (time step, steps, displacements, kinetic energy per frame, contacts, wall time).
-    ``progress``: called as ``progress(simulated time, settling time)`` [s] as the solver advances."""
+    ``progress``: the solver's ``progress(t_s, end_time_s, steps)``, called as it advances."""
     import time as _time
 
     from fiberpipe.config import validate_config
@@ -74,8 +74,7 @@ def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: fl
     mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
     model, effects, settings = build_simulation(mesh, cfg)
     t0 = _time.perf_counter()
-    res = simulate(model, effects, settings,
-                   progress=None if progress is None else (lambda t_s, end_s, _steps: progress(t_s, end_s)))
+    res = simulate(model, effects, settings, progress=progress)
     wall = _time.perf_counter() - t0
     X = np.asarray(res.frames_positions)
     off = np.asarray(mesh.node_offsets)

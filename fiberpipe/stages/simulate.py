@@ -30,6 +30,7 @@ from fiberpipe.artifacts import read_mesh, write_artifact
 from fiberpipe.config import Config
 from fiberpipe.errors import ArtifactError, FiberpipeError, SimulationDiverged
 from fiberpipe.io.vtk import mesh_vtu, write_pvd
+from fiberpipe.progress import terminal_bar
 from fiberpipe.stages._common import input_hashes
 
 log = logging.getLogger(__name__)
@@ -256,7 +257,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     if cfg.solver.settle_time > 0 and ck is None:
         settle = settle_under_gravity(mesh, cfg)
         log.info("simulate: settled for %.3g s, nodes moved by up to %.3g m", cfg.solver.settle_time, settle["max_displacement_m"])
-    bar = _progress_callback() if progress else None
+    bar = terminal_bar("simulate") if progress else None  # closed below, however the run ends
     try:
         with stop_on_signals() as should_stop:
             result = simulate(model, effects, settings, progress=bar, resume=ck, state=None if settle is None else settle["state"],
@@ -362,19 +363,3 @@ def settle_under_gravity(mesh, cfg: Config) -> dict:
     state.t, state.step = 0.0, 0
     state.acc[:] = 0.0
     return {"state": state, "max_displacement_m": moved, "wall_time_s": float(res.wall_time_s)}
-
-
-def _progress_callback():
-    """The simulation's progress (simulated time against the end time) as a bar on a terminal
-    (:func:`fiberpipe.progress.terminal_bar`); None otherwise (CI, logs)."""
-    from fiberpipe.progress import terminal_bar
-
-    bar = terminal_bar("simulate")
-    if bar is None:
-        return None
-
-    def callback(t_s: float, end_time_s: float, steps: int):
-        bar(t_s, end_time_s)
-
-    callback.close = bar.close
-    return callback

@@ -137,7 +137,7 @@ def test_specimen_progress_follows_the_deposit_and_the_settling(tmp_path, monkey
     def bar(label):
         calls = seen.setdefault(label, [])
 
-        def update(done, total):
+        def update(done, total, *_more):
             calls.append((done, total))
 
         update.close = lambda: calls.append("closed")
