@@ -18,6 +18,7 @@ help:
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
 	@echo "make fast-ensemble  paper-40's fastest settings within 2 %, ensemble against ensemble, and the modal step's (≈ 14 min)"
+	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min, two cores)"
 	@echo "make docs     build the documentation site into site/ (mkdocs-material, the docs extra)"
 
 $(VENV)/.installed: pyproject.toml
@@ -175,6 +176,12 @@ specimen-400: setup
 .PHONY: bench-400
 bench-400: specimen-400
 	NUMBA_NUM_THREADS=1 $(PY) -m fiberpipe.benchmarks.bench_bundle_cost runs/specimens/bundle-400/config.yaml
+
+# the 400-fiber specimen compacted at the study's settings and with mass scaling 100 (alpha / 100),
+# two threads each (docs/benchmarks.md, "Virtual specimens"; ≈ 30 min on two cores)
+.PHONY: fast-400
+fast-400: specimen-400
+	$(FP) study configs/studies/bundle-400/fast-settings.yaml --out runs/studies/bundle400-fast-settings
 
 .PHONY: bench-400-threads
 bench-400-threads: specimen-400

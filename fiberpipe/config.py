@@ -654,7 +654,9 @@ class SolverConfig(Section):
                          "least 256 pairs in contact, once 512 are; the same forces bit for bit); the legacy contact pass and the plane "
                          "friction stay serial; "
                          "> 1 uses a step loop of its own (with the built-in contact: compiled once and cached, ≈ 1 min); "
-                         "pays on an idle machine with a core per thread (docs/benchmarks.md)")
+                         "pays on an idle machine with a core per thread (docs/benchmarks.md); numba runs at most "
+                         "NUMBA_NUM_THREADS threads (read when it starts; fiberpipe study and fit set it to the largest "
+                         "solver.threads of their runs unless it is set): a run asking for more warns")
     settle_time: Time = 0.0
     stable_step: Literal["element", "modes"] = Field(
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "

@@ -308,7 +308,7 @@ class Integrator:
             state.q /= np.sqrt(qn2)[:, None]
         if self.threads > 1:
             import numba
-            numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
+            numba.set_num_threads(_usable_threads(self.threads))
         scene, work = self._kernel_args()
         ctl = StepControl(self.dt, int(n_steps), float(state.t), int(state.step), int(self.h_row),
                           self.history_every, float(self.v_limit), self.x_limit, float(self.e_ref))
@@ -568,6 +568,22 @@ def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSetti
     return RunPlan(dt, rep, state, end_time, total_steps, every, rows, chunk, ce)
 
 
+def _usable_threads(threads: int) -> int:
+    """The threads a run asking for ``threads`` gets: numba runs at most ``NUMBA_NUM_THREADS``, a
+    limit it reads once, when it starts."""
+    if threads <= 1:
+        return max(1, threads)
+    import numba
+    return min(threads, numba.config.NUMBA_NUM_THREADS)
+
+
+def threads_warning(threads: int) -> str:
+    """The run's warning when numba allows fewer threads than ``solver.threads`` asks for."""
+    usable = _usable_threads(threads)
+    return (f"solver.threads is {threads} but NUMBA_NUM_THREADS allows {usable}: the run uses {usable} (set "
+            "NUMBA_NUM_THREADS before fiberpipe starts)")
+
+
 def _restore(integ: Integrator, effects: Sequence[Effect], resume: Checkpoint, rows: int):
     """Put a checkpoint's integrator arrays, history, contact data and effect arrays back; returns its
     frames ``(times, positions, rotations)`` as lists."""
@@ -648,6 +664,8 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     watches = [w for w in (e.make_watch(model, dt, settings.dt_safety) for e in effects if hasattr(e, "make_watch"))
                if w is not None]
     warnings: list[str] = []
+    if _usable_threads(settings.threads) < settings.threads:
+        warnings.append(threads_warning(settings.threads))
 
     def take_frame():
         ft.append(state.t)

@@ -141,8 +141,9 @@ def _number_or_text(txt: str):
 def run_point(raw: dict, run_dir: str, where: str) -> dict:
     """One run of the fit: with a ``specimen`` section, build the specimen into
     ``run_dir/specimen`` and run its ready config into ``run_dir``; else run ``raw`` itself."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    from fiberpipe.studies.sweep import _run_point
+    from fiberpipe.studies.sweep import _run_point, numba_threads
+
+    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
 
     if raw.get("specimen") is None:
         return _run_point(raw, run_dir, where)
@@ -273,6 +274,10 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     seed_list = [seed0 + k for k in range(seeds)] if seed0 is not None else [None]
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
     out.mkdir(parents=True, exist_ok=True)
+    # before this process or its workers start numba: the threads the config's runs ask for
+    from fiberpipe.studies.sweep import numba_threads
+
+    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([base]))
     cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None
     try:
         return _search(base, ps, U_t, F_t, seed_list, out, workers,
@@ -290,7 +295,8 @@ def _local_cluster(workers: int):
         from dask.distributed import LocalCluster
     except ImportError:
         return None
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env={"NUMBA_NUM_THREADS": "1"})
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        env={"NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]})
 
 
 def _search(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo, config, target, budget, keys) -> dict:

@@ -171,9 +171,21 @@ def _warm_up(raw: dict, cfg, where: str) -> None:
         pass
 
 
+def numba_threads(raws) -> str:
+    """``NUMBA_NUM_THREADS`` for processes that run the configs ``raws``: the largest
+    ``solver.threads`` they ask for (1 by default). numba reads it once, when it starts, and never
+    runs more threads than it allows, so a worker started with 1 would run a ``solver.threads: 2``
+    point on one thread."""
+    def threads(raw):
+        solver = raw.get("solver") if isinstance(raw, dict) else None
+        value = solver.get("threads", 1) if isinstance(solver, dict) else 1
+        return value if isinstance(value, int) and value > 0 else 1
+    return str(max((threads(r) for r in raws), default=1))
+
+
 def _run_point(raw: dict, run_dir: str, where: str) -> dict:
     """Run one point in this process (also used by worker processes)."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
     from fiberpipe.pipeline import run_pipeline
 
     cfg = validate_config(copy.deepcopy(raw), where=where)
@@ -411,6 +423,10 @@ def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
     Dask); else one after the other in this process. Returns ``{id: fn result}``; ``fn(raw, run_dir,
     where)`` is :func:`_run_point` unless given (a module-level function, so workers can import it)."""
     _run_point = fn or globals()["_run_point"]
+    # before this process or its workers start numba (the worker processes inherit it); a value the
+    # user set stays
+    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw for _, raw, _ in jobs]))
+    env = {"NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]}
     if scheduler or nworkers > 1:
         try:
             from dask.distributed import Client, LocalCluster  # optional extra: fiberpipe[dask]
@@ -426,7 +442,7 @@ def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
                 return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
         echo(f"  on a local Dask cluster ({nworkers} worker processes)")
         # the cluster in its own context: a Client given a cluster does not close it
-        with LocalCluster(n_workers=nworkers, threads_per_worker=1, processes=True, env={"NUMBA_NUM_THREADS": "1"}) as cluster, \
+        with LocalCluster(n_workers=nworkers, threads_per_worker=1, processes=True, env=env) as cluster, \
                 Client(cluster) as client:
             return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
     results = {}

@@ -68,3 +68,17 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     assert integ._loop is step_loop_for(expect, contact_forces_of, threads, hook.cache_name, contact_friction_of)
     plain = Integrator(m, [ContactHook(lift, (np.array([1e-4, 1.0]),))], 1e-8, threads=threads)
     assert plain._loop is step_loop_for(lift, threads=threads)
+
+
+def test_a_run_warns_when_numba_allows_fewer_threads_than_asked(monkeypatch):
+    """solver.threads above NUMBA_NUM_THREADS (read once, when numba starts) runs on fewer threads:
+    the run says so instead of running slower in silence."""
+    import numba
+
+    from fiberpipe.solver.integrator import _usable_threads, threads_warning
+
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 1)
+    assert _usable_threads(2) == 1 and _usable_threads(1) == 1
+    assert threads_warning(2).startswith("solver.threads is 2 but NUMBA_NUM_THREADS allows 1: the run uses 1")
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 4)
+    assert _usable_threads(2) == 2

@@ -82,3 +82,26 @@ def test_docstring_example_base_exists():
     base = re.search(r"^\s*base: (\S+)", sweep.__doc__, re.M).group(1)
     studies = Path(__file__).resolve().parents[2] / "configs" / "studies"
     assert (studies / base).is_file(), base
+
+
+def test_points_get_the_threads_their_solver_asks_for(monkeypatch):
+    """numba reads NUMBA_NUM_THREADS once, when it starts: a study started without it must set it to
+    the largest solver.threads of its points (here 2), else a solver.threads: 2 point runs on one
+    thread; a value the user set stays."""
+    import os
+
+    from fiberpipe.studies import sweep
+
+    assert sweep.numba_threads([{}, {"solver": {"dt_safety": 0.9}}]) == "1"
+    assert sweep.numba_threads([{"solver": {"threads": 2}}, {}]) == "2"
+    jobs = [("a", {"solver": {"threads": 2}}, "run-a"), ("b", {}, "run-b")]
+    def seen(raw, run_dir, where):
+        return {"wall_time_s": 0.0, "threads": os.environ["NUMBA_NUM_THREADS"]}
+
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "unset")  # restored after the test
+    monkeypatch.delenv("NUMBA_NUM_THREADS")
+    got = sweep._execute(jobs, 1, None, "study", lambda *_: None, fn=seen)
+    assert [got[k]["threads"] for k in "ab"] == ["2", "2"]
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    got = sweep._execute(jobs, 1, None, "study", lambda *_: None, fn=seen)
+    assert [got[k]["threads"] for k in "ab"] == ["1", "1"]
