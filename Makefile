@@ -18,7 +18,7 @@ help:
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
 	@echo "make fast-ensemble  paper-40's fastest settings within 2 %, ensemble against ensemble, and the modal step's (≈ 14 min)"
-	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min, two cores)"
+	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min with the specimen, two cores)"
 	@echo "make docs     build the documentation site into site/ (mkdocs-material, the docs extra)"
 
 $(VENV)/.installed: pyproject.toml

@@ -95,6 +95,7 @@ def test_points_get_the_threads_their_solver_asks_for(monkeypatch):
     assert sweep.numba_threads([{}, {"solver": {"dt_safety": 0.9}}]) == "1"
     assert sweep.numba_threads([{"solver": {"threads": 2}}, {}]) == "2"
     jobs = [("a", {"solver": {"threads": 2}}, "run-a"), ("b", {}, "run-b")]
+
     def seen(raw, run_dir, where):
         return {"wall_time_s": 0.0, "threads": os.environ["NUMBA_NUM_THREADS"]}
 
