@@ -296,7 +296,7 @@ def _local_cluster(workers: int):
     except ImportError:
         return None
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        env={"NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]})
+                        env={"NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS", "1")})
 
 
 def _search(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo, config, target, budget, keys) -> dict:
