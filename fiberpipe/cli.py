@@ -324,7 +324,7 @@ def inspect(artifact, check):
 @main.command()
 @click.argument("study_file", type=click.Path(dir_okay=False))
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Study folder (default: runs/studies/<name>).")
-@click.option("--workers", type=int, help="Points run in parallel (local processes, or Dask workers).")
+@click.option("--workers", type=click.IntRange(min=1), help="Points run in parallel (local processes, or Dask workers).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
 def study(study_file, out, workers, scheduler):
     """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
@@ -352,7 +352,7 @@ def study(study_file, out, workers, scheduler):
 @click.option("--seeds", default=1, show_default=True, type=int, help="Specimen seeds the curve is averaged over.")
 @click.option("--budget", default=20, show_default=True, type=int, help="Largest number of evaluations.")
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/fits/<config name>).")
-@click.option("--workers", default=1, show_default=True, type=int, help="Runs in parallel (local processes).")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1), help="Runs in parallel (local processes).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
 def fit(config, target, params, seeds, budget, out, workers, scheduler):
     """Fit config keys so that the simulated load matches a measured curve (fit.json, fit.png, history.csv)."""

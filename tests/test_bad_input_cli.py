@@ -119,3 +119,17 @@ def test_fuzzed_volumes_fail_cleanly_or_run(tmp_path, shape, fill):
     r = _invoke(["run", _volume_config(tmp_path, "v.npy"), "--out", tmp_path / "run", "--to", "trace"])
     if r.exit_code != 0:
         _assert_clean_failure(r)
+
+
+@pytest.mark.parametrize("command", [
+    ["study", "s.yaml", "--workers", "0"],
+    ["study", "s.yaml", "--workers", "-3"],
+    ["fit", "c.yaml", "--target", "t.csv", "--param", "scene.friction.mu=0.1:0.4", "--workers", "0"],
+])
+def test_workers_below_one_are_refused(tmp_path, command):
+    """--workers 0 or below is a usage error before anything runs (not replaced by the study's own
+    value, not a run with -3 workers)."""
+    for name in ("s.yaml", "c.yaml", "t.csv"):
+        (tmp_path / name).write_text("x")
+    result = CliRunner().invoke(main, [str(tmp_path / c) if c in ("s.yaml", "c.yaml", "t.csv") else c for c in command])
+    assert result.exit_code == 2 and "--workers" in result.output and "Traceback" not in result.output

@@ -56,6 +56,12 @@ class ExtrapolateSpec(BaseModel):
     key: str
     order: Union[float, Literal["auto"]] = 2.0
 
+    @model_validator(mode="after")
+    def _order(self):
+        if self.order != "auto" and not self.order > 0:
+            raise ValueError(f"reference.extrapolate.order must be > 0 or 'auto', got {self.order}")
+        return self
+
 
 class ReferenceSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -79,23 +85,34 @@ class StudySpec(BaseModel):
     measures: list[Measure] = Field(default_factory=lambda: ["curve"])
     workers: int = Field(1, ge=1)
 
+    @model_validator(mode="after")
+    def _values(self):
+        empty = [k for k, v in self.sweep.items() if not v]
+        if not self.sweep or empty:
+            raise ValueError(f"sweep.{empty[0]} has no values" if empty else "sweep has no keys")
+        return self
+
 
 def _set_dotted(data: dict, dotted: str, value) -> None:
+    """Set ``data[a][b]…`` for the dotted key ``a.b…`` (an integer part indexes a list), creating
+    missing sections; a key that walks into a value or past a list's end is a ConfigError."""
     parts = dotted.split(".")
     cur: Any = data
-    for i, p in enumerate(parts[:-1]):
-        nxt = parts[i + 1]
+    for i, p in enumerate(parts):
+        last = i == len(parts) - 1
         if isinstance(cur, list):
-            cur = cur[int(p)]
-            continue
-        if p not in cur or cur[p] is None:
-            cur[p] = [] if nxt.isdigit() else {}
-        cur = cur[p]
-    last = parts[-1]
-    if isinstance(cur, list):
-        cur[int(last)] = value
-    else:
-        cur[last] = value
+            if not p.isdigit() or int(p) >= len(cur):
+                raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i]) or p}' is a list of {len(cur)}; "
+                                  f"'{p}' is not one of its indices (0…{len(cur) - 1})")
+            p = int(p)
+        elif not isinstance(cur, dict):
+            raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i])}' is a value ({cur!r}), not a section")
+        if last:
+            cur[p] = value
+        else:
+            if isinstance(cur, dict) and cur.get(p) is None:
+                cur[p] = [] if parts[i + 1].isdigit() else {}
+            cur = cur[p]
 
 
 def load_study(path: str | Path) -> tuple[StudySpec, dict]:
@@ -132,11 +149,11 @@ def study_points(spec: StudySpec, base: dict, where: str) -> list[dict]:
     return points
 
 
-def _point(base: dict, overrides: dict, where: str) -> dict:
+def _point(base: dict, overrides: dict, where: str, label: str = "point") -> dict:
     raw = copy.deepcopy(base)
     for k, v in overrides.items():
         _set_dotted(raw, k, v)
-    cfg = validate_config(copy.deepcopy(raw), where=f"{where} point {overrides}")
+    cfg = validate_config(copy.deepcopy(raw), where=f"{where} {label} {overrides}")
     pid = hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()[:10]
     return {"id": pid, "overrides": overrides, "raw": raw, "config_sha256": cfg.sha256()}
 
@@ -376,9 +393,14 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     base = ctx["base"]
     points = study_points(spec, base, str(path))
     use_ref_run = spec.reference.run is None and spec.reference.extrapolate is None
-    ref = _point(base, spec.reference.overrides, str(path)) if use_ref_run else None
+    ref = _point(base, spec.reference.overrides, str(path), "reference.overrides") if use_ref_run else None
     if spec.reference.extrapolate is not None:
         _extrapolation_points(spec, points, str(path))  # fail before running anything
+    given_ref = None
+    if spec.reference.run:  # read before running anything: a wrong file fails now
+        from fiberpipe.post.history import load_simulation
+
+        given_ref = load_simulation(_reference_run_path(spec, path))
     out = Path(out)
     (out / "points").mkdir(parents=True, exist_ok=True)
     jobs = []
@@ -394,10 +416,10 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     if spec.reference.extrapolate is not None:
         limit = richardson_limit(spec, points, out, str(path))
         ref_data = limit
+    elif given_ref is not None:
+        ref_data = given_ref
     else:
-        ref_sim = Path(spec.reference.run) if spec.reference.run else out / "reference" / "simulation.h5"
-        if spec.reference.run and not ref_sim.is_absolute():
-            ref_sim = (path.parent / ref_sim).resolve()
+        ref_sim = out / "reference" / "simulation.h5"
         if not ref_sim.exists():
             raise ConfigError("reference run not found", where=str(ref_sim))
         ref_data = load_simulation(ref_sim)
@@ -415,6 +437,16 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
         ref_res["limit"] = limit
     _write_outputs(out, spec, rows, ref_res, echo)
     return out
+
+
+def _reference_run_path(spec: StudySpec, path: Path) -> Path:
+    """The study's ``reference.run`` (relative to the study file): an existing simulation artifact."""
+    ref_sim = Path(spec.reference.run)
+    if not ref_sim.is_absolute():
+        ref_sim = (path.parent / ref_sim).resolve()
+    if not ref_sim.is_file():
+        raise ConfigError(f"reference.run {ref_sim}: reference run not found", where=str(path))
+    return ref_sim
 
 
 def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:

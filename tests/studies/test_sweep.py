@@ -4,7 +4,7 @@ import csv
 
 import pytest
 
-from fiberpipe.errors import ConfigError
+from fiberpipe.errors import ConfigError, FiberpipeError
 from fiberpipe.studies.sweep import load_study, run_study
 
 BASE = """
@@ -53,6 +53,46 @@ def test_study_with_a_bad_key_fails_before_running(tmp_path):
     with pytest.raises(ConfigError, match="dt_safty"):
         run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
     assert not (tmp_path / "out" / "points").exists() or not any((tmp_path / "out" / "points").iterdir())
+
+
+@pytest.mark.parametrize("sweep,message", [
+    ("mesh.element_length.x: [0.9]", r"'mesh.element_length.x': 'mesh.element_length' is a value"),
+    ("scene.clamps.5.at: [end]", r"'scene.clamps.5.at': 'scene.clamps' is a list of 1; '5' is not one of its indices"),
+    ("scene.clamps.x.at: [end]", r"'x' is not one of its indices"),
+    ("solver.dt_safety: []", r"sweep.solver.dt_safety has no values"),
+    ("{}", r"sweep has no keys"),
+])
+def test_a_sweep_key_that_cannot_be_set_fails_before_running(tmp_path, sweep, message):
+    """A sweep key that walks into a value or past a list's end, or a key without values, is one
+    ConfigError naming it, before any run (not a traceback, not a study of no points)."""
+    (tmp_path / "base.yaml").write_text(BASE)
+    text = STUDY.replace("sweep:\n  solver.dt_safety: [0.5, 0.9]", "sweep: {}" if sweep == "{}" else "sweep:\n  " + sweep)
+    (tmp_path / "study.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("reference,message", [
+    ("reference:\n  run: nope/simulation.h5", "reference run not found"),
+    ("reference:\n  run: base.yaml", "base.yaml"),
+    ("reference:\n  extrapolate: {key: solver.dt_safety, order: 0}", "order must be > 0"),
+])
+def test_a_reference_that_cannot_serve_fails_before_running(tmp_path, reference, message):
+    """A reference run that is missing or not a simulation artifact, or an extrapolation order that
+    is not positive, fails before the points run (they took minutes for nothing)."""
+    (tmp_path / "base.yaml").write_text(BASE)
+    (tmp_path / "study.yaml").write_text(STUDY.replace("reference:\n  overrides: {solver.dt_safety: 0.25}", reference))
+    with pytest.raises((ConfigError, FiberpipeError), match=message):
+        run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_reference_override_is_named_as_such(tmp_path):
+    (tmp_path / "base.yaml").write_text(BASE)
+    (tmp_path / "study.yaml").write_text(STUDY.replace("{solver.dt_safety: 0.25}", "{solver.bogus: 1}"))
+    with pytest.raises(ConfigError, match=r"reference.overrides \{'solver.bogus': 1\}"):
+        run_study(tmp_path / "study.yaml", tmp_path / "out", echo=lambda s: None)
 
 
 def test_unknown_study_key(tmp_path):
