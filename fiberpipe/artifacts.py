@@ -357,10 +357,19 @@ def read_fibers(path):
     from fiberpipe.polylines import Polylines
 
     art = read_artifact(path, "fibers")
+    points = np.asarray(art["fibers/points"])
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ArtifactError(f"fibers/points must be an (N, 3) array of positions, got shape {points.shape}",
+                            where=str(path))
     try:
-        return Polylines(art["fibers/points"], art["fibers/offsets"], art["fibers/radius"])
+        lines = Polylines(points, art["fibers/offsets"], art["fibers/radius"])
     except ValueError as exc:
         raise ArtifactError(f"inconsistent fibers layout: {exc}", where=str(path)) from None
+    bad = ~np.isfinite(lines.points_m).all(axis=1)
+    if bad.any():
+        fiber = int(np.searchsorted(lines.offsets, np.flatnonzero(bad)[0], side="right") - 1)
+        raise ArtifactError(f"fiber {fiber} has non-finite coordinates", where=str(path))
+    return lines
 
 
 def write_mesh(path, mesh, *, material: dict | None = None, **kw) -> Path:

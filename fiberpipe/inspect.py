@@ -8,8 +8,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, open_checked
-from fiberpipe.errors import ArtifactError
+from fiberpipe.artifacts import SCHEMA_VERSIONS, file_sha256, open_checked, read_fibers, read_mesh
+from fiberpipe.errors import ArtifactError, FiberpipeError
+
+
+# artifact kinds whose layout --check verifies with the reader the stages use
+_LAYOUT_READERS = {"fibers": read_fibers, "mesh": read_mesh}
 
 
 def inspect_artifact(path: Path, *, check: bool = False, echo=print) -> bool:
@@ -45,6 +49,16 @@ def inspect_artifact(path: Path, *, check: bool = False, echo=print) -> bool:
         f.visititems(show)
         inputs = f.attrs.get("inputs", "{}")
         inputs = json.loads(inputs.decode() if isinstance(inputs, bytes) else inputs)
+        kind = f.attrs.get("kind", "")
+        kind = kind.decode() if isinstance(kind, bytes) else kind
+    if check and ok and kind in _LAYOUT_READERS:
+        # the stages' own reader: the same layout checks (shapes, offsets, finite positions) as a run
+        try:
+            _LAYOUT_READERS[kind](path)
+            echo(f"  layout: a valid {kind} artifact")
+        except FiberpipeError as exc:
+            echo(f"  layout: {exc}")
+            ok = False
     if check:
         # Provenance: an input artifact that sits beside this one must still have the recorded hash.
         for name, digest in inputs.items():

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Callable
 
 from fiberpipe import __version__
-from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, write_text_atomic
+from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, read_fibers, write_text_atomic
 from fiberpipe.config import Config
 from fiberpipe.errors import ConfigError, FiberpipeError, InputError
 
@@ -317,10 +317,17 @@ def check_user_inputs(cfg: Config, plan: list[str]) -> None:
         given.append(("input.truth", cfg.input.truth))
     if "mesh" in plan and cfg.input.fibers is not None:
         given.append(("input.fibers", cfg.input.fibers))
+    if "post" in plan and cfg.post.reference_fibers:
+        given.append(("post.reference_fibers", cfg.post.reference_fibers))
     for key, p in given:
         if not Path(p).exists():
             raise InputError(f"file {p} does not exist (set in {cfg.source_path}; a relative path is relative "
                              "to the config's folder)", where=key)
+        if key != "input.volume":  # a fibers artifact: its layout and positions, before any stage writes
+            try:
+                read_fibers(p)
+            except FiberpipeError as exc:
+                raise InputError(str(exc), where=key) from None
 
 
 def _maker(cfg: Config, run_dir: Path, path: Path) -> str | None:

@@ -133,3 +133,23 @@ def test_workers_below_one_are_refused(tmp_path, command):
         (tmp_path / name).write_text("x")
     result = CliRunner().invoke(main, [str(tmp_path / c) if c in ("s.yaml", "c.yaml", "t.csv") else c for c in command])
     assert result.exit_code == 2 and "--workers" in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("key, stage", [("input.truth", "trace"), ("post.reference_fibers", "post"),
+                                        ("input.fibers", "mesh")])
+def test_a_corrupt_fibers_input_is_refused_before_any_stage_runs(tmp_path, key, stage):
+    """A fibers artifact the config names (ground truth, reference, input) with a NaN position is
+    refused with its key before the first stage writes (a failed trace rewrote fibers.h5 before)."""
+    from fiberpipe.artifacts import write_fibers
+    from fiberpipe.config import validate_config
+    from fiberpipe.errors import InputError
+    from fiberpipe.pipeline import check_user_inputs
+    from fiberpipe.polylines import Polylines
+
+    bad = tmp_path / "bad.h5"
+    write_fibers(bad, Polylines(np.array([[0, 0, 0], [1e-3, np.nan, 0.0]]), np.array([0, 2]), np.array([2.5e-4])))
+    section, name = key.split(".")
+    given = {} if key == "input.fibers" else GOOD.get(section, {})  # input.fibers replaces the polylines
+    cfg = validate_config({**GOOD, section: {**given, name: str(bad)}}, where="t.yaml")
+    with pytest.raises(InputError, match=rf"^{key}: .*bad.h5: fiber 0 has non-finite coordinates$"):
+        check_user_inputs(cfg, [stage])

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -108,3 +109,25 @@ def test_every_stage_hashes_existing_sources():
         assert stage.code, name
         for rel in stage.code:
             assert (root / rel).exists(), (name, rel)
+
+
+@pytest.mark.parametrize("points, offsets, message", [
+    ([[0, 0, 0], [1e-3, np.nan, 0]], [0, 2], "fiber 0 has non-finite coordinates"),
+    ([[0, 0], [1e-3, 0]], [0, 2], r"fibers/points must be an \(N, 3\) array of positions, got shape \(2, 2\)"),
+    ([[0, 0, 0], [1e-3, 0, 0]], [0, 3], "inconsistent fibers layout"),
+])
+def test_a_corrupt_fibers_artifact_fails_its_reader_and_the_check(tmp_path, points, offsets, message):
+    """What a run refuses, `inspect --check` refuses too (it read such files as 'check: ok'), with
+    the file named; the reader names the fiber with a non-finite position."""
+    import re
+
+    from fiberpipe.artifacts import read_fibers, write_artifact
+    from fiberpipe.errors import ArtifactError
+
+    path = tmp_path / "fibers.h5"
+    write_artifact(path, "fibers", {"fibers/points": np.asarray(points, float), "fibers/offsets": np.asarray(offsets),
+                                    "fibers/radius": np.array([2.5e-4])})
+    with pytest.raises(ArtifactError, match=message):
+        read_fibers(path)
+    r = _run("inspect", str(path), "--check")
+    assert r.exit_code == 1 and "check: FAILED" in r.output and re.search("layout: .*" + message, r.output)
