@@ -205,7 +205,12 @@ def _run_point(raw: dict, run_dir: str, where: str) -> dict:
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
     from fiberpipe.pipeline import run_pipeline
 
-    cfg = validate_config(copy.deepcopy(raw), where=where)
+    # the point's own config beside its results (its paths are absolute): what its summary, its run
+    # log and the resume command of an interrupted simulation name
+    point_config = Path(run_dir) / "config.yaml"
+    point_config.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(point_config, yaml.safe_dump(raw, sort_keys=False, allow_unicode=True))
+    cfg = validate_config(copy.deepcopy(raw), where=str(point_config))
     _warm_up(raw, cfg, where)
     t0 = time.perf_counter()
     report = run_pipeline(cfg, Path(run_dir))

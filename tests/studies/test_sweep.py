@@ -45,6 +45,18 @@ def test_study_runs_points_and_writes_table(tmp_path):
         assert int(r["steps"]) > 0 and float(r["wall_time_s"]) > 0
     assert int(rows[0]["steps"]) > int(rows[1]["steps"])  # the smaller step takes more steps
     assert (out / "pareto.png").exists() and (out / "study.md").exists()
+    # each point keeps its own config, which its summary (and an interrupted run's resume command)
+    # names: running it again is the same run, up to date
+    import json
+
+    from click.testing import CliRunner
+
+    from fiberpipe.cli import main
+
+    point = out / "points" / rows[0]["id"]
+    assert json.loads((point / "summary.json").read_text())["config"] == str(point / "config.yaml")
+    again = CliRunner().invoke(main, ["run", str(point / "config.yaml"), "--out", str(point)])
+    assert again.exit_code == 0 and "simulate     up to date" in again.output, again.output
 
 
 def test_study_with_a_bad_key_fails_before_running(tmp_path):
