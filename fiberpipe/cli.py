@@ -218,7 +218,7 @@ def trace(config, out, force, truth, scheduler=None):
 @click.option("--touching-fraction", default=1 / 3, show_default=True, type=float)
 @click.option("--cnr", "contrast_to_noise", default=5.0, show_default=True, type=float, help="Contrast-to-noise ratio.")
 @click.option("--blur", "blur_sigma_vox", default=1.0, show_default=True, type=float, help="PSF sigma, voxels.")
-@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--from-simulation", "from_simulation", type=click.Path(dir_okay=False),
               help="Render a frame of this simulation.h5 instead (closes the loop: trace it again).")
 @click.option("--frame", default=-1, show_default=True, type=int, help="Frame index for --from-simulation.")
@@ -374,7 +374,7 @@ def fit(config, target, params, seeds, budget, out, workers, scheduler):
 @main.command()
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/specimens/<config name>).")
-@click.option("--seed", type=int, help="Replaces specimen.seed.")
+@click.option("--seed", type=click.IntRange(min=0), help="Replaces specimen.seed.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help="Override a config key (repeatable), e.g. specimen.n_fibers=400.")
 def specimen(config, out, seed, sets):
     """Build the virtual specimen of CONFIG's specimen section: fibers.h5, specimen.json and a ready config.yaml."""

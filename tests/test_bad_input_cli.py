@@ -125,14 +125,19 @@ def test_fuzzed_volumes_fail_cleanly_or_run(tmp_path, shape, fill):
     ["study", "s.yaml", "--workers", "0"],
     ["study", "s.yaml", "--workers", "-3"],
     ["fit", "c.yaml", "--target", "t.csv", "--param", "scene.friction.mu=0.1:0.4", "--workers", "0"],
+    ["specimen", "c.yaml", "--seed", "-1"],
+    ["phantom", "--out", "ph", "--seed", "-1"],
 ])
-def test_workers_below_one_are_refused(tmp_path, command):
-    """--workers 0 or below is a usage error before anything runs (not replaced by the study's own
-    value, not a run with -3 workers)."""
+def test_workers_below_one_and_negative_seeds_are_refused(tmp_path, command):
+    """--workers 0 or below, or a negative --seed, is a usage error naming the option before
+    anything runs (not replaced by the study's own value, not a run with -3 workers, not numpy's
+    'expected non-negative integer')."""
     for name in ("s.yaml", "c.yaml", "t.csv"):
         (tmp_path / name).write_text("x")
-    result = CliRunner().invoke(main, [str(tmp_path / c) if c in ("s.yaml", "c.yaml", "t.csv") else c for c in command])
-    assert result.exit_code == 2 and "--workers" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(main, [str(tmp_path / c) if c in ("s.yaml", "c.yaml", "t.csv", "ph") else c
+                                       for c in command])
+    option = command[-2]
+    assert result.exit_code == 2 and option in result.output and "Traceback" not in result.output
 
 
 @pytest.mark.parametrize("key, stage", [("input.truth", "trace"), ("post.reference_fibers", "post"),

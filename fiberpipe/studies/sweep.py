@@ -552,8 +552,9 @@ def _write_outputs(out: Path, spec: StudySpec, rows: list[dict], ref: dict, echo
                 best = e[i]
                 front.append(i)
         ax.plot(w[front], e[front], "r--", label="Pareto front")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        # log axes need a positive value (a study whose errors are all 0 or NaN gets linear ones)
+        ax.set_xscale("log" if np.any(np.isfinite(w) & (w > 0)) else "linear")
+        ax.set_yscale("log" if np.any(np.isfinite(e) & (e > 0)) else "linear")
         ax.set_xlabel("solver wall time [s]")
         ax.set_ylabel(f"{err_cols[0]} [-]")
         ax.grid(alpha=0.3, which="both")

@@ -158,3 +158,21 @@ def test_points_get_the_threads_their_solver_asks_for(monkeypatch):
     monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
     got = sweep._execute(jobs, 1, None, "study", lambda *_: None, fn=seen)
     assert [got[k]["threads"] for k in "ab"] == ["1", "1"]
+
+
+def test_a_study_whose_errors_are_all_zero_still_plots(tmp_path):
+    """Points equal to the reference (errors 0): linear error axis instead of a log one that
+    matplotlib refuses ('Data cannot be log-scaled'), and no warning leaks into the output."""
+    import warnings
+
+    from fiberpipe.studies.sweep import _write_outputs
+
+    (tmp_path / "base.yaml").write_text(BASE)
+    (tmp_path / "study.yaml").write_text(STUDY)
+    spec, _ = load_study(tmp_path / "study.yaml")
+    rows = [{"solver.dt_safety": str(v), "position_error": 0.0, "wall_time_s": w, "steps": 10, "id": f"p{v}"}
+            for v, w in ((0.5, 2.0), (0.9, 1.0))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _write_outputs(tmp_path, spec, rows, {"solver_wall_time_s": 3.0, "steps": 20}, echo=lambda s: None)
+    assert (tmp_path / "pareto.png").stat().st_size > 0 and (tmp_path / "study.csv").exists()
