@@ -86,7 +86,8 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
 
     t = cfg.trace
     fibers, folds = split_folds_for_mesh(cfg, fibers)
-    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length")
+    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length",
+                                        None if cfg.trace.min_length is not None else "two mesh.element_length")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
     orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
     write_text_atomic(Path(out).with_name("orientation.json"), json.dumps(orientation, indent=2))
@@ -187,8 +188,9 @@ def split_folds_for_mesh(cfg: Config, fibers):
     return split_folds(fibers, lambda p: resample_polyline(p, el, smooth_sigma_m=sm), max_turn_deg=90.0)
 
 
-def drop_short_fibers(fibers, min_length: float, key: str):
-    """Drop fibers shorter than ``min_length`` (m), logging one warning line that names ``key``.
+def drop_short_fibers(fibers, min_length: float, key: str, default_of: str | None = None):
+    """Drop fibers shorter than ``min_length`` (m), logging one warning line that names ``key``
+    (``default_of``: what the value defaults to when the config leaves ``key`` unset).
 
     Returns the kept fibers and the number dropped. Every fiber too short is an InputError (there
     is nothing left to mesh).
@@ -197,7 +199,8 @@ def drop_short_fibers(fibers, min_length: float, key: str):
 
     kept, dropped = drop_short(fibers, min_length)
     if len(dropped) and kept.n_fibers == 0:
-        raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm "
+        origin = f" (unset: {default_of}; a length without a unit is in metres)" if default_of else ""
+        raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm{origin} "
                          f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key} or mesh.element_length")
     if len(dropped):
         log.warning("%s: dropped %d of %d fibers shorter than %s = %.3g mm", key.split(".")[0], len(dropped),

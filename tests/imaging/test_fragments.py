@@ -191,3 +191,19 @@ def test_a_tiff_folder_of_a_short_fiber_suspension_runs_through_mesh_with_defaul
     assert st["trace"]["method"] == "skeleton" and st["trace"]["dropped_short_fibers"] > 0
     long_true = int((truth.lengths_m() >= 0.6e-3).sum())
     assert 0.5 * long_true <= st["mesh"]["fibers"] <= 1.5 * long_true, (st["mesh"]["fibers"], long_true)
+
+
+def test_an_unset_trace_min_length_is_named_by_what_it_defaults_to():
+    """mesh.element_length: 0.3 (metres, a unit forgotten) makes the default trace.min_length 0.6 m:
+    the error says where that value came from, not only the key the user never set."""
+    from fiberpipe.errors import InputError
+    from fiberpipe.polylines import Polylines
+    from fiberpipe.stages.trace import drop_short_fibers
+
+    fibers = Polylines(np.array([[0, 0, 0], [0, 0, 2e-3], [1e-3, 0, 0], [1e-3, 0, 2e-3]]), np.array([0, 2, 4]),
+                       np.array([1e-4, 1e-4]))
+    with pytest.raises(InputError, match=r"trace.min_length = 600 mm \(unset: two mesh.element_length; a length "
+                                         r"without a unit is in metres\) \(longest 2 mm\)"):
+        drop_short_fibers(fibers, 0.6, "trace.min_length", "two mesh.element_length")
+    with pytest.raises(InputError, match=r"trace.min_length = 600 mm \(longest 2 mm\)"):
+        drop_short_fibers(fibers, 0.6, "trace.min_length")
