@@ -1018,14 +1018,26 @@ def load_config(path: str | Path, overrides: Optional[dict] = None) -> Config:
 
 
 def set_dotted(data: dict, dotted: str, value) -> None:
-    """Set ``data["a"]["b"]["c"] = value`` for ``dotted = "a.b.c"``, creating sections as needed."""
+    """Set ``data[a][b]…`` for the dotted key ``a.b…`` (an integer part indexes a list), creating
+    missing sections; a key that walks into a value or past a list's end is a ConfigError."""
     parts = dotted.split(".")
-    cur = data
-    for p in parts[:-1]:
-        if not isinstance(cur.get(p), dict):
-            cur[p] = {}
-        cur = cur[p]
-    cur[parts[-1]] = value
+    cur: Any = data
+    for i, p in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(cur, list):
+            if not p.isdigit() or int(p) >= len(cur):
+                held = f"0…{len(cur) - 1}" if cur else "it is empty"
+                raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i]) or p}' is a list of {len(cur)}; "
+                                  f"'{p}' is not one of its indices ({held})")
+            p = int(p)
+        elif not isinstance(cur, dict):
+            raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i])}' is a value ({cur!r}), not a section")
+        if last:
+            cur[p] = value
+        else:
+            if isinstance(cur, dict) and cur.get(p) is None:
+                cur[p] = [] if parts[i + 1].isdigit() else {}
+            cur = cur[p]
 
 
 def _type_name(ann) -> str:

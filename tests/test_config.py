@@ -239,3 +239,18 @@ def test_a_plane_onset_outside_its_range_is_refused():
 
     with pytest.raises(FiberpipeError, match="onset_fraction"):
         Walls({"y": (0.0, 1.0)}, onset_fraction=0.0)
+
+
+def test_set_dotted_indexes_lists_and_refuses_keys_that_cannot_be_set():
+    """One setter for --set, --param and study sweeps: an integer part indexes a list, missing
+    sections are created, a key that walks into a value or past a list's end is a ConfigError."""
+    from fiberpipe.config import set_dotted
+
+    raw = {"scene": {"drives": [{"velocity": "1 mm/min"}]}, "mesh": {"element_length": "0.3 mm"}}
+    set_dotted(raw, "scene.drives.0.velocity", "2 mm/min")
+    set_dotted(raw, "solver.threads", 2)
+    assert raw["scene"]["drives"] == [{"velocity": "2 mm/min"}] and raw["solver"] == {"threads": 2}
+    with pytest.raises(ConfigError, match=r"'scene.drives.3.velocity': 'scene.drives' is a list of 1; '3' is not"):
+        set_dotted(raw, "scene.drives.3.velocity", "1 mm/min")
+    with pytest.raises(ConfigError, match=r"'mesh.element_length.x': 'mesh.element_length' is a value"):
+        set_dotted(raw, "mesh.element_length.x", 1)

@@ -45,7 +45,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from fiberpipe.artifacts import write_text_atomic
-from fiberpipe.config import _DuplicateKey, _StrictLoader, load_raw, validate_config
+from fiberpipe.config import _DuplicateKey, _StrictLoader, load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError
 
 Measure = Literal["curve", "final_load", "positions", "tip", "rearrangement"]
@@ -93,28 +93,6 @@ class StudySpec(BaseModel):
         return self
 
 
-def _set_dotted(data: dict, dotted: str, value) -> None:
-    """Set ``data[a][b]…`` for the dotted key ``a.b…`` (an integer part indexes a list), creating
-    missing sections; a key that walks into a value or past a list's end is a ConfigError."""
-    parts = dotted.split(".")
-    cur: Any = data
-    for i, p in enumerate(parts):
-        last = i == len(parts) - 1
-        if isinstance(cur, list):
-            if not p.isdigit() or int(p) >= len(cur):
-                raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i]) or p}' is a list of {len(cur)}; "
-                                  f"'{p}' is not one of its indices (0…{len(cur) - 1})")
-            p = int(p)
-        elif not isinstance(cur, dict):
-            raise ConfigError(f"'{dotted}': '{'.'.join(parts[:i])}' is a value ({cur!r}), not a section")
-        if last:
-            cur[p] = value
-        else:
-            if isinstance(cur, dict) and cur.get(p) is None:
-                cur[p] = [] if parts[i + 1].isdigit() else {}
-            cur = cur[p]
-
-
 def load_study(path: str | Path) -> tuple[StudySpec, dict]:
     path = Path(path)
     if not path.exists():
@@ -152,7 +130,10 @@ def study_points(spec: StudySpec, base: dict, where: str) -> list[dict]:
 def _point(base: dict, overrides: dict, where: str, label: str = "point") -> dict:
     raw = copy.deepcopy(base)
     for k, v in overrides.items():
-        _set_dotted(raw, k, v)
+        try:
+            set_dotted(raw, k, v)
+        except ConfigError as exc:
+            raise ConfigError(str(exc), where=f"{where} {label}") from None
     cfg = validate_config(copy.deepcopy(raw), where=f"{where} {label} {overrides}")
     pid = hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()[:10]
     return {"id": pid, "overrides": overrides, "raw": raw, "config_sha256": cfg.sha256()}
