@@ -180,7 +180,7 @@ STAGES: dict[str, Stage] = {
         "simulate",
         ("material", "scene", "solver"),
         lambda c, d: {"mesh": d / "mesh.h5"},
-        lambda c, d: [d / "simulation.h5"],
+        lambda c, d: [d / "simulation.h5", d / "simulation.pvd"],
         _do_simulate,
         "simulation",
         code=("solver", "model", "post/contact_field.py", "stages/simulate.py"),
@@ -276,11 +276,19 @@ def _touch(name, obj) -> None:
     dict(obj.attrs)
 
 
+def _pvd_files(path: Path) -> list[str]:
+    """The files a ParaView collection (``.pvd``) lists."""
+    import xml.etree.ElementTree as ET
+
+    return [d.get("file") for d in ET.parse(path).getroot().iter("DataSet") if d.get("file")]
+
+
 def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
     """Why the outputs of an up-to-date stage cannot be trusted (None when they can): an HDF5 output
     must open as an artifact of the right kind and schema version with every object's header and
     attributes readable (the data themselves are not read: a corruption inside a dataset's data is
-    not seen), a JSON output must parse, any other output must not be empty. Read-only."""
+    not seen), a JSON output must parse and the files it lists as its ``outputs`` must exist, a
+    ParaView collection's frames must exist, any other output must not be empty. Read-only."""
     from fiberpipe.artifacts import open_checked
     from fiberpipe.errors import ArtifactError
 
@@ -291,9 +299,19 @@ def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
                 with open_checked(o, kind or tuple(SCHEMA_VERSIONS)) as f:
                     f.visititems(_touch)
             elif o.suffix == ".json":
-                json.loads(o.read_text())
+                data = json.loads(o.read_text())
+                # a summary that lists the files made beside it (post/summary.json's outputs)
+                listed = data.get("outputs", []) if isinstance(data, dict) else []
+                missing = [n for n in listed if isinstance(n, str) and not (o.parent / n).exists()]
+                if missing:
+                    return f"output {o.parent / missing[0]} is missing"
             elif o.stat().st_size == 0:
                 return f"output {o.name} is empty"
+            elif o.suffix == ".pvd":
+                listed = _pvd_files(o)
+                missing = [f for f in listed if not (o.parent / f).exists()]
+                if missing:
+                    return f"output {o.parent / missing[0]} is missing ({len(missing)} of the {len(listed)} frames {o.name} lists)"
         except ArtifactError as exc:
             return f"output {exc}"
         except Exception as exc:  # noqa: BLE001 — h5py raises RuntimeError/KeyError on damaged headers too
@@ -420,10 +438,12 @@ def run_pipeline(
     handler = _setup_run_log(run_dir)
     lock_path = run_dir / "fiberpipe.lock.json"
     summary_path = run_dir / "summary.json"
-    lock = json.loads(lock_path.read_text()) if lock_path.exists() else {}
-    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    lock = _read_state(lock_path, echo)
+    summary = _read_state(summary_path, echo)
     summary.update({"name": cfg.name, "fiberpipe_version": __version__, "config": cfg.source_path})
-    summary.setdefault("stages", {})
+    if not isinstance(summary.get("stages"), dict):
+        summary["stages"] = {}
+    _warn_stale_upstream(cfg, run_dir, plan, lock, echo)
     report = RunReport(run_dir)
     log.info("run %s -> %s: stages %s", cfg.source_path, run_dir, ", ".join(plan))
     try:
@@ -443,7 +463,7 @@ def run_pipeline(
                     raise FiberpipeError(f"stage {name} needs {iname} at {p}, which does not exist; {todo}")
             key = stage_key(stage, cfg, inputs)
             outputs = stage.outputs(cfg, run_dir)
-            entry = lock.get(name, {})
+            entry = lock.get(name) if isinstance(lock.get(name), dict) else {}
             if (not force and entry.get("key") == key and all(Path(o).exists() for o in outputs)
                     and not _checkpoint_to_resume(name, run_dir, key, resume)):
                 problem = outputs_problem(stage, outputs)
@@ -456,11 +476,25 @@ def run_pipeline(
                 echo(f"{name:12s} {problem}; rerunning")
             t0 = time.perf_counter()
             log.info("%s: started", name)
-            if name == "simulate":
-                mode = resume or ("discard" if force else "auto")
-                figures = stage.func(cfg, run_dir, inputs, key, resume=mode, echo=echo, progress=progress) or {}
-            else:
-                figures = stage.func(cfg, run_dir, inputs, key) or {}
+            # the stage's old key goes before it rewrites anything: a stage interrupted or failed
+            # half-way (a new simulation.h5 beside the old frames) is not up to date the next time;
+            # a stage that stops before touching its outputs (a refused resume) gets it back
+            old_entry, before = lock.pop(name, None), _outputs_state(outputs)
+            if old_entry is not None:
+                write_text_atomic(lock_path, json.dumps(lock, indent=2))
+            try:
+                if name == "simulate":
+                    mode = resume or ("discard" if force else "auto")
+                    figures = stage.func(cfg, run_dir, inputs, key, resume=mode, echo=echo, progress=progress) or {}
+                else:
+                    figures = stage.func(cfg, run_dir, inputs, key) or {}
+            except BaseException as exc:
+                log.error("%s: stopped: %s", name, "interrupted" if isinstance(exc, KeyboardInterrupt)
+                          else f"{exc.__class__.__name__}: {exc}")
+                if old_entry is not None and _outputs_state(outputs) == before:
+                    lock[name] = old_entry
+                    write_text_atomic(lock_path, json.dumps(lock, indent=2))
+                raise
             wall = time.perf_counter() - t0
             figures = {"wall_time_s": round(wall, 3), **figures}
             log.info("%s: done in %.2f s %s", name, wall, json.dumps(figures, default=str))
@@ -474,6 +508,64 @@ def run_pipeline(
         logging.getLogger("fiberpipe").removeHandler(handler)
         handler.close()
     return report
+
+
+def _outputs_state(outputs) -> list:
+    """Size and modification time of each output (None when absent), and of the files a frames
+    folder holds: what tells whether a stage has written anything."""
+    state = []
+    for o in map(Path, outputs):
+        try:
+            st = o.stat()
+            state.append((str(o), st.st_size, st.st_mtime_ns))
+        except OSError:
+            state.append((str(o), None))
+    frames = [Path(o).parent / "frames" for o in outputs if Path(o).suffix == ".pvd"]
+    for d in frames:
+        if d.is_dir():
+            state.extend((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in sorted(d.iterdir()))
+    return state
+
+
+def _read_state(path: Path, echo) -> dict:
+    """The run folder's ``fiberpipe.lock.json`` or ``summary.json`` (empty when missing); a file
+    that is not a JSON mapping is ignored with a warning, so its stages rerun."""
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        data, why = None, f"unreadable ({exc.__class__.__name__})"
+    else:
+        why = "not a JSON mapping"
+    if isinstance(data, dict):
+        return data
+    msg = f"warning: {path} is {why}: ignored, the stages it records run again"
+    log.warning(msg)
+    echo(msg)
+    return {}
+
+
+def _warn_stale_upstream(cfg: Config, run_dir: Path, plan: list[str], lock: dict, echo) -> None:
+    """With ``--from``, the stages before it are not run: say so when their outputs, which the plan
+    reads, were made with other settings, inputs or code than this config's (their recorded key
+    differs), instead of using them in silence."""
+    if not plan:
+        return
+    before = [n for n in planned_stages(cfg) if STAGE_ORDER.index(n) < STAGE_ORDER.index(plan[0])]
+    for name in before:
+        stage = STAGES[name]
+        inputs = stage.inputs(cfg, run_dir)
+        outputs = stage.outputs(cfg, run_dir)
+        if not all(Path(p).exists() for p in [*inputs.values(), *outputs]):
+            continue
+        entry = lock.get(name) if isinstance(lock.get(name), dict) else {}
+        if entry.get("key") != stage_key(stage, cfg, inputs):
+            msg = (f"warning: {name}'s outputs in {run_dir} were made with other settings, inputs or code than "
+                   f"{cfg.source_path or 'this config'} gives; {plan[0]} uses them as they are (run from {name} "
+                   "to remake them)")
+            log.warning(msg)
+            echo(msg)
 
 
 def _json_default(o):

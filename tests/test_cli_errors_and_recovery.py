@@ -382,3 +382,87 @@ def test_outputs_problem_reports_any_read_error(tmp_path, monkeypatch):
     stage = STAGES["mesh"]
     why = outputs_problem(stage, [tmp_path / "mesh.h5"])
     assert why is not None and "is unreadable (RuntimeError" in why
+
+
+# -- a stage stopped while it writes, outputs removed by hand, state files damaged ---------------
+
+
+def test_a_simulate_stopped_while_writing_is_not_up_to_date_after(tmp_path, small_run, monkeypatch):
+    """simulation.h5 is written before the frames: a simulate stopped between them (a full disk, a
+    Ctrl-C) left a new simulation.h5 beside the old frames under the old key, and the next run of the
+    old config took that mixture as up to date. The key goes before the stage writes."""
+    import copy
+
+    import numpy as np
+
+    import fiberpipe.stages.simulate as S
+
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    other = copy.deepcopy(SMALL)
+    other["solver"]["output_frames"] = 3
+    other_cfg = write_cfg(tmp_path / "other.yaml", other)
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(S, "write_frames_vtk", disk_full)
+    assert "No space left on device" in one_line_error(cli("run", other_cfg, "--out", run))
+    assert "simulate: stopped: OSError" in (run / "run.log").read_text()
+    monkeypatch.undo()
+    r = cli("run", cfg, "--out", run)
+    assert r.exit_code == 0 and "simulate     done" in r.output, r.output
+    a, b = _datasets(ref / "simulation.h5"), _datasets(run / "simulation.h5")
+    assert a["frames/positions"].shape == b["frames/positions"].shape
+    assert np.array_equal(a["frames/positions"], b["frames/positions"])
+
+
+@pytest.mark.parametrize("remove, stage, said", [
+    (lambda run: (run / "frames" / "frame_00001.vtu").unlink(), "simulate", "frame_00001.vtu is missing (1 of the 4"),
+    (lambda run: (run / "simulation.pvd").unlink(), "simulate", None),  # a missing output: rerun at once
+    (lambda run: (run / "post" / "report.md").unlink(), "post", "report.md is missing"),
+])
+def test_outputs_removed_by_hand_are_made_again(tmp_path, small_run, remove, stage, said):
+    """A frame, the ParaView collection or a file post's summary lists, removed: the stage that
+    makes it is not up to date (only the stages' main artifacts were checked)."""
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    assert cli("run", cfg, "--out", run).exit_code == 0  # post too
+    remove(run)
+    r = cli("run", cfg, "--out", run)
+    assert r.exit_code == 0 and f"{stage:12s} done" in r.output, r.output
+    if said:
+        line = next(ln for ln in r.output.splitlines() if ln.startswith(f"{stage:12s} output"))
+        assert said in line and line.endswith("rerunning"), r.output
+    assert "up to date" in cli("run", cfg, "--out", run).output
+
+
+@pytest.mark.parametrize("name, text", [("fiberpipe.lock.json", "[1, 2]"), ("fiberpipe.lock.json", '{"simulate": 5}'),
+                                        ("fiberpipe.lock.json", '{"simulate": {"key'), ("summary.json", "[]")])
+def test_a_damaged_lock_or_summary_is_ignored_with_a_warning(tmp_path, small_run, name, text):
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    (run / name).write_text(text)
+    r = cli("run", cfg, "--out", run, "--to", "simulate")
+    assert r.exit_code == 0 and "Traceback" not in r.output, r.output
+    if name == "summary.json" or text.startswith("[") or "key" in text:
+        assert f"warning: {run / name} is " in r.output and "ignored" in r.output, r.output
+    assert "up to date" in cli("run", cfg, "--out", run, "--to", "simulate").output
+
+
+def test_from_a_later_stage_warns_when_the_earlier_outputs_are_stale(tmp_path, small_run):
+    """--from simulate with another mesh section: the mesh.h5 it reads was made with other settings;
+    the run says so instead of using it in silence."""
+    import copy
+
+    cfg, ref = small_run
+    run = tmp_path / "run"
+    shutil.copytree(ref, run)
+    other = copy.deepcopy(SMALL)
+    other["mesh"]["element_length"] = "0.6 mm"
+    r = cli("run", write_cfg(tmp_path / "other.yaml", other), "--out", run, "--from", "simulate", "--to", "simulate")
+    assert r.exit_code == 0 and "warning: mesh's outputs in" in r.output and "run from mesh" in r.output, r.output
+    assert "warning" not in cli("run", cfg, "--out", run, "--from", "simulate", "--to", "simulate").output

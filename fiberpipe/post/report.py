@@ -208,7 +208,8 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
         stages = json.loads(run_summary.read_text()).get("stages", {})
         summary["wall_time_s_per_stage"] = {k: v.get("wall_time_s") for k, v in stages.items() if isinstance(v, dict)}
 
-    summary["outputs"] = made
+    # report.md too: written after the summary, so a stage stopped between them is not up to date
+    summary["outputs"] = [*made, "report.md"]
     write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2, default=float))
     write_text_atomic(out_dir / "report.md", _report(cfg, summary, made))
     return {k: summary[k] for k in ("final_load_N", "energy_balance_residual_max", "peak_ke_over_se", "vf_final", "position_error_mean_m") if k in summary}
