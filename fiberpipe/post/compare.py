@@ -16,6 +16,22 @@ from fiberpipe.post.phases import compaction_phases
 from fiberpipe.post.plots import plot_force_displacement
 
 
+def _post_summary(path: Path) -> dict:
+    """A run's ``post/summary.json`` ({} without one); one that is not a JSON mapping is an
+    InputError naming it (rerun the run's post stage)."""
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"is not readable JSON ({exc.__class__.__name__}); rerun its post stage "
+                         "(fiberpipe post CONFIG --out RUN)", where=str(path)) from None
+    if not isinstance(data, dict):
+        raise InputError("is not a JSON mapping; rerun its post stage (fiberpipe post CONFIG --out RUN)",
+                         where=str(path))
+    return data
+
+
 def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
     """Write ``comparison.png`` (F(U) of every run) and ``comparison.md`` (key figures); return the table."""
     out_dir = Path(out_dir)
@@ -35,9 +51,7 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
             raise InputError(f"{d} has no simulation.h5: run it first")
         sim = load_simulation(sim_path)
         name = d.name
-        summary = {}
-        if (d / "post" / "summary.json").exists():
-            summary = json.loads((d / "post" / "summary.json").read_text())
+        summary = _post_summary(d / "post" / "summary.json")
         try:
             U, F = force_displacement(sim)
             curves[name] = (U, F)

@@ -146,6 +146,13 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
     assert float(cells["contact_energy_created_over_WK"]) == 0.0  # no contact energy in this history
     assert (tmp_path / "cmp" / "comparison.png").exists()
+    # a damaged post/summary.json is one error naming it, not a traceback
+    from fiberpipe.errors import InputError
+
+    for text in ("[]", '{"final_load_N": '):
+        (tmp_path / "post" / "summary.json").write_text(text)
+        with pytest.raises(InputError, match=r"post/summary.json: is not .*rerun its post stage"):
+            compare_runs([tmp_path], tmp_path / "cmp2")
 
 
 def test_report_flags_energy_created_by_the_contact():
