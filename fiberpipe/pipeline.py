@@ -547,17 +547,21 @@ def _read_state(path: Path, echo) -> dict:
 
 
 def _warn_stale_upstream(cfg: Config, run_dir: Path, plan: list[str], lock: dict, echo) -> None:
-    """With ``--from``, the stages before it are not run: say so when their outputs, which the plan
-    reads, were made with other settings, inputs or code than this config's (their recorded key
-    differs), instead of using them in silence."""
+    """With ``--from``, the stages before it are not run: say so when the outputs the first stage
+    reads were made with other settings, inputs or code than this config's (their stage's recorded
+    key differs), instead of using them in silence. Only the stages that make the first stage's
+    inputs are checked: their keys hash files the first stage hashes anyway (not a whole volume
+    further up)."""
     if not plan:
         return
-    before = [n for n in planned_stages(cfg) if STAGE_ORDER.index(n) < STAGE_ORDER.index(plan[0])]
-    for name in before:
+    first_inputs = {Path(p) for p in STAGES[plan[0]].inputs(cfg, run_dir).values()}
+    for name in planned_stages(cfg):
+        if STAGE_ORDER.index(name) >= STAGE_ORDER.index(plan[0]):
+            continue
         stage = STAGES[name]
         inputs = stage.inputs(cfg, run_dir)
         outputs = stage.outputs(cfg, run_dir)
-        if not all(Path(p).exists() for p in [*inputs.values(), *outputs]):
+        if not first_inputs & {Path(o) for o in outputs} or not all(Path(p).exists() for p in [*inputs.values(), *outputs]):
             continue
         entry = lock.get(name) if isinstance(lock.get(name), dict) else {}
         if entry.get("key") != stage_key(stage, cfg, inputs):
