@@ -20,14 +20,31 @@ from fiberpipe import __version__
 from fiberpipe.errors import FiberpipeError
 
 
+class _Terminated(BaseException):
+    """SIGTERM outside the solver's step loop (which checkpoints on it): raised in the main thread so
+    that every file being written atomically is cleaned up on the way out, as on Ctrl-C."""
+
+
+def _raise_terminated(signum, frame):
+    raise _Terminated()
+
+
 class _Group(click.Group):
     """Turns user errors into one line (no traceback) unless ``--debug``."""
 
     def invoke(self, ctx):
+        import signal
+        import threading
+
+        in_main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _raise_terminated) if in_main else None
         try:
             rv = super().invoke(ctx)
             sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
             return rv
+        except _Terminated:
+            click.echo("terminated", err=True)
+            sys.exit(143)  # 128 + SIGTERM
         except BrokenPipeError:  # `fiberpipe inspect X | head`: the reader is gone, stop quietly
             _silence_stdout()
             sys.exit(141)  # 128 + SIGPIPE, as a tool killed by the signal
@@ -47,6 +64,9 @@ class _Group(click.Group):
                 raise
             click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
             sys.exit(2)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
 
 def _silence_stdout() -> None:

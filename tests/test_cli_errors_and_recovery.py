@@ -466,3 +466,30 @@ def test_from_a_later_stage_warns_when_the_earlier_outputs_are_stale(tmp_path, s
     r = cli("run", write_cfg(tmp_path / "other.yaml", other), "--out", run, "--from", "simulate", "--to", "simulate")
     assert r.exit_code == 0 and "warning: mesh's outputs in" in r.output and "run from mesh" in r.output, r.output
     assert "warning" not in cli("run", cfg, "--out", run, "--from", "simulate", "--to", "simulate").output
+
+
+def test_sigterm_outside_the_step_loop_cleans_up_and_exits_143(tmp_path, monkeypatch):
+    """SIGTERM while a stage writes (the solver's step loop checkpoints on it; elsewhere it killed
+    the process and left the half-written temporary file): 'terminated', exit 143, no temporary
+    file, the stage not recorded as done."""
+    import os
+    import signal
+
+    import fiberpipe.stages.mesh as M
+    from fiberpipe.artifacts import atomic_path
+
+    def killed_while_writing(path, *args, **kwargs):
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(b"half")
+            os.kill(os.getpid(), signal.SIGTERM)
+            tmp.write_bytes(b"half a mesh")  # not reached
+
+    monkeypatch.setattr(M, "write_mesh", killed_while_writing)
+    handler = signal.getsignal(signal.SIGTERM)
+    run = tmp_path / "run"
+    r = cli("run", write_cfg(tmp_path / "tip.yaml", TIP), "--out", run)
+    assert r.exit_code == 143 and "terminated" in r.output, r.output
+    assert not [p for p in run.rglob("*") if p.name.endswith(".tmp") or ".tmp" in p.name]
+    assert not (run / "mesh.h5").exists()
+    assert "mesh" not in json.loads((run / "fiberpipe.lock.json").read_text())
+    assert signal.getsignal(signal.SIGTERM) is handler  # restored for the next command
