@@ -45,6 +45,10 @@ class _Group(click.Group):
         except _Terminated:
             click.echo("terminated", err=True)
             sys.exit(143)  # 128 + SIGTERM
+        except click.UsageError as exc:  # a subcommand's bad option or argument: one line, as every error
+            where = exc.ctx.command_path if exc.ctx is not None else "fiberpipe"
+            click.echo(f"error: {exc.format_message()} (see {where} --help)", err=True)
+            sys.exit(exc.exit_code)
         except BrokenPipeError:  # `fiberpipe inspect X | head`: the reader is gone, stop quietly
             _silence_stdout()
             sys.exit(141)  # 128 + SIGPIPE, as a tool killed by the signal

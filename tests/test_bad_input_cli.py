@@ -158,3 +158,16 @@ def test_a_corrupt_fibers_input_is_refused_before_any_stage_runs(tmp_path, key, 
     cfg = validate_config({**GOOD, section: {**given, name: str(bad)}}, where="t.yaml")
     with pytest.raises(InputError, match=rf"^{key}: .*bad.h5: fiber 0 has non-finite coordinates$"):
         check_user_inputs(cfg, [stage])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["run"], "error: Missing argument 'CONFIG'. (see fiberpipe run --help)"),
+    (["bogus"], "error: No such command 'bogus'. (see fiberpipe --help)"),
+    (["run", "x.yaml", "--colour"], "error: No such option '--colour'. Did you mean '--out'?"),
+])
+def test_usage_errors_are_one_line(args, message):
+    """A bad option, a missing argument or an unknown command: one line like every other error
+    (click printed three: usage, hint, error)."""
+    result = CliRunner().invoke(main, args, prog_name="fiberpipe")
+    assert result.exit_code == 2 and result.output.strip().startswith(message), result.output
+    assert len(result.output.strip().splitlines()) == 1, result.output
