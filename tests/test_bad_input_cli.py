@@ -171,3 +171,17 @@ def test_usage_errors_are_one_line(args, message):
     result = CliRunner().invoke(main, args, prog_name="fiberpipe")
     assert result.exit_code == 2 and result.output.strip().startswith(message), result.output
     assert len(result.output.strip().splitlines()) == 1, result.output
+
+
+def test_export_checks_its_folders_before_the_stages_run(tmp_path):
+    """export abaqus: a deck path under a file, or a --run folder under one, fails before the stages
+    run (it ran them, then failed with FileExistsError), naming the option."""
+    p = tmp_path / "good.yaml"
+    p.write_text(yaml.safe_dump(GOOD))
+    (tmp_path / "afile").write_text("x")
+    r = _invoke(["export", "abaqus", p, "--run", tmp_path / "run", "--out", tmp_path / "afile" / "x.inp"])
+    _assert_clean_failure(r)
+    assert "choose another --out" in r.output and not (tmp_path / "run").exists()
+    r = _invoke(["export", "abaqus", p, "--run", tmp_path / "afile" / "run", "--out", tmp_path / "x.inp"])
+    _assert_clean_failure(r)
+    assert "choose another --run" in r.output
