@@ -352,6 +352,22 @@ def write_fibers(path, polylines, **kw) -> Path:
     )
 
 
+def read_json_mapping(path) -> dict:
+    """A JSON file holding one mapping (a run's ``summary.json``, ``fiberpipe.lock.json``, post's
+    ``summary.json``): {} when it does not exist; an ArtifactError naming it when it does not parse
+    or holds something else."""
+    path = Path(path)
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ArtifactError(f"is not readable JSON ({exc.__class__.__name__})", where=str(path)) from None
+    if not isinstance(data, dict):
+        raise ArtifactError("is not a JSON mapping", where=str(path))
+    return data
+
+
 def read_fibers(path):
     """Read a ``fibers`` artifact into :class:`~fiberpipe.polylines.Polylines`."""
     from fiberpipe.polylines import Polylines

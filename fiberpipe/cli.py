@@ -484,19 +484,14 @@ def export_abaqus(config, out_file, run_dir):
     outputs."""
     from fiberpipe.artifacts import read_mesh
     from fiberpipe.io.abaqus import write_abaqus_deck
-    from fiberpipe.pipeline import run_pipeline
-
-    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.pipeline import ensure_output_dir, run_pipeline
 
     cfg = _load(config)
     run_dir = Path(run_dir) if run_dir else _default_out(config)
     out_file = Path(out_file) if out_file else run_dir / "model.inp"
-    # both folders can be written, before the stages run (the run folder's message names --run)
-    for folder, option in ((out_file.parent, "--out"), (run_dir, "--run")):
-        try:
-            ensure_output_dir(folder)
-        except FiberpipeError as exc:
-            raise FiberpipeError(str(exc).replace("choose another --out", f"choose another {option}")) from None
+    # both folders can be written, before the stages run
+    ensure_output_dir(out_file.parent)
+    ensure_output_dir(run_dir, option="--run")
     run_pipeline(cfg, run_dir, to_stage="mesh", echo=_echo, progress=_progress())
     figures = write_abaqus_deck(out_file, cfg, read_mesh(run_dir / "mesh.h5"))
     fit = figures.get("contact_fit_error_full_scale")

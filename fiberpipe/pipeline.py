@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Callable
 
 from fiberpipe import __version__
-from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, read_fibers, write_text_atomic
+from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, read_fibers, read_json_mapping, write_text_atomic
 from fiberpipe.config import Config
-from fiberpipe.errors import ConfigError, FiberpipeError, InputError
+from fiberpipe.errors import ArtifactError, ConfigError, FiberpipeError, InputError
 
 log = logging.getLogger("fiberpipe")
 
@@ -290,7 +290,6 @@ def outputs_problem(stage: Stage, outputs: list[Path]) -> str | None:
     not seen), a JSON output must parse and the files it lists as its ``outputs`` must exist, a
     ParaView collection's frames must exist, any other output must not be empty. Read-only."""
     from fiberpipe.artifacts import open_checked
-    from fiberpipe.errors import ArtifactError
 
     for o in map(Path, outputs):
         try:
@@ -379,9 +378,10 @@ def _checkpoint_to_resume(name: str, run_dir: Path, key: str, resume: str | None
     return (got.decode() if isinstance(got, bytes) else got) == key
 
 
-def ensure_output_dir(path: str | Path) -> Path:
+def ensure_output_dir(path: str | Path, option: str = "--out") -> Path:
     """Create the output folder ``path`` if needed and check a file can be written in it, before
-    anything runs; an InputError says why not (an impossible path, a read-only folder)."""
+    anything runs; an InputError says why not (an impossible path, a read-only folder) and names
+    ``option``, the command option that chose the folder."""
     path = Path(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -390,7 +390,7 @@ def ensure_output_dir(path: str | Path) -> Path:
         os.unlink(probe)
     except OSError as exc:
         reason = exc.strerror or str(exc)
-        raise InputError(f"output folder {path} is not writable: {reason}; choose another --out") from None
+        raise InputError(f"output folder {path} is not writable: {reason}; choose another {option}") from None
     return path
 
 
@@ -530,20 +530,13 @@ def _outputs_state(outputs) -> list:
 def _read_state(path: Path, echo) -> dict:
     """The run folder's ``fiberpipe.lock.json`` or ``summary.json`` (empty when missing); a file
     that is not a JSON mapping is ignored with a warning, so its stages rerun."""
-    if not path.exists():
-        return {}
     try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        data, why = None, f"unreadable ({exc.__class__.__name__})"
-    else:
-        why = "not a JSON mapping"
-    if isinstance(data, dict):
-        return data
-    msg = f"warning: {path} is {why}: ignored, the stages it records run again"
-    log.warning(msg)
-    echo(msg)
-    return {}
+        return read_json_mapping(path)
+    except ArtifactError as exc:
+        msg = f"warning: {path} {exc.message}: ignored, the stages it records run again"
+        log.warning(msg)
+        echo(msg)
+        return {}
 
 
 def _warn_stale_upstream(cfg: Config, run_dir: Path, plan: list[str], lock: dict, echo) -> None:

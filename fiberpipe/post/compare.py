@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.artifacts import write_text_atomic
-from fiberpipe.errors import InputError
+from fiberpipe.artifacts import read_json_mapping, write_text_atomic
+from fiberpipe.errors import ArtifactError, InputError
 from fiberpipe.post.curves import force_displacement
 from fiberpipe.post.energies import contact_energy_created_figures
 from fiberpipe.post.history import load_simulation
@@ -19,17 +18,10 @@ from fiberpipe.post.plots import plot_force_displacement
 def _post_summary(path: Path) -> dict:
     """A run's ``post/summary.json`` ({} without one); one that is not a JSON mapping is an
     InputError naming it (rerun the run's post stage)."""
-    if not path.exists():
-        return {}
     try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(f"is not readable JSON ({exc.__class__.__name__}); rerun its post stage "
-                         "(fiberpipe post CONFIG --out RUN)", where=str(path)) from None
-    if not isinstance(data, dict):
-        raise InputError("is not a JSON mapping; rerun its post stage (fiberpipe post CONFIG --out RUN)",
-                         where=str(path))
-    return data
+        return read_json_mapping(path)
+    except ArtifactError as exc:
+        raise InputError(f"{exc}; rerun its post stage (fiberpipe post CONFIG --out RUN)") from None
 
 
 def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.artifacts import read_fibers, write_text_atomic
+from fiberpipe.artifacts import read_fibers, read_json_mapping, write_text_atomic
 from fiberpipe.config import Config
 from fiberpipe.post import plots
 from fiberpipe.post.compaction import fit_van_wyk, mean_field_contacts
@@ -205,8 +205,9 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
     # -- wall times of the run's stages ------------------------------------------------------
     run_summary = Path(sim_path).parent / "summary.json"
     if run_summary.exists():
-        stages = json.loads(run_summary.read_text()).get("stages", {})
-        summary["wall_time_s_per_stage"] = {k: v.get("wall_time_s") for k, v in stages.items() if isinstance(v, dict)}
+        stages = read_json_mapping(run_summary).get("stages", {})
+        if isinstance(stages, dict):
+            summary["wall_time_s_per_stage"] = {k: v.get("wall_time_s") for k, v in stages.items() if isinstance(v, dict)}
 
     # report.md too: written after the summary, so a stage stopped between them is not up to date
     summary["outputs"] = [*made, "report.md"]

@@ -577,9 +577,12 @@ def _usable_threads(threads: int) -> int:
     return min(threads, numba.config.NUMBA_NUM_THREADS)
 
 
-def threads_warning(threads: int) -> str:
-    """The run's warning when numba allows fewer threads than ``solver.threads`` asks for."""
+def threads_warning(threads: int) -> str | None:
+    """The run's warning when numba allows fewer threads than ``solver.threads`` asks for (None when
+    it allows them all)."""
     usable = _usable_threads(threads)
+    if usable >= threads:
+        return None
     return (f"solver.threads is {threads} but NUMBA_NUM_THREADS allows {usable}: the run uses {usable} (set "
             "NUMBA_NUM_THREADS before fiberpipe starts)")
 
@@ -664,8 +667,9 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     watches = [w for w in (e.make_watch(model, dt, settings.dt_safety) for e in effects if hasattr(e, "make_watch"))
                if w is not None]
     warnings: list[str] = []
-    if _usable_threads(settings.threads) < settings.threads:
-        warnings.append(threads_warning(settings.threads))
+    few_threads = threads_warning(settings.threads)
+    if few_threads:
+        warnings.append(few_threads)
 
     def take_frame():
         ft.append(state.t)

@@ -383,7 +383,7 @@ def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, 
     if spec.reference.extrapolate is not None:
         _extrapolation_points(spec, points, str(path))  # fail before running anything
     given_ref = None
-    if spec.reference.run:  # read before running anything: a wrong file fails now
+    if spec.reference.run:  # read before any point runs: a wrong file fails before the points' work
         from fiberpipe.post.history import load_simulation
 
         given_ref = load_simulation(_reference_run_path(spec, path))

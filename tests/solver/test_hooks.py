@@ -81,4 +81,4 @@ def test_a_run_warns_when_numba_allows_fewer_threads_than_asked(monkeypatch):
     assert _usable_threads(2) == 1 and _usable_threads(1) == 1
     assert threads_warning(2).startswith("solver.threads is 2 but NUMBA_NUM_THREADS allows 1: the run uses 1")
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 4)
-    assert _usable_threads(2) == 2
+    assert _usable_threads(2) == 2 and threads_warning(2) is None
