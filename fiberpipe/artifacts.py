@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import math
 import os
 import tempfile
 from contextlib import contextmanager
@@ -187,6 +188,36 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
 def write_text_atomic(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def _strict_json(obj):
+    """``obj`` with numpy scalars and arrays as Python numbers and lists, NaN and ±inf as None, and
+    any other value JSON has no type for as its text."""
+    if isinstance(obj, dict):
+        return {str(k): _strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_strict_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _strict_json(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
+
+
+def json_text(obj, *, indent: int | None = 2) -> str:
+    """``obj`` as strict JSON (RFC 8259), the text of every JSON file fiberpipe writes: a figure that
+    could not be computed (NaN, ±inf, for which JSON has no literal) is written as ``null``, so any
+    JSON parser reads the file; numpy values are written as numbers and lists."""
+    return json.dumps(_strict_json(obj), indent=indent, allow_nan=False) + "\n"
+
+
+def write_json_atomic(path: str | Path, obj) -> None:
+    """``obj`` as strict JSON (:func:`json_text`), written atomically to ``path``."""
+    write_text_atomic(path, json_text(obj))
 
 
 def write_artifact(

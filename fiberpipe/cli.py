@@ -265,7 +265,6 @@ def phantom(out, from_simulation, frame, **kw):
             vs = to_si(kw["voxel_size"], "length")
         except ValueError as exc:
             raise ConfigError(f"--voxel-size: {exc}") from None
-        ensure_output_dir(out)
         figures = render_simulation_frame(Path(from_simulation), frame, vs, Path(out), contrast_to_noise=kw["contrast_to_noise"],
                                           blur_sigma_vox=kw["blur_sigma_vox"], seed=kw["seed"])
         click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {frame}, shape {figures['shape']}")
@@ -326,10 +325,8 @@ def _phantom_option_error(exc) -> str:
 @click.option("--out", "out", type=click.Path(file_okay=False), required=True, help="Folder for comparison.png and comparison.md.")
 def compare(run_dirs, out):
     """Gather the force-displacement curves of several run folders into one plot and table."""
-    from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.post.compare import compare_runs
 
-    ensure_output_dir(out)
     click.echo(compare_runs([Path(d) for d in run_dirs], Path(out)))
 
 

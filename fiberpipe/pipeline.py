@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Callable
 
 from fiberpipe import __version__
-from fiberpipe.artifacts import SCHEMA_VERSIONS, input_sha256, read_fibers, read_json_mapping, write_text_atomic
+from fiberpipe.artifacts import (SCHEMA_VERSIONS, input_sha256, json_text, read_fibers, read_json_mapping,
+                                 write_json_atomic)
 from fiberpipe.config import Config
 from fiberpipe.errors import ArtifactError, ConfigError, FiberpipeError, InputError
 
@@ -481,7 +482,7 @@ def run_pipeline(
             # a stage that stops before touching its outputs (a refused resume) gets it back
             old_entry, before = lock.pop(name, None), _outputs_state(outputs)
             if old_entry is not None:
-                write_text_atomic(lock_path, json.dumps(lock, indent=2))
+                write_json_atomic(lock_path, lock)
             try:
                 if name == "simulate":
                     mode = resume or ("discard" if force else "auto")
@@ -493,17 +494,17 @@ def run_pipeline(
                           else f"{exc.__class__.__name__}: {exc}")
                 if old_entry is not None and _outputs_state(outputs) == before:
                     lock[name] = old_entry
-                    write_text_atomic(lock_path, json.dumps(lock, indent=2))
+                    write_json_atomic(lock_path, lock)
                 raise
             wall = time.perf_counter() - t0
             figures = {"wall_time_s": round(wall, 3), **figures}
-            log.info("%s: done in %.2f s %s", name, wall, json.dumps(figures, default=str))
+            log.info("%s: done in %.2f s %s", name, wall, json_text(figures, indent=None).strip())
             echo(f"{name:12s} done in {wall:7.2f} s  " + _short(figures))
             lock[name] = {"key": key, "outputs": [str(Path(o).relative_to(run_dir)) if Path(o).is_relative_to(run_dir) else str(o) for o in outputs]}
             summary["stages"][name] = figures
             report.stages[name] = figures
-            write_text_atomic(lock_path, json.dumps(lock, indent=2))
-            write_text_atomic(summary_path, json.dumps(summary, indent=2, default=_json_default))
+            write_json_atomic(lock_path, lock)
+            write_json_atomic(summary_path, summary)
     finally:
         logging.getLogger("fiberpipe").removeHandler(handler)
         handler.close()
@@ -563,16 +564,6 @@ def _warn_stale_upstream(cfg: Config, run_dir: Path, plan: list[str], lock: dict
                    "to remake them)")
             log.warning(msg)
             echo(msg)
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def _short(figures: dict) -> str:

@@ -120,3 +120,44 @@ def test_fast_ensemble_report_keeps_settings_whose_names_share_a_prefix_apart(tm
                  completed=True)
     rows = [line.split("|") for line in report(tmp_path, ["m", "m_s1"], 0.5e-3).splitlines() if line.startswith("| m")]
     assert [(r[1].strip(), r[2].strip()) for r in rows] == [("m", "1"), ("m_s1", "1")]
+
+
+def test_perf_profile_names_numba_functions_and_groups_samples_per_thread():
+    from numba import njit
+
+    from fiberpipe.benchmarks.perf_profile import _short_name, aggregate, table, write_perf_map
+
+    assert _short_name("_ZN9fiberpipe6solver17contact_potential11_merge_rowsB4v301B68c8tJTIeFIjx") \
+        == "contact_potential._merge_rows"
+    assert _short_name("__ieee754_log_fma") == "__ieee754_log_fma"
+    report = """
+# comment
+    40.00%   400  101:python  [JIT] tid 101   [.] _ZN9fiberpipe6solver18_kernels_integrate12update_rangeB4v3
+    10.00%   100  101:python  libgomp.so.1.0.0  [.] 0x000000000001f622
+    30.00%   300  102:python  libgomp.so.1.0.0  [.] 0x000000000001f7da
+    20.00%   200  102:python  [JIT] tid 101   [.] _ZN9fiberpipe6solver13_kernels_beam15beam_pass_nodesB3v48
+"""
+    per = aggregate(report)
+    assert per["101"]["_kernels_integrate.update_range"] == 400
+    assert per["102"]["libgomp (OpenMP runtime: waiting, task start)"] == 300
+    lines = table(per, 123.4, "101")
+    assert lines[0] == "123.4 µs per step (wall)" and lines[2].startswith("main thread: 500 samples")
+    assert "| _kernels_integrate.update_range | 80.0 % |" in lines
+    assert "| libgomp (OpenMP runtime: waiting, task start) | 60.0 % |" in lines
+
+    @njit(cache=False)
+    def twice(x):
+        return 2.0 * x
+
+    twice(1.0)
+    assert write_perf_map() > 0
+    import os
+
+    path = f"/tmp/perf-{os.getpid()}.map"
+    try:
+        text = open(path).read()
+        assert "twice" in text
+        start, size, _ = text.splitlines()[0].split(" ", 2)
+        assert int(start, 16) > 0 and int(size, 16) > 0
+    finally:
+        os.unlink(path)

@@ -16,7 +16,6 @@
 from __future__ import annotations
 
 import copy
-import json
 import math
 import os
 import time
@@ -89,7 +88,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict.
     ``progress``: bars for the deposit and the settling on a terminal
     (:func:`fiberpipe.progress.progress_bar`)."""
-    from fiberpipe.artifacts import write_fibers, write_text_atomic
+    from fiberpipe.artifacts import write_fibers, write_json_atomic, write_text_atomic
     from fiberpipe.model.specimen import cassette_specimen
     from fiberpipe.model.specimen_settle import fiber_contacts, settle_pile
     from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
@@ -181,7 +180,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     }
     out.mkdir(parents=True, exist_ok=True)
     write_fibers(out / "fibers.h5", fibers)
-    write_text_atomic(out / "specimen.json", json.dumps(info, indent=2) + "\n")
+    write_json_atomic(out / "specimen.json", info)
     write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, sp.width, where, strain=sp.strain))
     if settle:
         info["settle_wall_time_s"] = settle["wall_time_s"]

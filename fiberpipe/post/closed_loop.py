@@ -13,7 +13,13 @@ from fiberpipe.post.positions import position_error
 
 
 def frame_polylines(sim, frame: int = -1) -> Polylines:
-    """Mid-lines of a simulation frame (node positions of frame ``frame``), with the fiber radii."""
+    """Mid-lines of a simulation frame (node positions of frame ``frame``, negative from the last),
+    with the fiber radii; an InputError names the frames the simulation has when it has no such frame."""
+    n = len(sim.frames_positions)
+    if not -n <= frame < n:
+        from fiberpipe.errors import InputError
+
+        raise InputError(f"frame {frame}: the simulation has {n} frames (0 … {n - 1}, or −{n} … −1 from the last)")
     return Polylines(np.array(sim.frames_positions[frame]), sim.mesh.node_offsets.copy(), sim.mesh.radius_m.copy())
 
 

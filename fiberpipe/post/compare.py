@@ -24,26 +24,36 @@ def _post_summary(path: Path) -> dict:
         raise InputError(f"{exc}; rerun its post stage (fiberpipe post CONFIG --out RUN)") from None
 
 
+def _figure(summary: dict, key: str) -> float:
+    """A number of a post summary; NaN where it is missing or null (a figure that could not be computed)."""
+    v = summary.get(key)
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else float("nan")
+
+
 def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
     """Write ``comparison.png`` (F(U) of every run) and ``comparison.md`` (key figures); return the table."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    curves, rows = {}, []
-    for d in run_dirs:
-        d = Path(d)
-        sim_path = d / "simulation.h5"
-        if not sim_path.exists():
-            if (d / "simulation_diverged.h5").exists():
-                rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
-                             "rearrangement_end_U_mm": float("nan"), "steep_start_U_mm": float("nan"),
-                             "peak_ke_over_se": float("nan"), "energy_residual": float("nan"),
-                             "contact_energy_created_over_WK": float("nan"), "steps": 0,
-                             "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
-                continue
+    from fiberpipe.pipeline import ensure_output_dir
+
+    # every run read before the output folder is made: a refused comparison leaves nothing behind
+    runs = []
+    for d in map(Path, run_dirs):
+        if (d / "simulation.h5").exists():
+            runs.append((d, load_simulation(d / "simulation.h5"), _post_summary(d / "post" / "summary.json")))
+        elif (d / "simulation_diverged.h5").exists():
+            runs.append((d, None, {}))
+        else:
             raise InputError(f"{d} has no simulation.h5: run it first")
-        sim = load_simulation(sim_path)
+    out_dir = ensure_output_dir(out_dir)
+    curves, rows = {}, []
+    for d, sim, summary in runs:
+        if sim is None:
+            rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
+                         "rearrangement_end_U_mm": float("nan"), "steep_start_U_mm": float("nan"),
+                         "peak_ke_over_se": float("nan"), "energy_residual": float("nan"),
+                         "contact_energy_created_over_WK": float("nan"), "steps": 0,
+                         "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
+            continue
         name = d.name
-        summary = _post_summary(d / "post" / "summary.json")
         try:
             U, F = force_displacement(sim)
             curves[name] = (U, F)
@@ -62,8 +72,8 @@ def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
                 "max_load_N": peak,
                 "rearrangement_end_U_mm": u1,
                 "steep_start_U_mm": u2,
-                "peak_ke_over_se": summary.get("peak_ke_over_se", float("nan")),
-                "energy_residual": summary.get("energy_balance_residual_max", float("nan")),
+                "peak_ke_over_se": _figure(summary, "peak_ke_over_se"),
+                "energy_residual": _figure(summary, "energy_balance_residual_max"),
                 "contact_energy_created_over_WK": created,
                 "steps": int(sim.attrs.get("steps", 0)),
                 "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),

@@ -5,13 +5,12 @@ Every column and axis is defined, with its unit, in ``docs/outputs.md``.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.artifacts import read_fibers, read_json_mapping, write_text_atomic
+from fiberpipe.artifacts import read_fibers, read_json_mapping, write_json_atomic, write_text_atomic
 from fiberpipe.config import Config
 from fiberpipe.post import plots
 from fiberpipe.post.compaction import fit_van_wyk, mean_field_contacts
@@ -211,7 +210,7 @@ def run_post(cfg: Config, sim_path: Path, out_dir: Path, *, config_sha256: str =
 
     # report.md too: written after the summary, so a stage stopped between them is not up to date
     summary["outputs"] = [*made, "report.md"]
-    write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2, default=float))
+    write_json_atomic(out_dir / "summary.json", summary)
     write_text_atomic(out_dir / "report.md", _report(cfg, summary, made))
     return {k: summary[k] for k in ("final_load_N", "energy_balance_residual_max", "peak_ke_over_se", "vf_final", "position_error_mean_m") if k in summary}
 

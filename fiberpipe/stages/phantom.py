@@ -31,17 +31,17 @@ def run_phantom(pcfg: PhantomConfig, out_dir: Path, *, config_sha256: str = "") 
 
 
 def render_simulation_frame(sim_path: Path, frame: int, voxel_size_m: float, out_dir: Path, **render_kw) -> dict:
-    """Render frame ``frame`` of a simulation into ``out_dir/volume.tif`` + ``truth.h5`` (closed loop)."""
+    """Render frame ``frame`` of a simulation into ``out_dir/volume.tif`` + ``truth.h5`` (closed loop).
+    The simulation and its frame are read before ``out_dir`` is made: a refused call leaves no folder."""
     from fiberpipe.imaging.io import save_volume_tif
+    from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.polylines import Polylines
     from fiberpipe.post.closed_loop import frame_polylines, render_for_tracing
     from fiberpipe.post.history import load_simulation
 
-    sim = load_simulation(sim_path)
-    fibers = frame_polylines(sim, frame)
+    fibers = frame_polylines(load_simulation(sim_path), frame)
+    out_dir = ensure_output_dir(out_dir)
     vol, origin = render_for_tracing(fibers, voxel_size_m, **render_kw)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     save_volume_tif(out_dir / "volume.tif", vol, voxel_size_m)
     shifted = Polylines(fibers.points_m - origin, fibers.offsets, fibers.radius_m)
     write_fibers(out_dir / "truth.h5", shifted, attrs={"origin_m": [float(v) for v in origin], "frame": int(frame)})

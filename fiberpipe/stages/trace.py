@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_text_atomic
+from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_json_atomic
 from fiberpipe.config import Config
 from fiberpipe.errors import InputError
 from fiberpipe.stages._common import input_hashes
@@ -90,7 +89,7 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
                                         None if cfg.trace.min_length is not None else "two mesh.element_length")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
     orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
-    write_text_atomic(Path(out).with_name("orientation.json"), json.dumps(orientation, indent=2))
+    write_json_atomic(Path(out).with_name("orientation.json"), orientation)
     of = orientation["fibers"]
     figures = {
         "method": method,
@@ -215,7 +214,7 @@ def trace_accuracy_report(fibers_path: Path, truth_path: Path, voxel_size_m: flo
     acc = trace_accuracy(read_fibers(fibers_path), read_fibers(truth_path), voxel_size_m=voxel_size_m)
     acc = {k: (float(v) if isinstance(v, (np.floating, np.integer)) else v) for k, v in acc.items() if not isinstance(v, np.ndarray)}
     if out_json is not None:
-        write_text_atomic(out_json, json.dumps(acc, indent=2, default=float))
+        write_json_atomic(out_json, acc)
     return acc
 
 

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from fiberpipe.artifacts import write_text_atomic
+from fiberpipe.artifacts import write_json_atomic, write_text_atomic
 from fiberpipe.config import load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError, InputError
 
@@ -219,7 +219,7 @@ class _Evaluator:
         wall_s = time.perf_counter() - t0
         for p, is_new in zip(stamps, new):
             if is_new:
-                write_text_atomic(p, json.dumps({"wall_time_s": wall_s}))
+                write_json_atomic(p, {"wall_time_s": wall_s})
         if not any(new):  # runs of an earlier fit: what they cost then (NaN if it did not record it)
             wall_s = (max(json.loads(p.read_text())["wall_time_s"] for p in stamps)
                       if all(p.exists() for p in stamps) else float("nan"))
@@ -361,7 +361,7 @@ def _write(out: Path, result: dict, ev: _Evaluator, U_t, F_t, best) -> None:
     cols.update({c: [h[c] for h in ev.history] for c in ("objective_N", "spread_rms_N", "wall_time_s")})
     cols["evaluation"] = list(range(1, len(ev.history) + 1))
     write_csv(out / "history.csv", {"evaluation": cols.pop("evaluation"), **cols})
-    write_text_atomic(out / "fit.json", json.dumps(result, indent=2) + "\n")
+    write_json_atomic(out / "fit.json", result)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -146,13 +146,57 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
     assert float(cells["contact_energy_created_over_WK"]) == 0.0  # no contact energy in this history
     assert (tmp_path / "cmp" / "comparison.png").exists()
-    # a damaged post/summary.json is one error naming it, not a traceback
+    # a damaged post/summary.json is one error naming it, not a traceback, and no folder is made
     from fiberpipe.errors import InputError
 
     for text in ("[]", '{"final_load_N": '):
         (tmp_path / "post" / "summary.json").write_text(text)
         with pytest.raises(InputError, match=r"post/summary.json: is not .*rerun its post stage"):
             compare_runs([tmp_path], tmp_path / "cmp2")
+        assert not (tmp_path / "cmp2").exists()
+    (tmp_path / "post" / "summary.json").unlink()
+    with pytest.raises(InputError, match="has no simulation.h5"):
+        compare_runs([tmp_path, tmp_path / "nothing"], tmp_path / "cmp2")
+    assert not (tmp_path / "cmp2").exists()
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(InputError, match="is not writable"):
+        compare_runs([tmp_path], tmp_path / "afile" / "cmp")
+    # the closed loop's phantom of a frame: a frame the simulation does not have is one line naming the
+    # frames it has, before any folder is made; one it has is rendered with its mid-lines
+    from click.testing import CliRunner
+
+    from fiberpipe.cli import main
+
+    def phantom(frame, out):
+        return CliRunner().invoke(main, ["phantom", "--from-simulation", str(sim_path), "--frame", str(frame),
+                                         "--voxel-size", "50 um", "--out", str(out)])
+
+    res = phantom(6, tmp_path / "ph")
+    assert res.exit_code != 0 and "Traceback" not in res.output, res.output
+    assert "error: frame 6: the simulation has 6 frames (0 … 5, or −6 … −1 from the last)" in res.output
+    assert not (tmp_path / "ph").exists()
+    res = phantom(-1, tmp_path / "ph")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "ph" / "volume.tif").exists() and (tmp_path / "ph" / "truth.h5").exists()
+
+
+def test_summary_json_is_strict_json_with_null_for_figures_not_computed(tmp_path):
+    """NaN and ±inf have no JSON literal: a figure that could not be computed is written as null, so
+    any JSON parser reads the file, and compare reads null as NaN."""
+    from fiberpipe.artifacts import json_text, write_json_atomic
+    from fiberpipe.post.compare import _figure
+
+    def strict(text):
+        return json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON literal {c}"))
+
+    obj = {"a": float("nan"), "b": [np.inf, -np.inf, np.float64(1.5)], "c": {"d": np.int64(3), "e": np.array([1.0, np.nan])},
+           "f": None, "g": True, "h": tmp_path}
+    assert strict(json_text(obj)) == {"a": None, "b": [None, None, 1.5], "c": {"d": 3, "e": [1.0, None]}, "f": None,
+                                      "g": True, "h": str(tmp_path)}
+    write_json_atomic(tmp_path / "s.json", {"peak_ke_over_se": float("nan"), "energy_balance_residual_max": 2e-4})
+    s = strict((tmp_path / "s.json").read_text())
+    assert np.isnan(_figure(s, "peak_ke_over_se")) and _figure(s, "energy_balance_residual_max") == 2e-4
+    assert np.isnan(_figure(s, "missing")) and np.isnan(_figure({"x": True}, "x"))
 
 
 def test_report_flags_energy_created_by_the_contact():

@@ -1,0 +1,180 @@
+"""Where the step loop's time goes, per thread and per compiled function: Linux ``perf`` sampling
+of the jitted kernels, named.
+
+    python -m fiberpipe.benchmarks.perf_profile [--state STATE.npz | --config CONFIG] [--threads 2]
+
+The scene is paper-40 at the study's settings from a state saved by
+:mod:`fiberpipe.benchmarks.paper40_states` (``--state``), or a run config's scene from rest
+(``--config``). A child process compiles the step loop (into an empty numba cache, so that every
+kernel has the LLVM module its name is read from), writes ``/tmp/perf-PID.map`` (the address and
+name of each compiled function, which ``perf report`` reads for code without a symbol table), then
+runs ``--steps`` timed steps under ``perf record -e cycles:u``. Only the samples of the timed steps
+are counted. Each thread's samples are grouped by function; ``libgomp`` is the OpenMP runtime,
+where a thread with no task waits (a second thread's share there is the serial part of the step).
+
+Strategy: numba's functions are linked into the step loop as separate functions unless LLVM inlines
+them, so the names are those of the kernels that stay calls (the beam pass, the node update, the
+contact pass's pair range and merge, the laws' look-ups, the friction kernels); code inlined into
+them counts as theirs. Needs ``perf`` and ``kernel.perf_event_paranoid`` ≤ 2 (user-space
+sampling of one's own process).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import gc
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def write_perf_map() -> int:
+    """``/tmp/perf-PID.map`` for every function numba compiled in this process (not those loaded from
+    its cache, which keep no LLVM module to name them); returns how many."""
+    from numba.core.codegen import CPUCodeLibrary
+
+    addrs = {}
+    for lib in (o for o in gc.get_objects() if isinstance(o, CPUCodeLibrary)):
+        mod = getattr(lib, "_final_module", None)
+        if mod is None:
+            continue
+        for fn in mod.functions:
+            if fn.is_declaration:
+                continue
+            try:
+                p = lib._codegen._engine.get_function_address(fn.name)
+            except Exception:  # a function of a library not finalised
+                continue
+            if p:
+                addrs[p] = fn.name
+    items = sorted(addrs.items())
+    with open(f"/tmp/perf-{os.getpid()}.map", "w") as fh:
+        for k, (a, name) in enumerate(items):
+            size = min(items[k + 1][0] - a if k + 1 < len(items) else 1 << 16, 1 << 22)
+            fh.write(f"{a:x} {size:x} {name}\n")
+    return len(items)
+
+
+def _child(a) -> None:
+    from fiberpipe.benchmarks.paper40_states import load_state, scene
+    from fiberpipe.solver import State
+    from fiberpipe.solver.integrator import Integrator
+
+    if a.config:
+        model, effects, _, dt = scene(config=Path(a.config))
+        st = State.at_rest(model)
+    else:
+        model, effects, _, dt = scene()
+        st = load_state(a.state)
+    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
+    integ.advance(st, a.warmup)
+    write_perf_map()
+    t0 = time.clock_gettime(time.CLOCK_MONOTONIC)
+    w0 = time.perf_counter()
+    integ.advance(st, a.steps)
+    wall = time.perf_counter() - w0
+    t1 = time.clock_gettime(time.CLOCK_MONOTONIC)
+    print(f"WINDOW {t0:.6f} {t1:.6f} {wall / a.steps * 1e6:.2f} {model.n_elements} {os.getpid()}", flush=True)
+
+
+def _short_name(sym: str) -> str:
+    """``module.function`` of a numba symbol (Itanium-mangled ``_ZN…``), else the symbol."""
+    s = sym[3:] if sym.startswith("_ZN") else ""
+    names = []
+    while s and s[0].isdigit():
+        n = re.match(r"\d+", s).group()
+        s = s[len(n):]
+        names.append(s[:int(n)])
+        s = s[int(n):]
+    return ".".join(names[-2:]) if names else sym[:60]
+
+
+def aggregate(report_text: str) -> dict:
+    """Samples per thread and per function from ``perf report --sort pid,dso,sym -n --stdio``."""
+    per = collections.defaultdict(collections.Counter)
+    for line in report_text.splitlines():
+        m = re.match(r"\s*[\d.]+%\s+(\d+)\s+(\d+):\S+\s+(.*?)\s+\[.\]\s+(.*)", line)
+        if not m:
+            continue
+        n, tid, dso, sym = int(m[1]), m[2], m[3], m[4].strip()
+        if "JIT" in dso or dso.startswith("perf-"):
+            key = _short_name(sym)
+        elif "gomp" in dso:
+            key = "libgomp (OpenMP runtime: waiting, task start)"
+        elif "libm" in dso:
+            key = "libm (" + sym.split("@")[0] + ")"
+        else:
+            key = f"{os.path.basename(dso)}"
+        per[tid][key] += n
+    return per
+
+
+def table(per: dict, us_per_step: float, main_tid: str, min_share: float = 0.005) -> list[str]:
+    """Markdown tables of :func:`aggregate`'s samples: the main thread (``main_tid``, the process's id,
+    which runs the step's serial parts) first, then the others with at least 5 % of its samples."""
+    threads = sorted(per, key=lambda t: (t != main_tid, -sum(per[t].values())))
+    lines = [f"{us_per_step:.1f} µs per step (wall)", ""]
+    top = max(sum(c.values()) for c in per.values())
+    for tid in threads:
+        tot = sum(per[tid].values())
+        if tot < 0.05 * top:
+            continue  # BLAS or idle helper threads
+        lines += [f"{'main thread' if tid == main_tid else 'thread ' + tid}: {tot} samples", "",
+                  "| function | share of the thread's samples |", "|---|---|"]
+        for name, n in per[tid].most_common():
+            if n / tot >= min_share:
+                lines.append(f"| {name} | {100 * n / tot:.1f} % |")
+        lines.append("")
+    return lines
+
+
+def main(argv=None) -> list[str]:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--state", help="a paper-40 state saved by fiberpipe.benchmarks.paper40_states")
+    ap.add_argument("--config", help="a run config: its scene from rest")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--warmup", type=int, default=300)
+    ap.add_argument("--frequency", type=int, default=1999, help="samples per second and thread")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if not (a.state or a.config):
+        ap.error("give --state STATE.npz or --config CONFIG")
+    if a.child:
+        _child(a)
+        return []
+    if shutil.which("perf") is None:
+        raise SystemExit("perf_profile needs Linux perf (the linux-tools package) on the PATH")
+    with tempfile.TemporaryDirectory(prefix="fiberpipe-perf-") as tmp:
+        data = Path(tmp) / "perf.data"
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba-cache"),
+                   NUMBA_NUM_THREADS=os.environ.get("NUMBA_NUM_THREADS", str(max(1, a.threads))))
+        cmd = ["perf", "record", "-q", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
+               str(data), "--", sys.executable, "-m", "fiberpipe.benchmarks.perf_profile", "--child",
+               "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
+        cmd += ["--state", a.state] if a.state else ["--config", a.config]
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        window = [ln.split() for ln in run.stdout.splitlines() if ln.startswith("WINDOW")]
+        if run.returncode != 0 or not window:
+            raise SystemExit(f"perf record failed ({run.returncode}): {run.stderr.strip()[-400:]}")
+        _, t0, t1, us, n_el, pid = window[-1]
+        rep = subprocess.run(["perf", "report", "-i", str(data), "--time", f"{t0},{t1}", "--sort", "pid,dso,sym",
+                              "--no-children", "--stdio", "-n"], capture_output=True, text=True)
+        Path(f"/tmp/perf-{pid}.map").unlink(missing_ok=True)
+    scene_name = a.config or f"paper-40 state {os.path.basename(a.state)}"
+    lines = [f"`python -m fiberpipe.benchmarks.perf_profile {'--config ' + a.config if a.config else '--state ' + a.state}"
+             f" --threads {a.threads} --steps {a.steps}`: {scene_name}, {n_el} elements, {a.threads} thread(s), "
+             f"load average {os.getloadavg()[0]:.2f}", ""]
+    lines += table(aggregate(rep.stdout), float(us), pid)
+    print("\n".join(lines))
+    return lines
+
+
+if __name__ == "__main__":
+    main()
