@@ -124,7 +124,7 @@ def table(per: dict, us_per_step: float, main_tid: str, min_share: float = 0.005
     for tid in threads:
         tot = sum(per[tid].values())
         if tot < 0.05 * top:
-            continue  # BLAS or idle helper threads
+            continue  # the BLAS pool and other idle threads
         lines += [f"{'main thread' if tid == main_tid else 'thread ' + tid}: {tot} samples", "",
                   "| function | share of the thread's samples |", "|---|---|"]
         for name, n in per[tid].most_common():
