@@ -99,6 +99,15 @@ profile-paper40: setup
 	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
 	$(PY) -m fiberpipe.benchmarks.bench_profile runs/bench/p40_138728.npz runs/bench/p40_708000.npz
 
+# the same states sampled per thread and per compiled function with Linux perf (docs/benchmarks.md,
+# "The step per thread, sampled"; needs perf and kernel.perf_event_paranoid <= 2)
+.PHONY: perf-profile
+perf-profile: setup
+	test -f runs/bench/p40_708000.npz || $(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
+	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 1 --steps 6000
+	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 2 --steps 6000
+	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_138728.npz --threads 2 --steps 6000
+
 bench-reference: setup
 	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --until 12ms --spans 10
 	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --spans 10
