@@ -105,8 +105,8 @@ profile-paper40: setup
 perf-profile: setup
 	test -f runs/bench/p40_708000.npz || $(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
 	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 1 --steps 6000
-	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 2 --steps 6000
-	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_138728.npz --threads 2 --steps 6000
+	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 2 --steps 6000
+	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_138728.npz --threads 2 --steps 6000
 
 bench-reference: setup
 	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --until 12ms --spans 10

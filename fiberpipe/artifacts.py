@@ -190,13 +190,30 @@ def write_text_atomic(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def _json_key(k) -> str:
+    """A mapping key as JSON writes it (``true``, ``null``, numbers as their text)."""
+    if isinstance(k, np.generic):
+        k = k.item()
+    if isinstance(k, bool) or k is None:
+        return json.dumps(k)
+    return k if isinstance(k, str) else str(k)
+
+
 def _strict_json(obj):
-    """``obj`` with numpy scalars and arrays as Python numbers and lists, NaN and ±inf as None, and
-    any other value JSON has no type for as its text."""
+    """``obj`` with numpy scalars and arrays as Python numbers and lists, sets as sorted lists, NaN
+    and ±inf as None, and any other value JSON has no type for as its text."""
     if isinstance(obj, dict):
-        return {str(k): _strict_json(v) for k, v in obj.items()}
+        out = {}
+        for k, v in obj.items():
+            key = _json_key(k)
+            if key in out:
+                raise ValueError(f"two keys of one mapping are both {key!r} in JSON")
+            out[key] = _strict_json(v)
+        return out
     if isinstance(obj, (list, tuple)):
         return [_strict_json(v) for v in obj]
+    if isinstance(obj, (set, frozenset)):
+        return [_strict_json(v) for v in sorted(obj)]
     if isinstance(obj, np.ndarray):
         return _strict_json(obj.tolist())
     if isinstance(obj, np.generic):

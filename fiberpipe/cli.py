@@ -265,9 +265,11 @@ def phantom(out, from_simulation, frame, **kw):
             vs = to_si(kw["voxel_size"], "length")
         except ValueError as exc:
             raise ConfigError(f"--voxel-size: {exc}") from None
+        if not vs > 0:
+            raise ConfigError(f"--voxel-size {kw['voxel_size']}: must be positive")
         figures = render_simulation_frame(Path(from_simulation), frame, vs, Path(out), contrast_to_noise=kw["contrast_to_noise"],
                                           blur_sigma_vox=kw["blur_sigma_vox"], seed=kw["seed"])
-        click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {frame}, shape {figures['shape']}")
+        click.echo(f"wrote {out}/volume.tif and {out}/truth.h5: frame {figures['frame']}, shape {figures['shape']}")
         return
 
     from pydantic import ValidationError

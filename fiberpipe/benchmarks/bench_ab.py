@@ -136,8 +136,9 @@ def main(argv=None) -> dict:
     print("\n".join(HEADER + lines(r, str(a.reference))))
     print("per span ref/new:", " ".join(f"{x:.3f}" for x in r["per_span"]))
     if a.save:
-        import json
-        a.save.write_text(json.dumps(r))
+        from fiberpipe.artifacts import write_json_atomic
+
+        write_json_atomic(a.save, r)
     return r
 
 

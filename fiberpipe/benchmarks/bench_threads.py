@@ -25,6 +25,8 @@ import os
 import statistics
 import time
 
+from fiberpipe.benchmarks.paper40_states import scene_and_state
+
 
 def _bench_scene(n_fibers: int, contact: bool):
     """The bench bundle of ``n_fibers``: (model, effects, dt, state at rest)."""
@@ -41,35 +43,16 @@ def _bench_scene(n_fibers: int, contact: bool):
     return m, eff, dt, State.at_rest(m)
 
 
-def _state_scene(path: str):
-    """paper-40 at the study's settings from a saved state (:mod:`paper40_states`)."""
-    from fiberpipe.benchmarks.paper40_states import load_state, scene
-
-    m, eff, _, dt = scene()
-    return m, eff, dt, load_state(path)
-
-
-def _config_scene(path: str):
-    """The scene of a run config from rest: (model, effects, dt, state at rest)."""
-    from pathlib import Path
-
-    from fiberpipe.benchmarks.paper40_states import scene
-    from fiberpipe.solver import State
-
-    m, eff, _, dt = scene(config=Path(path))
-    return m, eff, dt, State.at_rest(m)
-
-
 def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True,
             state: str | None = None, config: str | None = None) -> dict:
     from fiberpipe.solver.integrator import Integrator
 
     runs = {}
     for th in (1, threads):
-        if config:
-            m, eff, dt, st = _config_scene(config)
+        if config or state:
+            m, eff, dt, st = scene_and_state(state, config)
         else:
-            m, eff, dt, st = _state_scene(state) if state else _bench_scene(n_fibers, contact)
+            m, eff, dt, st = _bench_scene(n_fibers, contact)
         integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
         integ.advance(st, 300 if config else 10)  # compile (from rest: past the first contacts)
         runs[th] = (integ, st, m.n_elements)

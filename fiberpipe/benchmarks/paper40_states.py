@@ -32,6 +32,18 @@ def scene(overrides: dict | None = None, config: Path | None = None):
     return model, effects, settings, dt
 
 
+def scene_and_state(state: str | Path | None = None, config: str | Path | None = None):
+    """``(model, effects, dt, state)``: paper-40 from the state saved at ``state``
+    (:func:`save_state`), or the scene of the run config ``config`` from rest."""
+    from fiberpipe.solver import State
+
+    if config is not None:
+        model, effects, _, dt = scene(config=Path(config))
+        return model, effects, dt, State.at_rest(model)
+    model, effects, _, dt = scene()
+    return model, effects, dt, load_state(state)
+
+
 def save_state(path, state) -> None:
     np.savez(path, x=state.x, q=state.q, v=state.v, w=state.w, acc=state.acc, t=state.t, step=state.step)
 

@@ -8,8 +8,11 @@ The scene is paper-40 at the study's settings from a state saved by
 (``--config``). A child process compiles the step loop (into an empty numba cache, so that every
 kernel has the LLVM module its name is read from), writes ``/tmp/perf-PID.map`` (the address and
 name of each compiled function, which ``perf report`` reads for code without a symbol table), then
-runs ``--steps`` timed steps under ``perf record -e cycles:u``. Only the samples of the timed steps
-are counted. Each thread's samples are grouped by function; ``libgomp`` is the OpenMP runtime,
+runs ``--steps`` timed steps under ``perf record -e cycles:u`` (perf falls back to a clock where the
+machine gives no cycle counter; the table names the event). Only the samples of the timed steps are
+counted. The code sampled is the code compiled in the child: a run that loads the kernels from
+numba's cache runs copies that can round differently in the last bit (docs/reliability.md), with the
+same work. Each thread's samples are grouped by function; ``libgomp`` is the OpenMP runtime,
 where a thread with no task waits (a second thread's share there is the serial part of the step).
 
 Strategy: numba's functions are linked into the step loop as separate functions unless LLVM inlines
@@ -62,25 +65,23 @@ def write_perf_map() -> int:
 
 
 def _child(a) -> None:
-    from fiberpipe.benchmarks.paper40_states import load_state, scene
-    from fiberpipe.solver import State
+    from fiberpipe.benchmarks.paper40_states import scene_and_state
     from fiberpipe.solver.integrator import Integrator
 
-    if a.config:
-        model, effects, _, dt = scene(config=Path(a.config))
-        st = State.at_rest(model)
-    else:
-        model, effects, _, dt = scene()
-        st = load_state(a.state)
+    model, effects, dt, st = scene_and_state(a.state, a.config)
     integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
-    integ.advance(st, a.warmup)
+    print(f"PID {os.getpid()}", flush=True)  # the map's name, for the parent to remove it
+    if integ.advance(st, a.warmup)[0] != 0:
+        raise SystemExit("the warm-up steps stopped (the state diverges at these settings)")
     write_perf_map()
     t0 = time.clock_gettime(time.CLOCK_MONOTONIC)
     w0 = time.perf_counter()
-    integ.advance(st, a.steps)
+    status = integ.advance(st, a.steps)[0]
     wall = time.perf_counter() - w0
     t1 = time.clock_gettime(time.CLOCK_MONOTONIC)
-    print(f"WINDOW {t0:.6f} {t1:.6f} {wall / a.steps * 1e6:.2f} {model.n_elements} {os.getpid()}", flush=True)
+    if status != 0:
+        raise SystemExit("the timed steps stopped (the state diverges at these settings)")
+    print(f"WINDOW {t0:.6f} {t1:.6f} {wall / a.steps * 1e6:.2f} {model.n_elements}", flush=True)
 
 
 def _short_name(sym: str) -> str:
@@ -136,44 +137,61 @@ def table(per: dict, us_per_step: float, main_tid: str, min_share: float = 0.005
 
 def main(argv=None) -> list[str]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--state", help="a paper-40 state saved by fiberpipe.benchmarks.paper40_states")
-    ap.add_argument("--config", help="a run config: its scene from rest")
+    where = ap.add_mutually_exclusive_group(required=True)
+    where.add_argument("--state", help="a paper-40 state saved by fiberpipe.benchmarks.paper40_states")
+    where.add_argument("--config", help="a run config: its scene from rest")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--warmup", type=int, default=300)
     ap.add_argument("--frequency", type=int, default=1999, help="samples per second and thread")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    if not (a.state or a.config):
-        ap.error("give --state STATE.npz or --config CONFIG")
     if a.child:
         _child(a)
         return []
     if shutil.which("perf") is None:
         raise SystemExit("perf_profile needs Linux perf (the linux-tools package) on the PATH")
+    report, us, n_el, event, pid = _record(a)
+    per = aggregate(report)
+    if not per:
+        raise SystemExit("perf recorded no samples of the timed steps (kernel.perf_event_paranoid ≤ 2 is needed)")
+    where = f"--config {a.config}" if a.config else f"--state {a.state}"
+    lines = [f"`python -m fiberpipe.benchmarks.perf_profile {where} --threads {a.threads} --steps {a.steps}`: "
+             f"{n_el} elements, {a.threads} thread(s), perf event {event}, "
+             f"load average {os.getloadavg()[0]:.2f}", ""]
+    lines += table(per, us, main_tid=pid)
+    print("\n".join(lines))
+    return lines
+
+
+def _record(a) -> tuple[str, float, int, str, str]:
+    """Run the child under ``perf record`` and ``perf report`` its timed steps: ``(the report's text,
+    µs per step, elements, the event perf sampled, the child's process id)``."""
     with tempfile.TemporaryDirectory(prefix="fiberpipe-perf-") as tmp:
         data = Path(tmp) / "perf.data"
-        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba-cache"),
-                   NUMBA_NUM_THREADS=os.environ.get("NUMBA_NUM_THREADS", str(max(1, a.threads))))
-        cmd = ["perf", "record", "-q", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
+        # numba's threads are fixed when it starts: at least the run's (make exports 1)
+        threads = max(a.threads, int(os.environ.get("NUMBA_NUM_THREADS") or 0))
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba-cache"), NUMBA_NUM_THREADS=str(threads))
+        cmd = ["perf", "record", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
                str(data), "--", sys.executable, "-m", "fiberpipe.benchmarks.perf_profile", "--child",
                "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
         cmd += ["--state", a.state] if a.state else ["--config", a.config]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)
-        window = [ln.split() for ln in run.stdout.splitlines() if ln.startswith("WINDOW")]
-        if run.returncode != 0 or not window:
-            raise SystemExit(f"perf record failed ({run.returncode}): {run.stderr.strip()[-400:]}")
-        _, t0, t1, us, n_el, pid = window[-1]
-        rep = subprocess.run(["perf", "report", "-i", str(data), "--time", f"{t0},{t1}", "--sort", "pid,dso,sym",
-                              "--no-children", "--stdio", "-n"], capture_output=True, text=True)
-        Path(f"/tmp/perf-{pid}.map").unlink(missing_ok=True)
-    scene_name = a.config or f"paper-40 state {os.path.basename(a.state)}"
-    lines = [f"`python -m fiberpipe.benchmarks.perf_profile {'--config ' + a.config if a.config else '--state ' + a.state}"
-             f" --threads {a.threads} --steps {a.steps}`: {scene_name}, {n_el} elements, {a.threads} thread(s), "
-             f"load average {os.getloadavg()[0]:.2f}", ""]
-    lines += table(aggregate(rep.stdout), float(us), pid)
-    print("\n".join(lines))
-    return lines
+        out = {ln.split()[0]: ln.split()[1:] for ln in run.stdout.splitlines() if ln.split()[:1] in (["PID"], ["WINDOW"])}
+        perf_map = Path(f"/tmp/perf-{out['PID'][0]}.map") if "PID" in out else None
+        try:
+            if run.returncode != 0 or "WINDOW" not in out:
+                raise SystemExit(f"perf record failed ({run.returncode}): {run.stderr.strip()[-400:]}")
+            t0, t1, us, n_el = out["WINDOW"]
+            rep = subprocess.run(["perf", "report", "-i", str(data), "--time", f"{t0},{t1}", "--sort",
+                                  "pid,dso,sym", "--no-children", "--stdio", "-n"], capture_output=True, text=True)
+        finally:
+            if perf_map is not None:
+                perf_map.unlink(missing_ok=True)
+    if rep.returncode != 0:
+        raise SystemExit(f"perf report failed ({rep.returncode}): {rep.stderr.strip()[-400:]}")
+    ev = re.search(r"of event '([^']+)'", rep.stdout)
+    return rep.stdout, float(us), int(n_el), ev.group(1) if ev else "?", out["PID"][0]
 
 
 if __name__ == "__main__":

@@ -8,19 +8,27 @@ from __future__ import annotations
 
 import numpy as np
 
+from fiberpipe.errors import InputError
 from fiberpipe.polylines import Polylines
 from fiberpipe.post.positions import position_error
 
 
-def frame_polylines(sim, frame: int = -1) -> Polylines:
-    """Mid-lines of a simulation frame (node positions of frame ``frame``, negative from the last),
-    with the fiber radii; an InputError names the frames the simulation has when it has no such frame."""
+def frame_index(sim, frame: int) -> int:
+    """``frame`` as an index from 0 (a negative one counts from the last frame); an InputError names
+    the frames the simulation has when it has no such frame."""
     n = len(sim.frames_positions)
+    if n == 0:
+        raise InputError("the simulation has no frames (rerun it with solver.output_frames ≥ 1)")
     if not -n <= frame < n:
-        from fiberpipe.errors import InputError
+        raise InputError(f"frame {frame}: the simulation has {n} frames (0 to {n - 1}, or -{n} to -1 from the last)")
+    return frame % n
 
-        raise InputError(f"frame {frame}: the simulation has {n} frames (0 … {n - 1}, or −{n} … −1 from the last)")
-    return Polylines(np.array(sim.frames_positions[frame]), sim.mesh.node_offsets.copy(), sim.mesh.radius_m.copy())
+
+def frame_polylines(sim, frame: int = -1) -> Polylines:
+    """Mid-lines of a simulation frame (node positions of frame ``frame``, :func:`frame_index`), with
+    the fiber radii."""
+    return Polylines(np.array(sim.frames_positions[frame_index(sim, frame)]), sim.mesh.node_offsets.copy(),
+                     sim.mesh.radius_m.copy())
 
 
 def render_for_tracing(polylines: Polylines, voxel_size_m: float, *, margin_vox: int = 6, contrast_to_noise: float = 5.0,

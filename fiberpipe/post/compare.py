@@ -30,56 +30,62 @@ def _figure(summary: dict, key: str) -> float:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else float("nan")
 
 
+def _diverged_row(name: str) -> dict:
+    nan = float("nan")
+    return {"run": name, "final_load_N": nan, "max_load_N": nan, "rearrangement_end_U_mm": nan, "steep_start_U_mm": nan,
+            "peak_ke_over_se": nan, "energy_residual": nan, "contact_energy_created_over_WK": nan, "steps": 0,
+            "solver_wall_time_s": nan, "note": "diverged (see its run.log)"}
+
+
+def _run_row(d: Path) -> tuple[dict, tuple | None]:
+    """A run folder's row of the table and its (U, F) curve (None without plates)."""
+    sim = load_simulation(d / "simulation.h5")
+    summary = _post_summary(d / "post" / "summary.json")
+    curve = None
+    try:
+        U, F = force_displacement(sim)
+        curve = (U, F)
+        final, peak = float(F[-1]), float(np.max(F))
+        ph = compaction_phases(U, F)
+        u1, u2 = (float("nan") if ph[k] is None else 1e3 * ph[k] for k in ("rearrangement_end_U_m", "steep_start_U_m"))
+    except KeyError:
+        final = peak = u1 = u2 = float("nan")
+    # from the run's history, not its summary.json: runs post-processed before the figure existed have it too
+    created = contact_energy_created_figures(sim.energy)[1] if sim.energy else float("nan")
+    row = {
+        "run": d.name,
+        "final_load_N": final,
+        "max_load_N": peak,
+        "rearrangement_end_U_mm": u1,
+        "steep_start_U_mm": u2,
+        "peak_ke_over_se": _figure(summary, "peak_ke_over_se"),
+        "energy_residual": _figure(summary, "energy_balance_residual_max"),
+        "contact_energy_created_over_WK": created,
+        "steps": int(sim.attrs.get("steps", 0)),
+        "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
+        "note": "",
+    }
+    return row, curve
+
+
 def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
     """Write ``comparison.png`` (F(U) of every run) and ``comparison.md`` (key figures); return the table."""
     from fiberpipe.pipeline import ensure_output_dir
 
-    # every run read before the output folder is made: a refused comparison leaves nothing behind
-    runs = []
+    # every run read (one at a time) before the output folder is made: a refused comparison leaves
+    # nothing behind
+    curves, rows = {}, []
     for d in map(Path, run_dirs):
         if (d / "simulation.h5").exists():
-            runs.append((d, load_simulation(d / "simulation.h5"), _post_summary(d / "post" / "summary.json")))
+            row, curve = _run_row(d)
+            rows.append(row)
+            if curve is not None:
+                curves[d.name] = curve
         elif (d / "simulation_diverged.h5").exists():
-            runs.append((d, None, {}))
+            rows.append(_diverged_row(d.name))
         else:
             raise InputError(f"{d} has no simulation.h5: run it first")
     out_dir = ensure_output_dir(out_dir)
-    curves, rows = {}, []
-    for d, sim, summary in runs:
-        if sim is None:
-            rows.append({"run": d.name, "final_load_N": float("nan"), "max_load_N": float("nan"),
-                         "rearrangement_end_U_mm": float("nan"), "steep_start_U_mm": float("nan"),
-                         "peak_ke_over_se": float("nan"), "energy_residual": float("nan"),
-                         "contact_energy_created_over_WK": float("nan"), "steps": 0,
-                         "solver_wall_time_s": float("nan"), "note": "diverged (see its run.log)"})
-            continue
-        name = d.name
-        try:
-            U, F = force_displacement(sim)
-            curves[name] = (U, F)
-            final = float(F[-1])
-            peak = float(np.max(F))
-            ph = compaction_phases(U, F)
-            u1, u2 = (float("nan") if ph[k] is None else 1e3 * ph[k] for k in ("rearrangement_end_U_m", "steep_start_U_m"))
-        except KeyError:
-            final = peak = u1 = u2 = float("nan")
-        # from the run's history, not its summary.json: runs post-processed before the figure existed have it too
-        created = contact_energy_created_figures(sim.energy)[1] if sim.energy else float("nan")
-        rows.append(
-            {
-                "run": name,
-                "final_load_N": final,
-                "max_load_N": peak,
-                "rearrangement_end_U_mm": u1,
-                "steep_start_U_mm": u2,
-                "peak_ke_over_se": _figure(summary, "peak_ke_over_se"),
-                "energy_residual": _figure(summary, "energy_balance_residual_max"),
-                "contact_energy_created_over_WK": created,
-                "steps": int(sim.attrs.get("steps", 0)),
-                "solver_wall_time_s": float(sim.attrs.get("wall_time_s", float("nan"))),
-                "note": "",
-            }
-        )
     if curves:
         plot_force_displacement(out_dir / "comparison.png", curves, title="compaction load, all runs")
     cols = list(rows[0]) if rows else []

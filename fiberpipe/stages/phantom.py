@@ -36,13 +36,15 @@ def render_simulation_frame(sim_path: Path, frame: int, voxel_size_m: float, out
     from fiberpipe.imaging.io import save_volume_tif
     from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.polylines import Polylines
-    from fiberpipe.post.closed_loop import frame_polylines, render_for_tracing
+    from fiberpipe.post.closed_loop import frame_index, frame_polylines, render_for_tracing
     from fiberpipe.post.history import load_simulation
 
-    fibers = frame_polylines(load_simulation(sim_path), frame)
+    sim = load_simulation(sim_path)
+    frame = frame_index(sim, frame)
+    fibers = frame_polylines(sim, frame)
     out_dir = ensure_output_dir(out_dir)
     vol, origin = render_for_tracing(fibers, voxel_size_m, **render_kw)
     save_volume_tif(out_dir / "volume.tif", vol, voxel_size_m)
     shifted = Polylines(fibers.points_m - origin, fibers.offsets, fibers.radius_m)
     write_fibers(out_dir / "truth.h5", shifted, attrs={"origin_m": [float(v) for v in origin], "frame": int(frame)})
-    return {"shape": list(vol.shape), "origin_m": [float(v) for v in origin]}
+    return {"shape": list(vol.shape), "origin_m": [float(v) for v in origin], "frame": frame}

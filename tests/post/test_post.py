@@ -88,7 +88,9 @@ def test_curve_error():
     assert curve_error(U, U * 10, U, U * 10.2) == pytest.approx(0.02)
 
 
-def test_post_stage_on_a_synthetic_compaction(tmp_path):
+def _synthetic_compaction(run_dir, strain_J_per_m2=5e3):
+    """A two-fiber run folder with a simulated compaction (F = 1e3 U on the load cell, 6 frames, strain
+    energy ``strain_J_per_m2`` U²): ``(simulation.h5's path, its config)``."""
     lines = [np.c_[np.full(20, x), np.zeros(20), np.linspace(0, 6e-3, 20)] for x in (-0.3e-3, 0.3e-3)]
     mesh = mesh_polylines(Polylines.from_list(lines, 0.25e-3), 0.3e-3)
     K, T = 6, 50
@@ -104,18 +106,23 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
             "plate_force": np.c_[1e3 * U, 1e3 * U],
             "plate_position": np.c_[-0.25e-3 + U, 0.25e-3 + 0 * U],
             "contacts": np.full(T, 3.0),
-            "energy": {"kinetic": 1e-9 * t, "strain": 5e3 * U**2, "external": 5e3 * U**2 + 1e-9 * t, "damping": 0 * t},
+            "energy": {"kinetic": 1e-9 * t, "strain": strain_J_per_m2 * U**2, "external": 5e3 * U**2 + 1e-9 * t, "damping": 0 * t},
         },
         dt_s=1e-7,
         steps=1000,
         wall_time_s=1.0,
         effects=["plates", "contact"],
     )
-    sim_path = write_simulation(tmp_path / "simulation.h5", mesh, result)
+    sim_path = write_simulation(run_dir / "simulation.h5", mesh, result)
     cfg = validate_config(
         {"name": "synthetic", "input": {"fibers": "x.h5"}, "scene": {"effects": ["plates"], "plates": {"axis": "y"}, "loading": {"displacement": "0.5 mm"},
                                                          "walls": {"x": [-0.6e-3, 0.6e-3]}}}
     )
+    return sim_path, cfg
+
+
+def test_post_stage_on_a_synthetic_compaction(tmp_path):
+    sim_path, cfg = _synthetic_compaction(tmp_path)
     figures = run_post(cfg, sim_path, tmp_path / "post")
     s = json.loads((tmp_path / "post" / "summary.json").read_text())
     assert s["final_load_N"] == pytest.approx(0.2)
@@ -146,57 +153,85 @@ def test_post_stage_on_a_synthetic_compaction(tmp_path):
     assert float(cells["final_load_N"]) == pytest.approx(0.2) and cells["steep_start_U_mm"] == "nan"
     assert float(cells["contact_energy_created_over_WK"]) == 0.0  # no contact energy in this history
     assert (tmp_path / "cmp" / "comparison.png").exists()
-    # a damaged post/summary.json is one error naming it, not a traceback, and no folder is made
-    from fiberpipe.errors import InputError
 
+
+def test_compare_reads_every_run_before_making_its_folder(tmp_path):
+    """A damaged post/summary.json, a folder without a simulation or an output folder that cannot be
+    made is one error (naming what is wrong), and a refused comparison leaves no folder behind."""
+    from fiberpipe.errors import InputError
+    from fiberpipe.post.compare import compare_runs
+
+    sim_path, cfg = _synthetic_compaction(tmp_path)
+    run_post(cfg, sim_path, tmp_path / "post")
     for text in ("[]", '{"final_load_N": '):
         (tmp_path / "post" / "summary.json").write_text(text)
         with pytest.raises(InputError, match=r"post/summary.json: is not .*rerun its post stage"):
-            compare_runs([tmp_path], tmp_path / "cmp2")
-        assert not (tmp_path / "cmp2").exists()
+            compare_runs([tmp_path], tmp_path / "cmp")
+        assert not (tmp_path / "cmp").exists()
     (tmp_path / "post" / "summary.json").unlink()
-    with pytest.raises(InputError, match="has no simulation.h5"):
-        compare_runs([tmp_path, tmp_path / "nothing"], tmp_path / "cmp2")
-    assert not (tmp_path / "cmp2").exists()
+    with pytest.raises(InputError, match="nothing has no simulation.h5: run it first"):
+        compare_runs([tmp_path, tmp_path / "nothing"], tmp_path / "cmp")
+    assert not (tmp_path / "cmp").exists()
     (tmp_path / "afile").write_text("x")
-    with pytest.raises(InputError, match="is not writable"):
+    with pytest.raises(InputError, match="afile/cmp is not writable"):
         compare_runs([tmp_path], tmp_path / "afile" / "cmp")
-    # the closed loop's phantom of a frame: a frame the simulation does not have is one line naming the
-    # frames it has, before any folder is made; one it has is rendered with its mid-lines
+    # without a post summary its figures are nan
+    assert "| nan | nan |" in compare_runs([tmp_path], tmp_path / "cmp")
+
+
+def test_phantom_of_a_simulated_frame_refuses_a_frame_it_does_not_have_before_making_its_folder(tmp_path):
     from click.testing import CliRunner
 
     from fiberpipe.cli import main
 
-    def phantom(frame, out):
-        return CliRunner().invoke(main, ["phantom", "--from-simulation", str(sim_path), "--frame", str(frame),
-                                         "--voxel-size", "50 um", "--out", str(out)])
+    sim_path, _ = _synthetic_compaction(tmp_path)
 
-    res = phantom(6, tmp_path / "ph")
-    assert res.exit_code != 0 and "Traceback" not in res.output, res.output
-    assert "error: frame 6: the simulation has 6 frames (0 … 5, or −6 … −1 from the last)" in res.output
-    assert not (tmp_path / "ph").exists()
+    def phantom(frame, out, voxel="50 um"):
+        return CliRunner().invoke(main, ["phantom", "--from-simulation", str(sim_path), "--frame", str(frame),
+                                         "--voxel-size", voxel, "--out", str(out)])
+
+    for frame, voxel, message in ((6, "50 um", "error: frame 6: the simulation has 6 frames (0 to 5, or -6 to -1 from the last)"),
+                                  (-7, "50 um", "error: frame -7: the simulation has 6 frames"),
+                                  (-1, "0 um", "error: --voxel-size 0 um: must be positive")):
+        res = phantom(frame, tmp_path / "ph", voxel)
+        assert isinstance(res.exception, SystemExit) and res.exit_code != 0, res.output
+        assert message in res.output, res.output
+        assert not (tmp_path / "ph").exists()
+    # a negative frame counts from the last and is written as its index from 0
     res = phantom(-1, tmp_path / "ph")
     assert res.exit_code == 0, res.output
-    assert (tmp_path / "ph" / "volume.tif").exists() and (tmp_path / "ph" / "truth.h5").exists()
+    assert "frame 5," in res.output
+    from fiberpipe.artifacts import read_artifact
+
+    assert int(read_artifact(tmp_path / "ph" / "truth.h5", "fibers", names=()).attrs["frame"]) == 5
+    assert (tmp_path / "ph" / "volume.tif").exists()
 
 
 def test_summary_json_is_strict_json_with_null_for_figures_not_computed(tmp_path):
     """NaN and ±inf have no JSON literal: a figure that could not be computed is written as null, so
     any JSON parser reads the file, and compare reads null as NaN."""
-    from fiberpipe.artifacts import json_text, write_json_atomic
-    from fiberpipe.post.compare import _figure
+    from fiberpipe.artifacts import json_text
+    from fiberpipe.post.compare import _figure, compare_runs
 
     def strict(text):
         return json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON literal {c}"))
 
     obj = {"a": float("nan"), "b": [np.inf, -np.inf, np.float64(1.5)], "c": {"d": np.int64(3), "e": np.array([1.0, np.nan])},
-           "f": None, "g": True, "h": tmp_path}
+           "f": None, "g": True, "h": tmp_path, "i": {2, 1}, True: 1, None: 2, 3: 3}
     assert strict(json_text(obj)) == {"a": None, "b": [None, None, 1.5], "c": {"d": 3, "e": [1.0, None]}, "f": None,
-                                      "g": True, "h": str(tmp_path)}
-    write_json_atomic(tmp_path / "s.json", {"peak_ke_over_se": float("nan"), "energy_balance_residual_max": 2e-4})
-    s = strict((tmp_path / "s.json").read_text())
-    assert np.isnan(_figure(s, "peak_ke_over_se")) and _figure(s, "energy_balance_residual_max") == 2e-4
-    assert np.isnan(_figure(s, "missing")) and np.isnan(_figure({"x": True}, "x"))
+                                      "g": True, "h": str(tmp_path), "i": [1, 2], "true": 1, "null": 2, "3": 3}
+    with pytest.raises(ValueError, match="two keys"):
+        json_text({1: "a", "1": "b"})
+    # the post stage on a run without strain energy: K/S is infinite, written as null
+    sim_path, cfg = _synthetic_compaction(tmp_path, strain_J_per_m2=0.0)
+    run_post(cfg, sim_path, tmp_path / "post")
+    s = strict((tmp_path / "post" / "summary.json").read_text())
+    assert s["peak_ke_over_se"] is None
+    assert np.isnan(_figure(s, "peak_ke_over_se")) and np.isnan(_figure(s, "missing"))
+    assert np.isnan(_figure({"x": True}, "x"))
+    head, _, row = compare_runs([tmp_path], tmp_path / "cmp").splitlines()[:3]
+    cells = dict(zip([c.strip() for c in head.strip("|").split("|")], [c.strip() for c in row.strip("|").split("|")]))
+    assert cells["peak_ke_over_se"] == "nan"
 
 
 def test_report_flags_energy_created_by_the_contact():
