@@ -26,7 +26,7 @@ import h5py
 import numpy as np
 
 from fiberpipe import __version__
-from fiberpipe.errors import ArtifactError
+from fiberpipe.errors import ArtifactError, InputError
 
 #: Schema version of each artifact kind this fiberpipe writes and reads.
 SCHEMA_VERSIONS = {
@@ -188,6 +188,22 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
 def write_text_atomic(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def ensure_output_dir(path: str | Path, option: str = "--out") -> Path:
+    """Create the output folder ``path`` if needed and check a file can be written in it, before
+    anything runs; an InputError says why not (an impossible path, a read-only folder) and names
+    ``option``, the command option that chose the folder."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".fiberpipe-write-test.", dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise InputError(f"output folder {path} is not writable: {reason}; choose another {option}") from None
+    return path
 
 
 def _json_key(k) -> str:

@@ -18,15 +18,14 @@ import importlib.util
 import json
 import logging
 import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 from fiberpipe import __version__
-from fiberpipe.artifacts import (SCHEMA_VERSIONS, input_sha256, json_text, read_fibers, read_json_mapping,
-                                 write_json_atomic)
+from fiberpipe.artifacts import (SCHEMA_VERSIONS, ensure_output_dir, input_sha256, json_text, read_fibers,
+                                 read_json_mapping, write_json_atomic)
 from fiberpipe.config import Config
 from fiberpipe.errors import ArtifactError, ConfigError, FiberpipeError, InputError
 
@@ -377,22 +376,6 @@ def _checkpoint_to_resume(name: str, run_dir: Path, key: str, resume: str | None
     except FiberpipeError:
         return False
     return (got.decode() if isinstance(got, bytes) else got) == key
-
-
-def ensure_output_dir(path: str | Path, option: str = "--out") -> Path:
-    """Create the output folder ``path`` if needed and check a file can be written in it, before
-    anything runs; an InputError says why not (an impossible path, a read-only folder) and names
-    ``option``, the command option that chose the folder."""
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".fiberpipe-write-test.", dir=path)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise InputError(f"output folder {path} is not writable: {reason}; choose another {option}") from None
-    return path
 
 
 def _setup_run_log(run_dir: Path) -> logging.Handler:

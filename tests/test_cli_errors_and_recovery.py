@@ -148,7 +148,7 @@ def test_impossible_output_folder(tmp_path):
 
 def test_read_only_output_folder(tmp_path, monkeypatch):
     """A folder the user may not write to (simulated: the tests may run as root, who may)."""
-    import fiberpipe.pipeline as P
+    import fiberpipe.artifacts as P
 
     cfg = write_cfg(tmp_path / "tip.yaml", TIP)
     out = tmp_path / "ro"

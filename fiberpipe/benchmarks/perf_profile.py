@@ -34,7 +34,11 @@ import subprocess
 import sys
 import tempfile
 import time
+import weakref
 from pathlib import Path
+
+
+_PROXIES = (weakref.ProxyType, weakref.CallableProxyType)
 
 
 def write_perf_map() -> int:
@@ -43,7 +47,9 @@ def write_perf_map() -> int:
     from numba.core.codegen import CPUCodeLibrary
 
     addrs = {}
-    for lib in (o for o in gc.get_objects() if isinstance(o, CPUCodeLibrary)):
+    for lib in gc.get_objects():
+        if type(lib) in _PROXIES or not isinstance(lib, CPUCodeLibrary):  # a weak proxy's referent may be gone
+            continue
         mod = getattr(lib, "_final_module", None)
         if mod is None:
             continue

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fiberpipe.artifacts import read_json_mapping, write_text_atomic
+from fiberpipe.artifacts import ensure_output_dir, read_json_mapping, write_text_atomic
 from fiberpipe.errors import ArtifactError, InputError
 from fiberpipe.post.curves import force_displacement
 from fiberpipe.post.energies import contact_energy_created_figures
@@ -70,8 +70,6 @@ def _run_row(d: Path) -> tuple[dict, tuple | None]:
 
 def compare_runs(run_dirs: list[Path], out_dir: Path) -> str:
     """Write ``comparison.png`` (F(U) of every run) and ``comparison.md`` (key figures); return the table."""
-    from fiberpipe.pipeline import ensure_output_dir
-
     # every run read (one at a time) before the output folder is made: a refused comparison leaves
     # nothing behind
     curves, rows = {}, []

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fiberpipe.artifacts import write_fibers
+from fiberpipe.artifacts import ensure_output_dir, write_fibers
 from fiberpipe.config import PhantomConfig
 
 
@@ -34,7 +34,6 @@ def render_simulation_frame(sim_path: Path, frame: int, voxel_size_m: float, out
     """Render frame ``frame`` of a simulation into ``out_dir/volume.tif`` + ``truth.h5`` (closed loop).
     The simulation and its frame are read before ``out_dir`` is made: a refused call leaves no folder."""
     from fiberpipe.imaging.io import save_volume_tif
-    from fiberpipe.pipeline import ensure_output_dir
     from fiberpipe.polylines import Polylines
     from fiberpipe.post.closed_loop import frame_index, frame_polylines, render_for_tracing
     from fiberpipe.post.history import load_simulation
