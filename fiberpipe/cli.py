@@ -254,7 +254,7 @@ def phantom(out, from_simulation, frame, **kw):
     """
     from fiberpipe.config import PhantomConfig
     from fiberpipe.errors import ConfigError
-    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.artifacts import ensure_output_dir
     from fiberpipe.stages.phantom import run_phantom
 
     if from_simulation:
@@ -353,7 +353,7 @@ def study(study_file, out, workers, scheduler):
     """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
     from fiberpipe.studies.sweep import run_study
 
-    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.artifacts import ensure_output_dir
 
     out = Path(out) if out else Path("runs") / "studies" / Path(study_file).stem
     created = not out.exists()
@@ -379,7 +379,7 @@ def study(study_file, out, workers, scheduler):
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
 def fit(config, target, params, seeds, budget, out, workers, scheduler):
     """Fit config keys so that the simulated load matches a measured curve (fit.json, fit.png, history.csv)."""
-    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.artifacts import ensure_output_dir
     from fiberpipe.studies.fit import run_fit
 
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
@@ -403,7 +403,7 @@ def specimen(config, out, seed, sets):
     """Build the virtual specimen of CONFIG's specimen section: fibers.h5, specimen.json and a ready config.yaml."""
     from fiberpipe.errors import ConfigError
     from fiberpipe.model.virtual_specimen import run_specimen_command
-    from fiberpipe.pipeline import ensure_output_dir
+    from fiberpipe.artifacts import ensure_output_dir
 
     overrides = {}
     for item in sets:
@@ -483,7 +483,8 @@ def export_abaqus(config, out_file, run_dir):
     outputs."""
     from fiberpipe.artifacts import read_mesh
     from fiberpipe.io.abaqus import write_abaqus_deck
-    from fiberpipe.pipeline import ensure_output_dir, run_pipeline
+    from fiberpipe.artifacts import ensure_output_dir
+    from fiberpipe.pipeline import run_pipeline
 
     cfg = _load(config)
     run_dir = Path(run_dir) if run_dir else _default_out(config)

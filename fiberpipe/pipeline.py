@@ -507,7 +507,9 @@ def _outputs_state(outputs) -> list:
     frames = [Path(o).parent / "frames" for o in outputs if Path(o).suffix == ".pvd"]
     for d in frames:
         if d.is_dir():
-            state.extend((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in sorted(d.iterdir()))
+            for f in sorted(d.iterdir()):
+                st = f.stat()
+                state.append((f.name, st.st_size, st.st_mtime_ns))
     return state
 
 

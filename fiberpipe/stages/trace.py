@@ -30,8 +30,6 @@ def run_trace(
     from fiberpipe.stages._chunks import chunked
     from fiberpipe.stages.skeletonize import mask_shape
 
-    if truth_path is not None and Path(truth_path).exists():
-        read_fibers(truth_path)  # a bad ground truth fails before the stage writes its fibers
     if chunked(cfg, mask_shape(mask_path)):
         return run_trace_chunked(cfg, mask_path, out, truth_path=truth_path, config_sha256=config_sha256,
                                  volume_path=volume_path)
