@@ -108,6 +108,14 @@ perf-profile: setup
 	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 2 --steps 6000
 	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_138728.npz --threads 2 --steps 6000
 
+# this code against $(REFERENCE) in one process, blocks of steps alternated from paper-40's
+# compacted state (docs/benchmarks.md, "A change against the code before it, in one process")
+.PHONY: bench-inprocess
+bench-inprocess: setup
+	test -f runs/bench/p40_708000.npz || $(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
+	$(PY) -m fiberpipe.benchmarks.bench_inprocess --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 1 --steps 500
+	$(PY) -m fiberpipe.benchmarks.bench_inprocess --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 2 --steps 500
+
 bench-reference: setup
 	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --until 12ms --spans 10
 	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --spans 10

@@ -2,8 +2,11 @@
 package and the paper-40 scene ships with it (a copy that must equal configs/paper-40.yaml)."""
 
 import importlib
+import os
+import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 import fiberpipe.bench as bench
@@ -161,3 +164,49 @@ def test_perf_profile_names_numba_functions_and_groups_samples_per_thread():
         assert int(start, 16) > 0 and int(size, 16) > 0
     finally:
         os.unlink(path)
+
+
+def test_inprocess_mirror_renames_the_package_imports_and_keeps_unchanged_files(tmp_path):
+    """bench_inprocess mirrors the reference's package under another name: its imports of
+    ``fiberpipe`` read the mirror's name (strings and other names untouched), numba's caches are not
+    copied, a file whose text is unchanged keeps its time stamp (numba's cache stays valid) and a
+    changed one is rewritten; the mirror imports."""
+    from fiberpipe.benchmarks.bench_inprocess import MIRROR_NAME, mirror_package
+
+    pkg = tmp_path / "ref" / "fiberpipe"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__pycache__").mkdir()
+    (pkg / "__init__.py").write_text("from fiberpipe.sub import a\nimport fiberpipe.sub\nfiberpipe_x = 1\n")
+    (pkg / "sub" / "__init__.py").write_text("from . import a\n")
+    (pkg / "sub" / "a.py").write_text("NAME = 'fiberpipe'\n")
+    (pkg / "table.csv").write_text("k,1\n")
+    (pkg / "__pycache__" / "kernel.nbi").write_bytes(b"index")
+    root = mirror_package(tmp_path / "ref", tmp_path / "mirror")
+    m = root / MIRROR_NAME
+    assert (m / "__init__.py").read_text() == f"from {MIRROR_NAME}.sub import a\nimport {MIRROR_NAME}.sub\nfiberpipe_x = 1\n"
+    assert (m / "sub" / "a.py").read_text() == "NAME = 'fiberpipe'\n"
+    assert (m / "table.csv").is_file() and not (m / "__pycache__").exists()
+    for f in (m / "__init__.py", m / "sub" / "a.py"):
+        os.utime(f, ns=(10**9, 10**9))
+    (pkg / "sub" / "a.py").write_text("NAME = 'changed'\n")
+    mirror_package(tmp_path / "ref", tmp_path / "mirror")
+    assert (m / "__init__.py").stat().st_mtime_ns == 10**9  # unchanged: kept
+    assert (m / "sub" / "a.py").stat().st_mtime_ns != 10**9 and "changed" in (m / "sub" / "a.py").read_text()
+    sys.path.insert(0, str(root))
+    try:
+        assert importlib.import_module(f"{MIRROR_NAME}.sub.a").NAME == "changed"
+    finally:
+        sys.path.remove(str(root))
+        for name in [n for n in sys.modules if n == MIRROR_NAME or n.startswith(MIRROR_NAME + ".")]:
+            del sys.modules[name]
+
+
+def test_inprocess_bench_refuses_a_folder_without_the_package(tmp_path, capsys):
+    from fiberpipe.benchmarks.bench_inprocess import main
+
+    with pytest.raises(SystemExit) as err:
+        main(["--reference", str(tmp_path)])
+    assert "no fiberpipe package" in str(err.value)
+    with pytest.raises(SystemExit) as err:
+        main(["--reference", str(tmp_path), "--state", str(tmp_path / "missing.npz")])
+    assert "no such file" in str(err.value)

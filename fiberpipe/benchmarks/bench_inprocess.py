@@ -1,0 +1,133 @@
+"""This code's step loop against a reference checkout's, in one process, from one saved state.
+
+    python -m fiberpipe.benchmarks.bench_inprocess --reference CHECKOUT [--state STATE.npz]
+        [--config CONFIG.yaml] [--threads N] [--steps 200] [--rounds 20]
+
+Both sides advance their own copy of the state (paper-40's scene, or ``--config``'s; from rest
+without ``--state``) by ``--steps`` steps per round, the sides alternating and the order flipping
+every round; each block is timed by the wall clock. The figures: each side's best and median block
+(µs per step), the median of the rounds' ratios (this code / reference) and the ratio of the best
+blocks. ``--reference .`` runs this code against a copy of itself: its ratios are the method's own
+bias (about 1.01–1.03 for paper-40 on two threads).
+
+Why one process: on a shared virtual machine the same code and state ran up to 1.8× slower in one
+process than in another started minutes later (docs/benchmarks.md), so the worker-per-side
+comparison of :mod:`fiberpipe.benchmarks.bench_ab` cannot tell a few percent apart; blocks
+alternated within one process see the same machine. The reference needs this code's interface for
+states and scenes (``benchmarks.paper40_states.scene``, ``load_state``, ``solver.Integrator``); for
+older commits use ``bench_ab``.
+"""
+
+from __future__ import annotations
+
+# Strategy: the reference's package is mirrored into a folder of the temporary directory under
+# another name (``fpref``), its absolute imports of ``fiberpipe`` rewritten; a file is rewritten
+# only when its text changed, so numba's cache beside the mirror (keyed on each file's time stamp)
+# stays valid from one run to the next and only the first run compiles the reference's kernels.
+
+import argparse
+import hashlib
+import importlib
+import os
+import re
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+MIRROR_NAME = "fpref"
+_IMPORT = re.compile(r"\b(from|import) fiberpipe\b")
+
+
+def mirror_package(checkout: Path, root: Path | None = None, name: str = MIRROR_NAME) -> Path:
+    """The folder holding ``name``, a copy of ``checkout/fiberpipe`` whose ``from fiberpipe`` and
+    ``import fiberpipe`` read ``name``; files whose text is unchanged keep their time stamp."""
+    src = Path(checkout).resolve() / "fiberpipe"
+    if not (src / "__init__.py").is_file():
+        raise SystemExit(f"error: {checkout}: no fiberpipe package in it (give the checkout's root folder)")
+    if root is None:
+        key = hashlib.sha1(str(src).encode()).hexdigest()[:12]
+        root = Path(tempfile.gettempdir()) / f"fiberpipe-inprocess-{key}"
+    dst = root / name
+    for path in src.rglob("*"):
+        if "__pycache__" in path.parts or path.is_dir():
+            continue
+        out = dst / path.relative_to(src)
+        data = path.read_bytes()
+        if path.suffix == ".py":
+            data = _IMPORT.sub(lambda m: f"{m.group(1)} {name}", data.decode()).encode()
+        if out.is_file() and out.read_bytes() == data:
+            continue
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(data)
+    return root
+
+
+def _side(package: str, config: Path | None, state: Path | None, threads: int, warmup: int):
+    """``(integrator, state)`` of one side, advanced by ``warmup`` steps (its kernels compiled or
+    loaded)."""
+    states = importlib.import_module(f"{package}.benchmarks.paper40_states")
+    solver = importlib.import_module(f"{package}.solver")
+    model, effects, _, dt = states.scene(config=config)
+    st = states.load_state(state) if state is not None else solver.State.at_rest(model)
+    integ = solver.Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=threads)
+    integ.advance(st, warmup)
+    return integ, st
+
+
+def measure(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
+            steps: int = 200, rounds: int = 20, warmup: int = 50, mirror_root: Path | None = None) -> dict:
+    """Blocks of ``steps`` steps of both sides, alternated over ``rounds`` rounds in this process;
+    µs per step of each block, per side."""
+    root = mirror_package(reference, mirror_root)
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    sides = {"reference": _side(MIRROR_NAME, config, state, threads, warmup),
+             "this code": _side("fiberpipe", config, state, threads, warmup)}
+    blocks = {name: [] for name in sides}
+    for r in range(rounds):
+        for name in (list(sides) if r % 2 == 0 else list(sides)[::-1]):
+            integ, st = sides[name]
+            t0 = time.perf_counter()
+            integ.advance(st, steps)
+            blocks[name].append(1e6 * (time.perf_counter() - t0) / steps)
+    ref, new = blocks["reference"], blocks["this code"]
+    return {"blocks_us": blocks, "ratio_median": statistics.median(n / r for n, r in zip(new, ref)),
+            "ratio_best": min(new) / min(ref), "abs_x_sum": {name: float(abs(st.x).sum()) for name, (_, st) in
+                                                                sides.items()}}
+
+
+def table(result: dict) -> list[str]:
+    rows = ["| side | best (µs/step) | median (µs/step) | Σ|x| at the end (m) |", "|---|---|---|---|"]
+    for name, us in result["blocks_us"].items():
+        rows.append(f"| {name} | {min(us):.1f} | {statistics.median(us):.1f} | {result['abs_x_sum'][name]:.12g} |")
+    rows.append(f"\nthis code / reference: median of the rounds' ratios {result['ratio_median']:.3f}, "
+                f"best blocks {result['ratio_best']:.3f}")
+    return rows
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reference", type=Path, required=True, help="a checkout's root folder ('.': this one)")
+    ap.add_argument("--state", type=Path, help="a saved state (benchmarks.paper40_states); default: from rest")
+    ap.add_argument("--config", type=Path, help="the run config of the scene (default: paper-40's)")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--steps", type=int, default=200, help="steps per block")
+    ap.add_argument("--rounds", type=int, default=20)
+    args = ap.parse_args(argv)
+    if args.threads < 1 or args.steps < 1 or args.rounds < 1:
+        raise SystemExit("error: --threads, --steps and --rounds must be at least 1")
+    for path in (args.state, args.config):
+        if path is not None and not path.is_file():
+            raise SystemExit(f"error: {path}: no such file")
+    # numba reads its thread count when it starts: before the first import of either side
+    if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
+        os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
+    result = measure(args.reference, state=args.state, config=args.config, threads=args.threads, steps=args.steps,
+                     rounds=args.rounds)
+    print("\n".join(table(result)))
+
+
+if __name__ == "__main__":
+    main()
