@@ -31,6 +31,7 @@ import importlib
 import os
 import re
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -76,15 +77,22 @@ def _side(package: str, config: Path | None, state: Path | None, threads: int, w
     return integ, st
 
 
+def load_sides(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
+               warmup: int = 50, mirror_root: Path | None = None) -> dict:
+    """``{"reference": (integrator, state), "this code": (integrator, state)}``, each advanced by
+    ``warmup`` steps."""
+    root = mirror_package(reference, mirror_root)
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    return {"reference": _side(MIRROR_NAME, config, state, threads, warmup),
+            "this code": _side("fiberpipe", config, state, threads, warmup)}
+
+
 def measure(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
             steps: int = 200, rounds: int = 20, warmup: int = 50, mirror_root: Path | None = None) -> dict:
     """Blocks of ``steps`` steps of both sides, alternated over ``rounds`` rounds in this process;
     µs per step of each block, per side."""
-    root = mirror_package(reference, mirror_root)
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    sides = {"reference": _side(MIRROR_NAME, config, state, threads, warmup),
-             "this code": _side("fiberpipe", config, state, threads, warmup)}
+    sides = load_sides(reference, state=state, config=config, threads=threads, warmup=warmup, mirror_root=mirror_root)
     blocks = {name: [] for name in sides}
     for r in range(rounds):
         for name in (list(sides) if r % 2 == 0 else list(sides)[::-1]):
@@ -101,7 +109,7 @@ def measure(reference: Path, *, state: Path | None = None, config: Path | None =
 def table(result: dict) -> list[str]:
     rows = ["| side | best (µs/step) | median (µs/step) | Σ|x| at the end (m) |", "|---|---|---|---|"]
     for name, us in result["blocks_us"].items():
-        rows.append(f"| {name} | {min(us):.1f} | {statistics.median(us):.1f} | {result['abs_x_sum'][name]:.12g} |")
+        rows.append(f"| {name} | {min(us):.1f} | {statistics.median(us):.1f} | {result['abs_x_sum'][name]!r} |")
     rows.append(f"\nthis code / reference: median of the rounds' ratios {result['ratio_median']:.3f}, "
                 f"best blocks {result['ratio_best']:.3f}")
     return rows
@@ -115,6 +123,7 @@ def main(argv=None) -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=200, help="steps per block")
     ap.add_argument("--rounds", type=int, default=20)
+    ap.add_argument("--compile-only", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.threads < 1 or args.steps < 1 or args.rounds < 1:
         raise SystemExit("error: --threads, --steps and --rounds must be at least 1")
@@ -124,6 +133,16 @@ def main(argv=None) -> None:
     # numba reads its thread count when it starts: before the first import of either side
     if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
         os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
+    if args.compile_only:
+        load_sides(args.reference, state=args.state, config=args.config, threads=args.threads, warmup=1)
+        return
+    # both sides' kernels compiled and cached by a process of their own first: a kernel compiled in
+    # the measuring process calls its callees' own copies, one loaded from the cache its inlined
+    # ones, and the two ran up to 4 % apart on paper-40 (docs/reliability.md, "Where bit for bit stops")
+    child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *(argv or sys.argv[1:]),
+                            "--compile-only"], env=os.environ)
+    if child.returncode != 0:
+        raise SystemExit(f"error: compiling the two sides failed (exit status {child.returncode})")
     result = measure(args.reference, state=args.state, config=args.config, threads=args.threads, steps=args.steps,
                      rounds=args.rounds)
     print("\n".join(table(result)))
