@@ -210,3 +210,8 @@ def test_inprocess_bench_refuses_a_folder_without_the_package(tmp_path, capsys):
     with pytest.raises(SystemExit) as err:
         main(["--reference", str(tmp_path), "--state", str(tmp_path / "missing.npz")])
     assert "no such file" in str(err.value)
+    bad = tmp_path / "state.npz"
+    bad.write_bytes(b"not a numpy file")
+    with pytest.raises(SystemExit) as err:
+        main(["--reference", str(tmp_path), "--state", str(bad)])
+    assert str(err.value).startswith(f"error: {bad}: not a saved state")

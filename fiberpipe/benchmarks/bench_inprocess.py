@@ -115,6 +115,29 @@ def table(result: dict) -> list[str]:
     return rows
 
 
+def _check_inputs(state: Path | None, config: Path | None) -> None:
+    """A one-line error for a state that is not one ``paper40_states.save_state`` wrote, or a config
+    that does not load."""
+    import numpy as np
+
+    from ..config import load_config
+    from ..errors import FiberpipeError
+
+    if state is not None:
+        try:
+            with np.load(state) as d:
+                missing = {"x", "q", "v", "w", "acc", "t", "step"} - set(d.files)
+        except (OSError, ValueError) as e:
+            raise SystemExit(f"error: {state}: not a saved state ({e})") from None
+        if missing:
+            raise SystemExit(f"error: {state}: not a saved state (no {', '.join(sorted(missing))})")
+    if config is not None:
+        try:
+            load_config(config)
+        except FiberpipeError as e:
+            raise SystemExit(f"error: {config}: {e}") from None
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference", type=Path, required=True, help="a checkout's root folder ('.': this one)")
@@ -130,15 +153,18 @@ def main(argv=None) -> None:
     for path in (args.state, args.config):
         if path is not None and not path.is_file():
             raise SystemExit(f"error: {path}: no such file")
+    _check_inputs(args.state, args.config)
     # numba reads its thread count when it starts: before the first import of either side
     if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
         os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
+    mirror_package(args.reference)  # a folder without the package: its one-line error here
     if args.compile_only:
         load_sides(args.reference, state=args.state, config=args.config, threads=args.threads, warmup=1)
         return
     # both sides' kernels compiled and cached by a process of their own first: a kernel compiled in
-    # the measuring process calls its callees' own copies, one loaded from the cache its inlined
-    # ones, and the two ran up to 4 % apart on paper-40 (docs/reliability.md, "Where bit for bit stops")
+    # the process that runs it calls its callees as compiled on their own, one loaded from the cache
+    # runs its own copies of them, and the two ran 3–4 % apart on paper-40 (docs/reliability.md,
+    # "Where bit for bit stops")
     child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *(argv or sys.argv[1:]),
                             "--compile-only"], env=os.environ)
     if child.returncode != 0:
