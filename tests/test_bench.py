@@ -215,3 +215,33 @@ def test_inprocess_bench_refuses_a_folder_without_the_package(tmp_path, capsys):
     with pytest.raises(SystemExit) as err:
         main(["--reference", str(tmp_path), "--state", str(bad)])
     assert str(err.value).startswith(f"error: {bad}: not a saved state")
+
+
+def test_inprocess_mirror_imports_nothing_of_this_code_and_keeps_its_own_cache_guard(tmp_path):
+    """The mirror of this checkout, imported beside this code, pulls in no ``fiberpipe`` module
+    (checked in a process of its own), and each copy of the solver package registers its own numba
+    cache locator (the whole package's sources as stamp), so that an edit of either side's solver
+    recompiles that side."""
+    import subprocess
+
+    from fiberpipe.benchmarks.bench_inprocess import MIRROR_NAME, mirror_package
+
+    root = mirror_package(ROOT, tmp_path / "mirror")
+    probe = (f"import sys; sys.path.insert(0, {str(root)!r}); import {MIRROR_NAME}.solver, "
+             f"{MIRROR_NAME}.benchmarks.paper40_states, {MIRROR_NAME}.bench; import fiberpipe.solver\n"
+             "from numba.core import caching\n"
+             "impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl\n"
+             "print(sorted(c._fiberpipe_solver_dir for c in impl._locator_classes if hasattr(c, '_fiberpipe_solver_dir')))\n")
+    before = ("import sys; sys.path.insert(0, %r); import %s.solver, %s.benchmarks.paper40_states, %s.bench; "
+              "print(sorted(m for m in sys.modules if m == 'fiberpipe' or m.startswith('fiberpipe.')))"
+              % (str(root), MIRROR_NAME, MIRROR_NAME, MIRROR_NAME))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", before], capture_output=True, text=True, cwd=tmp_path, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip() == "[]"
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=tmp_path, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    dirs = eval(r.stdout.strip())
+    assert sorted(dirs) == sorted([str(root / MIRROR_NAME / "solver"), str(ROOT / "fiberpipe" / "solver")])

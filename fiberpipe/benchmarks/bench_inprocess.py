@@ -3,11 +3,12 @@
     python -m fiberpipe.benchmarks.bench_inprocess --reference CHECKOUT [--state STATE.npz]
         [--config CONFIG.yaml] [--threads N] [--steps 200] [--rounds 20]
 
-Both sides advance their own copy of the state (paper-40's scene, or ``--config``'s; from rest
-without ``--state``) by ``--steps`` steps per round, the sides alternating and the order flipping
-every round; each block is timed by the wall clock. The figures: each side's best and median block
-(µs per step), the median of the rounds' ratios (this code / reference) and the ratio of the best
-blocks. ``--reference .`` runs this code against a copy of itself: its ratios are the method's own
+Both sides advance their own copy of the state (paper-40's scene from this checkout's config, or
+``--config``'s; from rest without ``--state``) by ``--steps`` steps per round, the sides
+alternating and the order flipping every round; each block is timed by the wall clock. The
+figures: each side's best and median block (µs per step), the median of the rounds' ratios (this
+code / reference), the ratio of the best blocks, and each side's Σ|x| at the end (equal to the last
+digit when a change leaves the results as they are). ``--reference .`` runs this code against a copy of itself: its ratios are the method's own
 bias (about 1.01–1.03 for paper-40 on two threads).
 
 Why one process: on a shared virtual machine the same code and state ran up to 1.8× slower in one
@@ -51,10 +52,12 @@ def mirror_package(checkout: Path, root: Path | None = None, name: str = MIRROR_
         key = hashlib.sha1(str(src).encode()).hexdigest()[:12]
         root = Path(tempfile.gettempdir()) / f"fiberpipe-inprocess-{key}"
     dst = root / name
+    wanted = set()
     for path in src.rglob("*"):
         if "__pycache__" in path.parts or path.is_dir():
             continue
         out = dst / path.relative_to(src)
+        wanted.add(out)
         data = path.read_bytes()
         if path.suffix == ".py":
             data = _IMPORT.sub(lambda m: f"{m.group(1)} {name}", data.decode()).encode()
@@ -62,25 +65,46 @@ def mirror_package(checkout: Path, root: Path | None = None, name: str = MIRROR_
             continue
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(data)
+    for path in list(dst.rglob("*")):  # files the reference no longer has
+        if path.is_file() and "__pycache__" not in path.parts and path not in wanted:
+            path.unlink()
     return root
 
 
-def _side(package: str, config: Path | None, state: Path | None, threads: int, warmup: int):
+def _side(package: str, config: Path, state: Path | None, threads: int, warmup: int):
     """``(integrator, state)`` of one side, advanced by ``warmup`` steps (its kernels compiled or
     loaded)."""
-    states = importlib.import_module(f"{package}.benchmarks.paper40_states")
-    solver = importlib.import_module(f"{package}.solver")
-    model, effects, _, dt = states.scene(config=config)
-    st = states.load_state(state) if state is not None else solver.State.at_rest(model)
-    integ = solver.Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=threads)
-    integ.advance(st, warmup)
+    try:
+        states = importlib.import_module(f"{package}.benchmarks.paper40_states")
+        solver = importlib.import_module(f"{package}.solver")
+        model, effects, _, dt = states.scene(config=config)
+        st = states.load_state(state) if state is not None else solver.State.at_rest(model)
+        integ = solver.Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=threads)
+    except (ImportError, AttributeError, TypeError) as e:
+        raise SystemExit(f"error: {package}: no paper40_states.scene/load_state or Integrator as this code's "
+                         f"({e}); compare older commits with bench_ab") from None
+    if st.x.shape[0] != model.n_nodes:
+        raise SystemExit(f"error: {state}: a state of {st.x.shape[0]} nodes, the scene has {model.n_nodes} "
+                         f"(give the state's --config)")
+    _advance(integ, st, warmup, package)
     return integ, st
+
+
+def _advance(integ, st, steps: int, package: str) -> None:
+    status, done, bad = integ.advance(st, steps)
+    if status != 0 or done != steps:
+        raise SystemExit(f"error: {package}: the run stopped after {done} of {steps} steps (status {status}, "
+                         f"node {bad}): its blocks would not be comparable")
 
 
 def load_sides(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
                warmup: int = 50, mirror_root: Path | None = None) -> dict:
     """``{"reference": (integrator, state), "this code": (integrator, state)}``, each advanced by
-    ``warmup`` steps."""
+    ``warmup`` steps; both sides read the same config (None: this code's paper-40)."""
+    if config is None:
+        from ..bench import default_paper40_config
+
+        config = Path(default_paper40_config())
     root = mirror_package(reference, mirror_root)
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
@@ -98,7 +122,7 @@ def measure(reference: Path, *, state: Path | None = None, config: Path | None =
         for name in (list(sides) if r % 2 == 0 else list(sides)[::-1]):
             integ, st = sides[name]
             t0 = time.perf_counter()
-            integ.advance(st, steps)
+            _advance(integ, st, steps, name)
             blocks[name].append(1e6 * (time.perf_counter() - t0) / steps)
     ref, new = blocks["reference"], blocks["this code"]
     return {"blocks_us": blocks, "ratio_median": statistics.median(n / r for n, r in zip(new, ref)),
@@ -127,8 +151,8 @@ def _check_inputs(state: Path | None, config: Path | None) -> None:
         try:
             with np.load(state) as d:
                 missing = {"x", "q", "v", "w", "acc", "t", "step"} - set(d.files)
-        except (OSError, ValueError) as e:
-            raise SystemExit(f"error: {state}: not a saved state ({e})") from None
+        except Exception as e:  # noqa: BLE001 (numpy raises OSError, ValueError, EOFError, BadZipFile...)
+            raise SystemExit(f"error: {state}: not a saved state ({type(e).__name__}: {e})") from None
         if missing:
             raise SystemExit(f"error: {state}: not a saved state (no {', '.join(sorted(missing))})")
     if config is not None:
@@ -150,13 +174,13 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     if args.threads < 1 or args.steps < 1 or args.rounds < 1:
         raise SystemExit("error: --threads, --steps and --rounds must be at least 1")
+    # numba reads its thread count when it starts: before anything imports it
+    if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
+        os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
     for path in (args.state, args.config):
         if path is not None and not path.is_file():
             raise SystemExit(f"error: {path}: no such file")
     _check_inputs(args.state, args.config)
-    # numba reads its thread count when it starts: before the first import of either side
-    if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
-        os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
     mirror_package(args.reference)  # a folder without the package: its one-line error here
     if args.compile_only:
         load_sides(args.reference, state=args.state, config=args.config, threads=args.threads, warmup=1)
@@ -165,8 +189,13 @@ def main(argv=None) -> None:
     # the process that runs it calls its callees as compiled on their own, one loaded from the cache
     # runs its own copies of them, and the two ran 3–4 % apart on paper-40 (docs/reliability.md,
     # "Where bit for bit stops")
-    child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *(argv or sys.argv[1:]),
-                            "--compile-only"], env=os.environ)
+    opts = ["--reference", str(args.reference.resolve()), "--threads", str(args.threads), "--compile-only"]
+    for flag, path in (("--state", args.state), ("--config", args.config)):
+        if path is not None:
+            opts += [flag, str(path.resolve())]
+    package_root = str(Path(__file__).resolve().parents[2])  # this code, whatever the working folder
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (package_root, os.environ.get("PYTHONPATH")))))
+    child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *opts], env=env)
     if child.returncode != 0:
         raise SystemExit(f"error: compiling the two sides failed (exit status {child.returncode})")
     result = measure(args.reference, state=args.state, config=args.config, threads=args.threads, steps=args.steps,

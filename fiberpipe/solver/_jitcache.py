@@ -58,13 +58,15 @@ def _install() -> bool:
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # numba ≥ 0.61 / older
     if base is None or impl is None or not hasattr(impl, "_locator_classes"):  # pragma: no cover
         return False
-    if any(getattr(c, "_fiberpipe_solver", False) for c in impl._locator_classes):
+    # one locator per copy of the package (a process may hold two, as the in-process benchmark
+    # does: each covers the files of its own folder)
+    if any(getattr(c, "_fiberpipe_solver_dir", None) == _PKG_DIR for c in impl._locator_classes):
         return True
 
     class SolverPackageLocator(base):
         """Numba's own locator for the file, with the whole package's source digest as stamp."""
 
-        _fiberpipe_solver = True
+        _fiberpipe_solver_dir = _PKG_DIR
 
         def __init__(self, inner):
             self._inner = inner
