@@ -481,9 +481,8 @@ def export_abaqus(config, out_file, run_dir):
     """The scene of CONFIG as a complete Abaqus/Explicit input deck (docs/abaqus.md): runs the
     stages up to mesh (cached), then writes fibers, plates, walls, contact, loading, step and
     outputs."""
-    from fiberpipe.artifacts import read_mesh
+    from fiberpipe.artifacts import ensure_output_dir, read_mesh
     from fiberpipe.io.abaqus import write_abaqus_deck
-    from fiberpipe.artifacts import ensure_output_dir
     from fiberpipe.pipeline import run_pipeline
 
     cfg = _load(config)

@@ -74,6 +74,8 @@ def mirror_package(checkout: Path, root: Path | None = None, name: str = MIRROR_
 def _side(package: str, config: Path, state: Path | None, threads: int, warmup: int):
     """``(integrator, state)`` of one side, advanced by ``warmup`` steps (its kernels compiled or
     loaded)."""
+    # each side's own scene and state loaders, the ones every version since the named interfaces
+    # has (not paper40_states.scene_and_state, which older references lack)
     try:
         states = importlib.import_module(f"{package}.benchmarks.paper40_states")
         solver = importlib.import_module(f"{package}.solver")
@@ -97,26 +99,26 @@ def _advance(integ, st, steps: int, package: str) -> None:
                          f"node {bad}): its blocks would not be comparable")
 
 
-def load_sides(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
-               warmup: int = 50, mirror_root: Path | None = None) -> dict:
-    """``{"reference": (integrator, state), "this code": (integrator, state)}``, each advanced by
-    ``warmup`` steps; both sides read the same config (None: this code's paper-40)."""
+def load_sides(root: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
+               warmup: int = 50) -> dict:
+    """``{"reference": (integrator, state), "this code": (integrator, state)}``, the reference from its
+    mirror in ``root`` (:func:`mirror_package`), each advanced by ``warmup`` steps; both sides read the
+    same config (None: this code's paper-40)."""
     if config is None:
         from ..bench import default_paper40_config
 
         config = Path(default_paper40_config())
-    root = mirror_package(reference, mirror_root)
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     return {"reference": _side(MIRROR_NAME, config, state, threads, warmup),
             "this code": _side("fiberpipe", config, state, threads, warmup)}
 
 
-def measure(reference: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
-            steps: int = 200, rounds: int = 20, warmup: int = 50, mirror_root: Path | None = None) -> dict:
-    """Blocks of ``steps`` steps of both sides, alternated over ``rounds`` rounds in this process;
-    µs per step of each block, per side."""
-    sides = load_sides(reference, state=state, config=config, threads=threads, warmup=warmup, mirror_root=mirror_root)
+def measure(root: Path, *, state: Path | None = None, config: Path | None = None, threads: int = 1,
+            steps: int = 200, rounds: int = 20, warmup: int = 50) -> dict:
+    """Blocks of ``steps`` steps of both sides (:func:`load_sides`), alternated over ``rounds`` rounds
+    in this process; µs per step of each block, per side."""
+    sides = load_sides(root, state=state, config=config, threads=threads, warmup=warmup)
     blocks = {name: [] for name in sides}
     for r in range(rounds):
         for name in (list(sides) if r % 2 == 0 else list(sides)[::-1]):
@@ -170,26 +172,26 @@ def main(argv=None) -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=200, help="steps per block")
     ap.add_argument("--rounds", type=int, default=20)
-    ap.add_argument("--compile-only", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--compile-only", type=Path, help=argparse.SUPPRESS)  # the mirror's folder
     args = ap.parse_args(argv)
     if args.threads < 1 or args.steps < 1 or args.rounds < 1:
         raise SystemExit("error: --threads, --steps and --rounds must be at least 1")
     # numba reads its thread count when it starts: before anything imports it
     if int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0) < args.threads:
         os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
+    if args.compile_only:  # the parent checked the inputs and made the mirror
+        load_sides(args.compile_only, state=args.state, config=args.config, threads=args.threads, warmup=1)
+        return
     for path in (args.state, args.config):
         if path is not None and not path.is_file():
             raise SystemExit(f"error: {path}: no such file")
     _check_inputs(args.state, args.config)
-    mirror_package(args.reference)  # a folder without the package: its one-line error here
-    if args.compile_only:
-        load_sides(args.reference, state=args.state, config=args.config, threads=args.threads, warmup=1)
-        return
+    root = mirror_package(args.reference)  # a folder without the package: its one-line error here
     # both sides' kernels compiled and cached by a process of their own first: a kernel compiled in
     # the process that runs it calls its callees as compiled on their own, one loaded from the cache
     # runs its own copies of them, and the two ran 3–4 % apart on paper-40 (docs/reliability.md,
     # "Where bit for bit stops")
-    opts = ["--reference", str(args.reference.resolve()), "--threads", str(args.threads), "--compile-only"]
+    opts = ["--reference", str(args.reference.resolve()), "--threads", str(args.threads), "--compile-only", str(root)]
     for flag, path in (("--state", args.state), ("--config", args.config)):
         if path is not None:
             opts += [flag, str(path.resolve())]
@@ -198,7 +200,7 @@ def main(argv=None) -> None:
     child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *opts], env=env)
     if child.returncode != 0:
         raise SystemExit(f"error: compiling the two sides failed (exit status {child.returncode})")
-    result = measure(args.reference, state=args.state, config=args.config, threads=args.threads, steps=args.steps,
+    result = measure(root, state=args.state, config=args.config, threads=args.threads, steps=args.steps,
                      rounds=args.rounds)
     print("\n".join(table(result)))
 

@@ -33,15 +33,19 @@ def scene(overrides: dict | None = None, config: Path | None = None):
 
 
 def scene_and_state(state: str | Path | None = None, config: str | Path | None = None):
-    """``(model, effects, dt, state)``: paper-40 from the state saved at ``state``
-    (:func:`save_state`), or the scene of the run config ``config`` from rest."""
+    """``(model, effects, dt, state)``: the scene of the run config ``config`` (None: paper-40) from
+    the state saved at ``state`` (:func:`save_state`; None: from rest). A state of another node count
+    than the scene's stops with a one-line error."""
     from fiberpipe.solver import State
 
-    if config is not None:
-        model, effects, _, dt = scene(config=Path(config))
+    model, effects, _, dt = scene(config=Path(config) if config is not None else None)
+    if state is None:
         return model, effects, dt, State.at_rest(model)
-    model, effects, _, dt = scene()
-    return model, effects, dt, load_state(state)
+    st = load_state(state)
+    if st.x.shape[0] != model.n_nodes:
+        raise SystemExit(f"error: {state}: a state of {st.x.shape[0]} nodes, the scene has {model.n_nodes} "
+                         "(give the state's config)")
+    return model, effects, dt, st
 
 
 def save_state(path, state) -> None:

@@ -1,11 +1,10 @@
 """Where the step loop's time goes, per thread and per compiled function: Linux ``perf`` sampling
 of the jitted kernels, named.
 
-    python -m fiberpipe.benchmarks.perf_profile [--state STATE.npz | --config CONFIG] [--threads 2]
+    python -m fiberpipe.benchmarks.perf_profile [--state STATE.npz] [--config CONFIG] [--threads 2]
 
-The scene is paper-40 at the study's settings from a state saved by
-:mod:`fiberpipe.benchmarks.paper40_states` (``--state``), or a run config's scene from rest
-(``--config``). A child process compiles the step loop (into an empty numba cache, so that every
+The scene is a run config's (``--config``; paper-40 at the study's settings without it), from a
+state saved by :mod:`fiberpipe.benchmarks.paper40_states` (``--state``) or from rest. A child process compiles the step loop (into an empty numba cache, so that every
 kernel has the LLVM module its name is read from), writes ``/tmp/perf-PID.map`` (the address and
 name of each compiled function, which ``perf report`` reads for code without a symbol table), then
 runs ``--steps`` timed steps under ``perf record -e cycles:u`` (perf falls back to a clock where the
@@ -143,9 +142,8 @@ def table(per: dict, us_per_step: float, main_tid: str, min_share: float = 0.005
 
 def main(argv=None) -> list[str]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    where = ap.add_mutually_exclusive_group(required=True)
-    where.add_argument("--state", help="a paper-40 state saved by fiberpipe.benchmarks.paper40_states")
-    where.add_argument("--config", help="a run config: its scene from rest")
+    ap.add_argument("--state", help="a state saved by fiberpipe.benchmarks.paper40_states (default: from rest)")
+    ap.add_argument("--config", help="the run config of the scene (default: paper-40's)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--warmup", type=int, default=300)
@@ -161,7 +159,7 @@ def main(argv=None) -> list[str]:
     per = aggregate(report)
     if not per:
         raise SystemExit("perf recorded no samples of the timed steps (kernel.perf_event_paranoid ≤ 2 is needed)")
-    where = f"--config {a.config}" if a.config else f"--state {a.state}"
+    where = " ".join(f"--{name} {value}" for name, value in (("config", a.config), ("state", a.state)) if value)
     lines = [f"`python -m fiberpipe.benchmarks.perf_profile {where} --threads {a.threads} --steps {a.steps}`: "
              f"{n_el} elements, {a.threads} thread(s), perf event {event}, "
              f"load average {os.getloadavg()[0]:.2f}", ""]
@@ -181,7 +179,7 @@ def _record(a) -> tuple[str, float, int, str, str]:
         cmd = ["perf", "record", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
                str(data), "--", sys.executable, "-m", "fiberpipe.benchmarks.perf_profile", "--child",
                "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
-        cmd += ["--state", a.state] if a.state else ["--config", a.config]
+        cmd += [arg for name, value in (("--state", a.state), ("--config", a.config)) if value for arg in (name, value)]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)
         out = {ln.split()[0]: ln.split()[1:] for ln in run.stdout.splitlines() if ln.split()[:1] in (["PID"], ["WINDOW"])}
         perf_map = Path(f"/tmp/perf-{out['PID'][0]}.map") if "PID" in out else None
