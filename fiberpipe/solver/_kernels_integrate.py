@@ -62,8 +62,12 @@ def no_contact_forces(data):
 def eval_external(f, mom, f_ext):
     """Reset the force and moment arrays to the constant loads ``f_ext`` (N, 3) (gravity, point and
     line loads) and zero."""
-    f[:, :] = f_ext
-    mom[:, :] = 0.0
+    # element by element: an array assignment compiles numba's shape-mismatch message (seconds of
+    # compile time for a copy)
+    for i in range(f.shape[0]):
+        for c in range(3):
+            f[i, c] = f_ext[i, c]
+            mom[i, c] = 0.0
 
 
 @njit(inline="always", **_FLAGS)

@@ -87,7 +87,10 @@ def _rebuild(x, data):
     data.lists[1] = cur
     st.n_pairs[0] = n
     st.n_builds[0] += 1
-    data.x_ref[:, :] = x
+    x_ref = data.x_ref
+    for i in range(x.shape[0]):  # not x_ref[:, :] = x: see _kernels_integrate.eval_external
+        for c in range(3):
+            x_ref[i, c] = x[i, c]
     # each pair's gap at this build (clamped segment distance − r_i − r_j): the contact pass skips
     # a pair while the gap exceeds twice the path bound since (and refreshes it when it looks)
     # (the potential kernel leaves fn alone for the pairs it skips: every pair starts at fn = 0)
