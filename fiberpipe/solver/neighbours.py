@@ -220,14 +220,39 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
                             n += 1
     if n > cap:
         return -n
-    order = np.argsort(keys_out[:n])
-    tmp = pairs_out[:n].copy()
-    tk = keys_out[:n].copy()
-    for k in range(n):
-        pairs_out[k, 0] = tmp[order[k], 0]
-        pairs_out[k, 1] = tmp[order[k], 1]
-        keys_out[k] = tk[order[k]]
+    _sort_by_key(pairs_out, keys_out, n, ne)
     return n
+
+
+@njit(cache=True, error_model="numpy")
+def _sort_by_key(pairs, keys, n, ne):
+    """Rows ``0 … n − 1`` of ``pairs`` and ``keys`` in ascending order of the key ``i·E + j``.
+
+    Strategy: a counting sort by the first segment i (E buckets), then an insertion sort by j within
+    each bucket (a segment has a few dozen candidates at most). The keys are unique, so the order is
+    the one any sort gives; numba's ``np.argsort`` did the same and cost seconds of compile time."""
+    start = np.zeros(ne + 1, np.int64)
+    for k in range(n):
+        start[pairs[k, 0] + 1] += 1
+    for e in range(ne):
+        start[e + 1] += start[e]
+    tmp = pairs[:n].copy()
+    fill = start[:ne].copy()
+    for k in range(n):
+        i = tmp[k, 0]
+        pairs[fill[i], 0] = i
+        pairs[fill[i], 1] = tmp[k, 1]
+        fill[i] += 1
+    for e in range(ne):
+        for k in range(start[e] + 1, start[e + 1]):
+            j = pairs[k, 1]
+            m = k - 1
+            while m >= start[e] and pairs[m, 1] > j:
+                pairs[m + 1, 1] = pairs[m, 1]
+                m -= 1
+            pairs[m + 1, 1] = j
+    for k in range(n):
+        keys[k] = pairs[k, 0] * ne + pairs[k, 1]
 
 
 def segment_arclength(seg_nodes: np.ndarray, seg_fiber: np.ndarray, x_ref: np.ndarray) -> np.ndarray:

@@ -116,3 +116,25 @@ def test_scales_linearly():
             vl.build(x)
         times.append((time.perf_counter() - t) / 3 / len(seg))
     assert times[1] < 3.0 * times[0]
+
+
+@pytest.mark.parametrize("n", [0, 1, 37, 500])
+def test_pairs_sorted_by_key_as_argsort_sorts_them(n):
+    from fiberpipe.solver.neighbours import _sort_by_key
+
+    ne = 40
+    rng = np.random.default_rng(n)
+    allp = np.array([(i, j) for i in range(ne) for j in range(i + 1, ne)], np.int64)
+    pairs = allp[rng.permutation(len(allp))[:n]].copy()
+    if n == 500:  # one segment with many candidates, given in descending order
+        pairs[:30, 0] = 3
+        pairs[:30, 1] = np.arange(39, 9, -1)
+        pairs = np.unique(pairs, axis=0)[rng.permutation(len(np.unique(pairs, axis=0)))]
+    m = len(pairs)
+    keys = np.full(m + 5, -7, np.int64)
+    buf = np.vstack([pairs, np.full((5, 2), -9, np.int64)])
+    _sort_by_key(buf, keys, m, ne)
+    order = np.argsort(pairs[:, 0] * ne + pairs[:, 1])
+    assert np.array_equal(buf[:m], pairs[order])
+    assert np.array_equal(keys[:m], pairs[order, 0] * ne + pairs[order, 1])
+    assert np.all(buf[m:] == -9) and np.all(keys[m:] == -7)  # rows beyond n untouched
