@@ -49,7 +49,7 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
 
     runs = {}
     for th in (1, threads):
-        if config or state:  # one of them: a paper-40 state, or a config's scene from rest
+        if config or state:  # a saved state, a config's scene, or both (scene_and_state)
             m, eff, dt, st = scene_and_state(state, config)
         else:
             m, eff, dt, st = _bench_scene(n_fibers, contact)

@@ -231,7 +231,7 @@ def _sort_by_key(pairs, keys, n, ne):
     Strategy: a counting sort by the first segment i (E buckets), then an insertion sort by j within
     each bucket (a segment has a few dozen candidates at most). The keys are unique (a pair is listed
     once), so the order is the one any sort gives; numba's ``np.argsort`` gives it too, at seconds of
-    compile time and 6–7× the run time."""
+    compile time."""
     start = np.zeros(ne + 1, np.int64)
     for k in range(n):
         start[pairs[k, 0] + 1] += 1
