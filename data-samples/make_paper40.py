@@ -26,7 +26,7 @@ generator's parameters and the measured statistics). The original specimen (up t
 lattice specimen matched to the statistics but with no contacts (``placement="rigid"``) is ``--rigid``.
 ``--phi-mean-deg 10 --out DIR`` makes the variant at the study's upper bound, for comparison.
 
-Then (``--settle``, the default since issue #5's third round; ``--no-settle`` keeps the pile as
+Then (``--settle``, the default; ``--no-settle`` keeps the pile as
 placed) the pile settles in the solver itself (:func:`settle_pile`), because the frictionless
 rest of the placement is not an equilibrium with point contacts and μ = 0.2: meshed as the
 paper-40 scene, lower plate and walls fixed, no upper plate, gravity, contact, Coulomb friction
@@ -36,7 +36,7 @@ energy has died out); the settled node positions become the mid-lines (rest shap
 plate is put on the settled pile's top (+1 µm). The solver runs on one thread: deterministic
 (about 6.5 min on one core).
 
-``--wavy`` makes the variant of data-samples/paper-40-wavy/ instead (issue #5, Table 4's curvature
+``--wavy`` makes the variant of data-samples/paper-40-wavy/ instead (the study's Table 4 curvature
 read as 0.24 1/mm): the same deposit with a smooth 1.8–2.5 mm waviness of that projected
 curvature (``cassette_specimen(wave_curvature_per_m=...)``), settled with the work-around for the
 axial-lock instability of curved fibers described at ``WAVY_SETTLE_MASS_SCALING``. The default
@@ -64,7 +64,7 @@ SETTLE_TIME_S = 0.15  # 150 ms: kinetic energy 3e-15 J (from 1e-8 J), fastest no
 SETTLE_LOCK = "all"  # settle with the axial lock the paper-40 scene uses
 SETTLE_FRAMES = 9
 DEPOSIT_CANDIDATES = 2  # trial drops per fiber, the lowest kept: 1 gives v_f0 ≈ 30 %, 2 ≈ 38 %, 4 ≈ 48 %
-# --wavy (issue #5, Table 4 read as 1/mm): a smooth waviness of 0.24 1/mm projected curvature, 2 sine
+# --wavy (the study's Table 4 read as 1/mm): a smooth waviness of 0.24 1/mm projected curvature, 2 sine
 # modes per component of wavelengths 1.8-2.5 mm (longer waves with that curvature give Φ ≈ 20° and
 # v_f0 ≈ 19 %: data-samples/paper-40-wavy/README.md), the tilts lowered to keep Φ ≈ 6-7°, one trial
 # drop per fiber (a wavy pile is denser: two give v_f0 ≈ 40 % before settling)
@@ -183,7 +183,7 @@ def options(argv=None) -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--original", action="store_true", help="the specimen before the statistics were matched")
     ap.add_argument("--rigid", action="store_true",
-                    help="the lattice specimen of issue #5's first round (placement='rigid': no contacts at U = 0)")
+                    help="the lattice specimen matched to the statistics (placement='rigid': no contacts at U = 0)")
     ap.add_argument("--settle", action=argparse.BooleanOptionalAction, default=True,
                     help="settle the deposited pile in the solver under gravity with friction (settle_pile; the "
                          "default); --no-settle: the deposited pile as placed")

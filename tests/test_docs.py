@@ -224,3 +224,35 @@ def narration(path: Path) -> list[str]:
 def test_reference_text_does_not_narrate(path):
     found = narration(path)
     assert not found, "\n".join(found)
+
+
+# the code, its comments and the tests: the same rules but "helpers" (a helper function is code) and
+# pytest's fixture scope "session"
+CODE_NARRATION = [(p, why) for p, why in NARRATION if "who did the work" not in why] + [
+    (re.compile(r"\b(sessions?|engineers?|reviewers?)\b(?<!scope=\"session)", re.I), "narrates who did the work"),
+    (re.compile(r"\b(first|second|third|last) round of work|\b(first|second|third)( and \w+)? round\b", re.I),
+     "narrates rounds of work"),
+]
+CODE = sorted({*ROOT.glob("fiberpipe/**/*.py"), *ROOT.glob("tests/**/*.py"), *ROOT.glob("data-samples/**/*.py"),
+               *(ROOT / "tools").glob("*.py")} - {Path(__file__).resolve()})
+
+
+def test_code_and_tests_do_not_narrate():
+    found = []
+    for path in CODE:
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            for pattern, why in CODE_NARRATION:
+                if pattern.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{n}: {why}: {line.strip()[:100]}")
+    assert not found, "\n".join(found)
+
+
+def test_code_narration_check_flags_an_issue_number_and_passes_a_fixture_scope():
+    def flags(line):
+        return [why for pattern, why in CODE_NARRATION if pattern.search(line)]
+    assert flags("# the default since issue #5's third round")
+    assert flags("Until 2026-11-22 a segment owned a point contact")
+    assert flags("see docs/contact.md §12")
+    assert not flags('@pytest.fixture(scope="session")')
+    assert not flags("# small helpers shared by the stages")
+    assert not flags("best of 12 rounds of 500 steps")

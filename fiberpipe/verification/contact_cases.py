@@ -559,7 +559,7 @@ def sliding_parallel(quick: bool = False, p: float = 66.0, speed_m_s: float = 5.
     m = _model([((0, 0, 0), (LA, 0, 0), 20), ((1e-3, 0, zb), (1e-3 + LB, 0, zb), 12)])
     law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
     # the legacy kernel integrates each overlap exactly; the potential formulation's Gauss points,
-    # fixed on the segments, make the sliding fibre bounce by ±5.6 % (docs/contact.md §12)
+    # fixed on the segments, make the sliding fibre bounce by ±5.6 % (docs/contact.md, "The potential formulation")
     eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]),
            contact_hook(m, law=law, formulation="legacy")]
     dist = 0.6e-3 if quick else 1.8e-3

@@ -1,4 +1,5 @@
-"""Slice-wise tracer on phantoms of touching, curved, quasi-parallel fibers (issue acceptance)."""
+"""Slice-wise tracer on phantoms of touching, curved, quasi-parallel fibers: recall, precision and
+coverage ≥ 0.95, mean error ≤ 0.75 voxel, 95th percentile ≤ 1 voxel."""
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ CASES = [  # (seed, n_fibers, contrast_to_noise)
 
 
 @pytest.mark.parametrize("seed,n_fibers,cnr", CASES)
-def test_slices_tracer_meets_issue_accuracy(seed, n_fibers, cnr):
+def test_slices_tracer_meets_accuracy_targets_on_touching_fibers(seed, n_fibers, cnr):
     vol, truth = make_phantom(n_fibers=n_fibers, shape=(120, 120, 120), radius_vox=5.0,
                               contrast_to_noise=cnr, touching_fraction=1 / 3, seed=seed)
     assert truth.meta["touching"].sum() >= n_fibers // 3 - 1

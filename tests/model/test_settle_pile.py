@@ -1,5 +1,5 @@
 """data-samples/make_paper40.py --settle: the deposited pile settled in the solver under gravity
-with friction (issue #5), its settled mid-lines taken as the specimen and the upper plate put on
+with friction, its settled mid-lines taken as the specimen and the upper plate put on
 the settled top."""
 
 import importlib.util

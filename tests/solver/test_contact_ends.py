@@ -1,12 +1,12 @@
 """Contact at a fibre's free end is conservative: an end cap sliding onto and off another fibre.
 
-Until 2026-11-22 a segment at a fibre's free end owned a point contact only while the closest point
-of the two infinite lines fell inside it: when that point crossed the free end the force appeared or
-vanished at full penetration. Every such event created or destroyed the stored contact energy, and
-in an undamped bundle (the study's α = 0 case) fibres rattling against each other's ends gained
-energy until they diverged (paper-40 at α = 0 left the box at 6e4 m/s after 4.5 ms). The free end
-now owns its clamped closest point (the hemispherical end cap), so the distance, the force and the
-energy are continuous.
+A segment at a fibre's free end owns its clamped closest point (the hemispherical end cap), so the
+distance, the force and the energy are continuous as the closest point of the two infinite lines
+crosses the free end. Were the point contact owned only while that point falls inside the segment,
+the force would appear or vanish at full penetration, each such event would create or destroy
+stored contact energy, and in an undamped bundle (the study's α = 0 case) fibres rattling against
+each other's ends would gain energy until they diverged (paper-40 at α = 0 then leaves the box at
+6e4 m/s after 4.5 ms).
 """
 
 from __future__ import annotations

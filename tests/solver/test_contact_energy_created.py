@@ -1,4 +1,5 @@
-"""The energy the contact creates at high loads (docs/contact.md §11–12), on the quickstart bundle.
+"""The energy the contact creates at high loads, on the quickstart bundle (docs/contact.md, "Created
+energy" and "The potential formulation").
 
 Slow (two runs of ≈ 60 s): the quickstart's 14 traced fibres compacted by 2.2 mm without friction.
 With ℓ_blend = 1 mm (the legacy kernel) the point law on long crossings makes the bundle rattle at
