@@ -179,7 +179,9 @@ def _record(a) -> tuple[str, float, int, str, str]:
         cmd = ["perf", "record", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
                str(data), "--", sys.executable, "-m", "fiberpipe.benchmarks.perf_profile", "--child",
                "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
-        cmd += [arg for name, value in (("--state", a.state), ("--config", a.config)) if value for arg in (name, value)]
+        for flag, value in (("--state", a.state), ("--config", a.config)):
+            if value:
+                cmd += [flag, value]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)
         out = {ln.split()[0]: ln.split()[1:] for ln in run.stdout.splitlines() if ln.split()[:1] in (["PID"], ["WINDOW"])}
         perf_map = Path(f"/tmp/perf-{out['PID'][0]}.map") if "PID" in out else None

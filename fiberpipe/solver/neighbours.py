@@ -85,6 +85,13 @@ def _all_finite_bits(x):
     return True
 
 
+@njit(cache=True, inline="always")
+def pair_key(i, j, ne):
+    """The key of segment pair (i, j) among ``ne`` segments, ``i·E + j``: the list's order and the
+    friction history's look-up when the list is rebuilt."""
+    return i * ne + j
+
+
 @njit(cache=True, error_model="numpy")
 def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
     """Build the Verlet list of candidate segment pairs.
@@ -216,7 +223,7 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
                             if n < cap:
                                 pairs_out[n, 0] = i
                                 pairs_out[n, 1] = j
-                                keys_out[n] = i * ne + j
+                                keys_out[n] = pair_key(i, j, ne)
                             n += 1
     if n > cap:
         return -n
@@ -253,7 +260,7 @@ def _sort_by_key(pairs, keys, n, ne):
                 m -= 1
             pairs[m + 1, 1] = j
     for k in range(n):
-        keys[k] = pairs[k, 0] * ne + pairs[k, 1]
+        keys[k] = pair_key(pairs[k, 0], pairs[k, 1], ne)
 
 
 def segment_arclength(seg_nodes: np.ndarray, seg_fiber: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
