@@ -125,7 +125,7 @@ stable-step: setup
 	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_0.npz --span 2e-3
 	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_708000.npz --span 0.5e-3 --fixed-penalties --factors 0.8 0.85 0.9 0.95 1.0
 
-# energy the time step creates in the six-fibre scene at 1000 N/m, against dt_safety (docs/contact.md)
+# energy the time step creates in the six-fiber scene at 1000 N/m, against dt_safety (docs/contact.md)
 step-energy: setup
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --load 3 30 300 1000 --seeds 4
 	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_oriented --load 1000 --onset-fraction 0.004 0.012 --seeds 4

@@ -134,7 +134,7 @@ def test_half_diameter_overlap_is_resolved_by_the_mesh_stage_then_runs_quietly()
 def test_half_diameter_overlap_in_the_solver_is_pushed_apart_without_explosion():
     """The same overlap given straight to the solver (no adjustment), damped: pushed apart to
     (was xfail: ~1.6 J stored, divergence at step 6; now the hook's initial-overlap offset, released
-    over ``contact.overlap_release`` = 0.1 ms, pushes the fibres apart gradually)
+    over ``contact.overlap_release`` = 0.1 ms, pushes the fibers apart gradually)
     contact (δ → 0), no NaN, speeds bounded (no divergence), energy balanced."""
     L, n = 3e-3, 10
     m = fibers_model([((0, 0, 0), (L, 0, 0), n), ((0, 0, R), (L, 0, R), n)])
@@ -184,7 +184,7 @@ def test_crossing_fiber_dragged_across_joints_does_not_snag(pressed):
     pressed: the upper fiber 0.02 r into the lower one, which is clamped at its ends only and bends
     under the contact: the contact stays active along the whole drag (no snag, no loss of contact);
     residual 2.3e-3 of the booked balance; from state functions 3.1 %: the point part's crossing
-    hops across the bent fibre's joints (docs/contact.md, "The potential formulation").
+    hops across the bent fiber's joints (docs/contact.md, "The potential formulation").
     """
     L, n = 3e-3, 10
     z1 = (2.0 - 0.02) * R if pressed else 2 * R

@@ -1,6 +1,6 @@
 """Contact-pass cost: ns per candidate segment pair, per law, loose and squeezed bundles.
 
-40 fibres × 50 elements (0.3 mm, r = 0.25 mm) in a hexagonal bundle, slightly wavy (so crossing
+40 fibers × 50 elements (0.3 mm, r = 0.25 mm) in a hexagonal bundle, slightly wavy (so crossing
 angles are small but not zero), centre spacing ``2r + gap``. Times :func:`contact_forces` (normal
 forces only) and the friction pass on the Verlet list the hook would use (skin 0.2 r).
 

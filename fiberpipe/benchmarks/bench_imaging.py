@@ -58,15 +58,15 @@ def run_fibretracker(vol: np.ndarray, vs: float, r: float) -> Polylines:
     """fibretracker 0.1.0 on the grey volume, tuned to the phantom's radius (its own defaults
     are for r ~ 2.5-5 px): blob std r/2, min_distance r, peak threshold 0.5 of the contrast,
     intensity-weighted centroids, max_jump r/2, Gaussian-smoothed tracks."""
-    from fibretracker.models.detector import get_fibre_coords
-    from fibretracker.models.tracker import track_fibres
+    from fibretracker.models.detector import get_fiber_coords
+    from fibretracker.models.tracker import track_fibers
 
     lo, hi = np.percentile(vol, [1, 99])
     v = np.clip((vol - lo) / (hi - lo), 0, 1).astype(np.float64)
     with contextlib.redirect_stdout(io.StringIO()):  # it prints progress with \r
-        coords = get_fibre_coords(v, std=r / 2, min_distance=int(round(r)), threshold_abs=0.5,
+        coords = get_fiber_coords(v, std=r / 2, min_distance=int(round(r)), threshold_abs=0.5,
                                   weighted_avg=True, window_size=int(round(r)))
-        tracks = track_fibres(coords=coords, max_jump=max(2, int(round(r / 2))), max_skip=3,
+        tracks = track_fibers(coords=coords, max_jump=max(2, int(round(r / 2))), max_skip=3,
                               momentum=0.1, track_min_length=int(3 * r), smoothtrack_gaussian=True,
                               sigma=2)
     fibers = [np.asarray(t, dtype=np.float64)[:, :3] * vs for t in tracks]  # x, y, z voxels -> m

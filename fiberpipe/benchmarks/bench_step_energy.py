@@ -1,12 +1,12 @@
-"""Energy created in the six-fibre conservation scene, per law, load, plane penalty and step.
+"""Energy created in the six-fiber conservation scene, per law, load, plane penalty and step.
 
-The scene of :mod:`fiberpipe.verification.six_fibres` (undamped, frictionless, loaded at once) is
-chaotic at high loads, so each cell is run on an ensemble: the top fibres lifted by
+The scene of :mod:`fiberpipe.verification.six_fibers` (undamped, frictionless, loaded at once) is
+chaotic at high loads, so each cell is run on an ensemble: the top fibers lifted by
 ``seed × --lift`` (seed 0 is the test's scene). Each row gives the mean and the largest excess
 (ALLKE + ALLSE + Π − W)/max|W| over the seeds (the leapfrog kinetic term, the stored contact
-energy of planes and fibres) and the kinetic energy at the end over W. ``--tangent`` adds whether
+energy of planes and fibers) and the kinetic energy at the end over W. ``--tangent`` adds whether
 the contact lowers the stable step: the modal step (:func:`fiberpipe.solver.timestep.modal_time_step`)
-at seed 0's final state with the tangent of the fibre–fibre contact forces added to the beams',
+at seed 0's final state with the tangent of the fiber–fiber contact forces added to the beams',
 over the beams' alone.
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_step_energy \\
@@ -25,7 +25,7 @@ import numpy as np
 
 def contact_tangent_ratio(model, law, x, q, onset_m: float) -> float:
     """dt of the modal step with the contact's tangent added, over the beams' alone, at ``(x, q)``
-    (all segment pairs of different fibres, the default two Gauss points)."""
+    (all segment pairs of different fibers, the default two Gauss points)."""
     from fiberpipe.solver.contact import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
     from fiberpipe.solver.contact_state import new_records
@@ -54,13 +54,13 @@ def contact_tangent_ratio(model, law, x, q, onset_m: float) -> float:
 
 def main(argv=None) -> None:
     from fiberpipe.config import ContactConfig
-    from fiberpipe.verification.six_fibres import LAWS, energy_excess, law_label, six_fibres_law, six_fibres_run
+    from fiberpipe.verification.six_fibers import LAWS, energy_excess, law_label, six_fibers_law, six_fibers_run
 
     names = sorted({n for n, _ in LAWS})
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--law", nargs="+", choices=names, default=None,
                     help="laws of the scene's set (default: all, every preset); a law with presets runs each")
-    ap.add_argument("--load", type=float, nargs="+", default=[1000.0], help="line load on the top fibres, N/m")
+    ap.add_argument("--load", type=float, nargs="+", default=[1000.0], help="line load on the top fibers, N/m")
     ap.add_argument("--dt-safety", type=float, nargs="+", default=[0.9])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--lift", type=float, default=1e-9, help="perturbation per seed, m")
@@ -72,16 +72,16 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     laws = [(n, kw) for n, kw in LAWS if a.law is None or n in a.law]
     onset_m = float(ContactConfig().onset)
-    print(f"# Six fibres, undamped and frictionless, {a.seeds} seeds ({time.strftime('%Y-%m-%d %H:%M')})\n")
+    print(f"# Six fibers, undamped and frictionless, {a.seeds} seeds ({time.strftime('%Y-%m-%d %H:%M')})\n")
     print("| law | load (N/m) | onset (r) | penalty factor | dt_safety | excess, mean over seeds | largest | "
           "ALLKE/W at the end, mean | dt with the contact's tangent / beams' |\n|---|---|---|---|---|---|---|---|---|",
           flush=True)
     for (name, kw), q, of, pf, s in itertools.product(laws, a.load, a.onset_fraction, a.penalty_factor, a.dt_safety):
-        law = six_fibres_law(name, kw)
+        law = six_fibers_law(name, kw)
         ex, kw_end = [], []
         ratio = float("nan")
         for seed in range(a.seeds):
-            m, res = six_fibres_run(law, q, dt_safety=s, lift_m=seed * a.lift, penalty_factor=pf, onset_fraction=of)
+            m, res = six_fibers_run(law, q, dt_safety=s, lift_m=seed * a.lift, penalty_factor=pf, onset_fraction=of)
             e, ke = energy_excess(res)
             ex.append(e)
             kw_end.append(ke[-1] / np.max(np.abs(res.history["energy/external"])))

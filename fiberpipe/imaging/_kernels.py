@@ -28,7 +28,7 @@ def render_segments_max(out, starts, ends, radius, shape_zyx):
     Occupancy is ``clip(r + 0.5 - d, 0, 1)`` with ``d`` the distance from the voxel centre to the
     segment: a linear ramp one voxel wide, which is what a box-filtered (partial-volume) edge of a
     large cylinder looks like to first order. Only each segment's bounding box is visited, so the
-    cost is proportional to the fibres' volume, not to the volume size.
+    cost is proportional to the fibers' volume, not to the volume size.
     """
     nz, ny, nx = shape_zyx[0], shape_zyx[1], shape_zyx[2]
     for s in range(starts.shape[0]):

@@ -23,9 +23,9 @@ RAMP_SMOOTHSTEP = 2
 
 # onset length of the plane penalty as a fraction of the node's radius (5 µm at r = 0.25 mm): the
 # stiffness must switch on over many steps of the fastest approach, or nodes rattling on a plane at
-# a step near the stability limit gain energy (six undamped fibres pressed at once by 1000 N/m, every
+# a step near the stability limit gain energy (six undamped fibers pressed at once by 1000 N/m, every
 # law, dt_safety 0.9: +3–4 % of the loads' work at 0.004 r, ≤ −0.0001 at 0.02 r); a longer onset
-# leaves the fibres deeper in the planes (the static penetration grows by up to half of it)
+# leaves the fibers deeper in the planes (the static penetration grows by up to half of it)
 DEFAULT_ONSET_FRACTION = 0.02
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -141,7 +141,7 @@ def path_delta(t1, t0, u_end, duration, t_accel, mode):
             - path_travel(t0, u_end, duration, t_accel, mode)[0])
 
 
-#: margin of the step loop's list of nodes near each plane, × the largest fibre radius: a node
+#: margin of the step loop's list of nodes near each plane, × the largest fiber radius: a node
 #: 0.2 r away from touching needs ≈ 2000 steps at 0.3 m/s to touch (paper-40), so the list is taken
 #: again about that often, at the cost of one pass over all nodes per plane
 PLANE_LIST_MARGIN = 0.2

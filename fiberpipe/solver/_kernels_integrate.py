@@ -426,7 +426,7 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
     ½αΔt v_{n+½}·M (v̄_n + v̄_{n+1}): its dissipation counts ½αΔt v_{n−½}·M v̄_n of step n
     (``H_VD_LF`` = ``H_VD`` + the shift), the rest with step n + 1. Both sum to ALLVD over whole
     steps; the state-function residual takes the second, which leaves no error of order αΔt in it
-    (a suddenly loaded pair of fibres under α = 2e6 1/s showed one of 1.7e-3 in its first steps)."""
+    (a suddenly loaded pair of fibers under α = 2e6 1/s showed one of 1.7e-3 in its first steps)."""
     ke, ke_lf, se, vd_lf_shift = energies
     x, v, acc, hist = state.x, state.v, state.acc, work.hist
     f_ext, x0 = scene.f_ext, model.x0

@@ -7,13 +7,13 @@ Penetration ``δ = r_i + r_j − d``, ``d`` the centre-line distance. For each c
    is ≥ r_i + r_j: no part can touch. This is the common path of a Verlet candidate.
 2. **Orientation** ``Φ = acos(|t_A·t_B|)`` in [0, π/2]; the law's point share ``w(δ_c, Φ)``
    (:func:`fiberpipe.solver.laws.law_weight`).
-3. **Point part** (weight w; crossing fibres): closest points of the two infinite lines,
+3. **Point part** (weight w; crossing fibers): closest points of the two infinite lines,
    parameters (s*, t*); it belongs to this pair with weight win(s*)·win(t*), win = 1 on
    (ε, 1 − ε) and linear ramps over [−ε, ε] at both ends (ε = 1e-6), a partition of unity over
    collinear neighbours, so a contact crossing an element joint is counted exactly once whatever the
    rounding, and moves continuously from one pair to the next. Force ``F = law_point(δ_c, Φ)``
    along the line joining the points.
-4. **Line part** (weight 1 − w; near-parallel fibres; Meier, Popp & Wall, CMAME 308, 2016,
+4. **Line part** (weight 1 − w; near-parallel fibers; Meier, Popp & Wall, CMAME 308, 2016,
    Gauss-point-to-segment with integration-interval segmentation): Gauss points on A projected
    orthogonally onto the *line* of B. The projection ``t(s) = t0 + s t1`` is affine, so the
    sub-interval of A that projects into B's [0, 1] and whose distance to B's line is below
@@ -77,12 +77,12 @@ def _joint_share(x, seg_nodes, e, s, d_own, o0, to, rr):
     """Share of the point contact owned by segment ``e`` (against the other segment, from node
     position ``o0`` along ``to``).
 
-    The neighbouring segment of the same fibre at the end nearer to the line closest parameter
+    The neighbouring segment of the same fiber at the end nearer to the line closest parameter
     ``s`` competes for the contact: the segment whose clamped segment–segment distance is smaller
     owns it, with a linear ramp over ``1e-9 (r_i + r_j)`` so that the two shares sum to 1 exactly
     (both pairs evaluate the same two distances with the same arguments) and equal distances give
     ½ each: a crossing exactly on a straight joint, or on a kinked joint (convex: both line
-    closest points fall outside the segments; concave: both inside), is counted once. A fibre's
+    closest points fall outside the segments; concave: both inside), is counted once. A fiber's
     free end has no competitor: the end segment always owns its clamped closest point, i.e. the
     hemispherical end cap is a contact surface. (Owning it only while the line closest point was
     inside the segment made the force appear or vanish at full penetration when that point crossed
@@ -235,7 +235,7 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
     r1 = a0[1] - b0[1]
     r2 = a0[2] - b0[2]
     # ownership across element joints (partition of unity): compare with the neighbouring
-    # segment at the nearer end, on each fibre (see _joint_share)
+    # segment at the nearer end, on each fiber (see _joint_share)
     d_own = math.sqrt(dist2)
     ws_ = _joint_share(x, seg_nodes, i, s, d_own, b0, tb, rr)
     wt_ = _joint_share(x, seg_nodes, j, t, d_own, a0, ta, rr)

@@ -552,7 +552,7 @@ def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *
     A penalty k on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two bodies
     of that mass); central differences stay stable while the beam's element modes it couples with
     (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal contact,
-    and axial too for the tangential spring, which acts along the fibre) plus this stay below
+    and axial too for the tangential spring, which acts along the fiber) plus this stay below
     (ωΔt)² = 4, i.e. while Δt ≤ dt_ok = 2/√(ω_beam² + 2k/m); ``k_lim`` is the penalty at that
     bound. A mode whose element bound the step already exceeds is locked in the scene (the modal
     step checked it) and does not couple. ``rep``: the model's

@@ -14,7 +14,7 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   fixed parameters ξ_g of A (whole segment, weight ``w_g L0_A``, the reference length), each
   projected on B (clamped); the point belongs to the segment of B nearer to it than B's neighbour
   at the nearer end (ties: the later one; a free end keeps its clamped point, the hemispherical
-  end cap), so the integrand is ``e_line`` of the distance to fibre B's polyline: a function of the
+  end cap), so the integrand is ``e_line`` of the distance to fiber B's polyline: a function of the
   node positions only, continuous across straight and kinked joints.
   ``Π_line = ½ Σ_g w_g L0_A e_line(g(δ_g))`` both ways (A on B and B on A). The closest point is
   stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
@@ -62,13 +62,13 @@ def onset(delta, ds):
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _prev_node(seg_nodes, e):
-    """The far node of the segment before ``e`` on its fibre (−1: ``e`` starts the fibre)."""
+    """The far node of the segment before ``e`` on its fiber (−1: ``e`` starts the fiber)."""
     return seg_nodes[e - 1, 0] if e > 0 and seg_nodes[e - 1, 1] == seg_nodes[e, 0] else -1
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _next_node(seg_nodes, e):
-    """The far node of the segment after ``e`` on its fibre (−1: ``e`` ends the fibre)."""
+    """The far node of the segment after ``e`` on its fiber (−1: ``e`` ends the fiber)."""
     return seg_nodes[e + 1, 1] if e + 1 < seg_nodes.shape[0] and seg_nodes[e + 1, 0] == seg_nodes[e, 1] else -1
 
 
@@ -99,7 +99,7 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
     """Stage 1 of a line half: the Gauss points fixed on A, projected on segment B, that touch B and
     belong to it, written to ``gbuf`` rows from ``n0`` on (with their weight w_g); returns the new
     row count. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``: the segments' nodes and the far nodes of
-    the segments before and after B on its fibre (−1: B ends there, its clamped point is the end
+    the segments before and after B on its fiber (−1: B ends there, its clamped point is the end
     cap)."""
     na0, na1, nb0, nb1, b_prev, b_next = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
@@ -131,7 +131,7 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
             continue
         # ownership: the Gauss point belongs to the segment of B nearest to it, against B's neighbour
         # at the nearer end (ties to the later segment), so Π_line integrates e(min over B's segments
-        # of the distance): continuous on kinked fibres too; at a free end the clamped point (end cap)
+        # of the distance): continuous on kinked fibers too; at a free end the clamped point (end cap)
         if t_raw > 0.5:
             if b_next >= 0 and _point_segment_distance2(p0, p1, p2, x, nb1, b_next) <= dd2:
                 continue
@@ -288,12 +288,12 @@ def _pair_blend_point_of_law(law_id, law_params, delta_c, ds, ra, rb, phi):
 
 
 # Half-width of the joint share's ramps in the difference of two clamped distances: 0.3 of the
-# pair's penetration δ_c plus 1e-5 (r_i + r_j) (5 nm for paper-40's fibres). The ramp's stiffness
+# pair's penetration δ_c plus 1e-5 (r_i + r_j) (5 nm for paper-40's fibers). The ramp's stiffness
 # in that difference is at most Π_point · 3/(2e²); with Π_point = (2/5) K δ^{5/2} and e = c δ that
 # is (0.4/c²) times the law's own normal tangent 3/2 K δ^{1/2}: 4.4× at c = 0.3, 40× at 0.1, which
 # the step did not carry (paper-40/compaction-blend created 1.2 % of its work with 0.1, 13 % with
 # 0.03, none with 0.3). The floor keeps the ramp wide against the change of that difference in one
-# step where two fibres' distance is nearly flat (≈ 1e-9 m a step at 1.7° and δ_c ≈ 5e-9 m on
+# step where two fibers' distance is nearly flat (≈ 1e-9 m a step at 1.7° and δ_c ≈ 5e-9 m on
 # paper-40), where a ramp of 1e-9 (r_i + r_j) was crossed within a step and without a force. Inside a
 # ramp the pairs, whose depths differ by < 2e, share the crossing and the shallower one's energy
 # counts for part of it (docs/contact.md).
@@ -354,14 +354,14 @@ def _joint_share(x, seg_nodes, i, j, d_own, e, jgeo):
     (0.3 δ_c and a floor, ``_JOINT_RAMP``); ``jgeo[r, 6]`` gets ``∂H/∂d_r`` at fixed e and
     ``jgeo[r, 0:5]`` rival r's closest points and normal.
 
-    Across a joint of a straight fibre the two pairs' shares sum to 1 (their ramps see the same
+    Across a joint of a straight fiber the two pairs' shares sum to 1 (their ramps see the same
     difference with opposite signs), equal distances giving ½ each; a free end has no rival (its
     cap is a contact surface). A diagonal rival (both segments moved on) cuts the pair only once it is
-    closer by more than the ramp (its ramp shifted by e): at a crossing on a joint of each fibre the
+    closer by more than the ramp (its ramp shifted by e): at a crossing on a joint of each fiber the
     four pairs then share it by ¼, and a pair whose clamped points sit on both joints while the
     crossing is on the diagonal pair gets nothing. With the ramps of finite width and their gradient
     in the force (:func:`_joint_share_forces`), ``H Π_point`` is continuous and conservative where
-    a crossing moves from one pair to the next, and where two crossings of bent fibres merge (a
+    a crossing moves from one pair to the next, and where two crossings of bent fibers merge (a
     secondary minimum of the distance fades as its depth below the rival's goes to 0)."""
     nodes = (seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1], _prev_node(seg_nodes, i),
              _next_node(seg_nodes, i), _prev_node(seg_nodes, j), _next_node(seg_nodes, j))
@@ -708,7 +708,7 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
                         out, c_off, reach):
     """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
     ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
-    [m], the arc length of each segment's ends along its fibre (their difference, the reference
+    [m], the arc length of each segment's ends along its fiber (their difference, the reference
     length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
     ``(energy, n_active)``; ``energy`` is the potential itself.
 

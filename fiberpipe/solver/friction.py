@@ -118,8 +118,8 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
     f_out : (N, 3) float64 — accumulated into; +f_t on the first segment, −f_t on the second.
     rec.share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact.contact_forces_ex`);
         the pair's tangential stiffness is ``k_t × share`` (size 0: ``k_t``). Without it a contact
-        split over several segment pairs (parallel fibres: each segment touches 2–3 of the other
-        fibre) gets ``k_t`` per pair, so a node's tangential stiffness grew with the number of pairs
+        split over several segment pairs (parallel fibers: each segment touches 2–3 of the other
+        fiber) gets ``k_t`` per pair, so a node's tangential stiffness grew with the number of pairs
         and the tangential springs went unstable at ``dt_safety`` 0.9 (energy gain, tens of m/s).
 
     rec.active, n_active : (n_active,) int64 — the pairs in contact (``active`` of the contact kernel);

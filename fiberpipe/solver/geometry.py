@@ -39,7 +39,7 @@ def crossing_angle(ta0, ta1, ta2, tb0, tb1, tb2, aa, bb, ab):
     """Angle Φ ∈ [0, π/2] [rad] between the lines of two segments (tangents ``ta``, ``tb``; ``aa``,
     ``bb``, ``ab`` their dot products).
 
-    Contacts of quasi-parallel fibres cross at a few degrees: there Φ = y·asin(y)/y with
+    Contacts of quasi-parallel fibers cross at a few degrees: there Φ = y·asin(y)/y with
     y = sin Φ from the cross product (one square root and a polynomial: Σ cₙ y²ⁿ, cₙ = (2n)!/(4ⁿ(n!)²(2n+1)))
     instead of ``acos`` — cheaper, and more accurate at small angles, where acos(|cos Φ|) loses
     half of the digits of Φ (cos Φ = 1 − Φ²/2).

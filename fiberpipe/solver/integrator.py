@@ -445,7 +445,7 @@ def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep:
 
 def _residual_start(state: State, ke0: float, se0: float) -> float:
     """The state energy at t = 0 the residual counts from: kinetic, strain and the planes' penalties
-    (``ke0 + se0``) plus the contact hook's stored energy at the first step (``ACC_STORED0``: fibre
+    (``ke0 + se0``) plus the contact hook's stored energy at the first step (``ACC_STORED0``: fiber
     pairs whose initial overlap acts at once), once the step loop has recorded it."""
     stored0 = float(state.acc[ACC_STORED0])
     return ke0 + se0 + max(stored0, 0.0)

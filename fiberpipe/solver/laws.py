@@ -37,7 +37,7 @@ Sources
   contact above a crossing angle, line contact below, smooth blend in between.
 
 Units: SI throughout (m, N, Pa). ``E_star = [(1−ν1²)/E1 + (1−ν2²)/E2]^−1``; one material for the
-whole scene (identical fibres: ``E_star = E/(2(1−ν²))``, 8.24 GPa for E = 15 GPa, ν = 0.3).
+whole scene (identical fibers: ``E_star = E/(2(1−ν²))``, 8.24 GPa for E = 15 GPa, ν = 0.3).
 """
 
 from __future__ import annotations
@@ -223,7 +223,7 @@ _EM2 = math.exp(-2.0)
 # nodes has a relative error in P and e below 1e-10 (7e-11 at most; tests/solver/test_laws.py).
 # From r alone: ``P = C u r`` and, with ``ln x = −1 − 1/r``, ``e = C (R1 + R2) u² (2r − r²)``: one log
 # (for λ), no exp, no division. Outside [λ₀, λ₁] the exact iteration runs.
-_LT_LAM0 = math.log(1e-14)               # δ ≈ 2e-17 m for our fibres
+_LT_LAM0 = math.log(1e-14)               # δ ≈ 2e-17 m for our fibers
 _LT_LAM1 = math.log(0.5 * math.exp(-2.0))  # half the range of the law (δ ≈ 0.14 mm)
 _LT_N = 4097
 _LT_H = (_LT_LAM1 - _LT_LAM0) / (_LT_N - 1)
@@ -286,7 +286,7 @@ def hertz_parallel_line(delta, e_star, r1, r2):
     Writing ``x = P/C``, ``C = 4πE*(R1 + R2)``: ``δ = 4(R1 + R2)·x(−ln x − 1)``, which inverts with
     ``y = W₋₁(−e u)``, ``u = δ/(4(R1+R2))``: ``P = C e^{y−1}`` (equal radii:
     ``P = −πE*δ/W₋₁(−eδ/8R)``). Stored energy ``∫P dδ = C·4(R1+R2)·(−x² ln x /2 − 3x²/4)``.
-    Valid for ``u < e⁻²`` (δ < 4(R1+R2)/e², 0.27 mm for our fibres); beyond 0.99 of that the law
+    Valid for ``u < e⁻²`` (δ < 4(R1+R2)/e², 0.27 mm for our fibers); beyond 0.99 of that the law
     continues linearly with its secant stiffness there. ``x/u`` comes from a table uniform in
     ``ln u`` with cubic Hermite interpolation (relative error < 1e-10; outside the table
     :func:`_hertz_parallel_line_outside`).
@@ -525,7 +525,7 @@ _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def law_blended(law_id, params, delta, r1, r2, phi, length):
-    """Total force [N] of two straight fibres of length ``length`` [m] crossing at their middles.
+    """Total force [N] of two straight fibers of length ``length`` [m] crossing at their middles.
 
     Same split as the contact kernel: ``w·F_point(δ, Φ) + (1 − w)·∫ p(δ(s)) ds``, the line part
     integrated (16-point Gauss on the touching interval) over the crossing geometry
@@ -863,7 +863,7 @@ class HertzCrossedLaw(ContactLaw):
     """Elliptical Hertz contact of cylinders crossed at one fixed angle Φ for the whole model: F = K(Φ)δ^{3/2}.
 
     ``K(Φ)`` from the exact solution (:func:`hertz_crossed_exact`), tabulated once; reproduces
-    K ≈ 2.29e9, 9.28e8, 6.21e8, 2.81e8, 1.74e8 N/m^1.5 at Φ = 2, 6, 10, 30, 90° for our fibres.
+    K ≈ 2.29e9, 9.28e8, 6.21e8, 2.81e8, 1.74e8 N/m^1.5 at Φ = 2, 6, 10, 30, 90° for our fibers.
     Point contact above ``phi_hi_deg``; for near-parallel segments distributed as F/ℓ_ref per length.
     """
 
@@ -904,9 +904,9 @@ class HertzOrientedLaw(ContactLaw):
     """Each contact's own Φ: crossed Hertz F = K(Φ)δ^{3/2} while the contact ellipse fits, line law beyond.
 
     The blend uses ``ξ = a(δ, Φ)/ℓ_blend`` (``a`` the Hertz semi-major axis, ``ℓ_blend`` the straight
-    fibre length available on each side of the contact): point law for ξ ≤ ξ_lo, line law
+    fiber length available on each side of the contact): point law for ξ ≤ ξ_lo, line law
     ``p(δ)`` integrated over the segments' overlap for ξ ≥ ξ_hi, smoothstep between. At Φ = 2°,
-    δ = 1 µm our fibres have a ≈ 0.83 mm.
+    δ = 1 µm our fibers have a ≈ 0.83 mm.
     """
 
     law_id = LAW_HERTZ_ORIENTED

@@ -9,9 +9,9 @@ Rule (``docs/contact.md``):
 * Narrow filter (a "tight" Verlet list): keep a pair if the segments' closest distance is
   ``< r_i + r_j + skin`` at build time.
 * Exclusions: pairs sharing a node, and pairs of the same fiber whose curvilinear gap (reference
-  arclength between their nearest ends) is ``< s_excl`` (default ``2 r``; a fibre folding back on
+  arclength between their nearest ends) is ``< s_excl`` (default ``2 r``; a fiber folding back on
   itself needs at least ``π r`` of arc to touch, so nothing physical is lost). Far-apart parts of
-  the same fibre may contact.
+  the same fiber may contact.
 * Rebuild when the largest nodal displacement since the last build exceeds ``skin/2`` (every point
   of a segment moves at most as far as its farthest node, so no pair can come from beyond the skin
   into contact before that).
@@ -99,9 +99,9 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     Parameters
     ----------
     x : (N, 3) float64, m. seg_nodes : (E, 2) int64. seg_radius : (E,) float64, m.
-    seg_fiber : (E,) int64 — fibre id of each segment.
-    seg_arc : (E, 2) float64, m — reference arclength of each segment's two ends along its fibre.
-    skin : float, m. s_excl : float, m — same-fibre curvilinear exclusion gap.
+    seg_fiber : (E,) int64 — fiber id of each segment.
+    seg_arc : (E, 2) float64, m — reference arclength of each segment's two ends along its fiber.
+    skin : float, m. s_excl : float, m — same-fiber curvilinear exclusion gap.
     pairs_out : (C, 2) int64, keys_out : (C,) int64 — out (capacity C).
 
     Returns
@@ -264,7 +264,7 @@ def _sort_by_key(pairs, keys, n, ne):
 
 
 def segment_arclength(seg_nodes: np.ndarray, seg_fiber: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
-    """Reference arclength (E, 2) of each segment's ends along its fibre (segments in fibre order)."""
+    """Reference arclength (E, 2) of each segment's ends along its fiber (segments in fiber order)."""
     seg_nodes = np.asarray(seg_nodes)
     L = np.linalg.norm(x_ref[seg_nodes[:, 1]] - x_ref[seg_nodes[:, 0]], axis=1)
     arc = np.empty((len(seg_nodes), 2))

@@ -43,7 +43,7 @@ def penalty_time_step(model: Model, dt_s: float, *, beta_s: float = 0.0) -> floa
 
     Why: a penalty ``k ∝ 1/Δt²`` keeps ω Δt fixed, so the central-difference error of every contact
     it carries stays the same fraction of the contact's energy at any step (measured on the
-    six-fibre scene at 1000 N/m: up to +4 % of the loads' work at `dt_safety` 0.45, 0.2 and 0.1
+    six-fiber scene at 1000 N/m: up to +4 % of the loads' work at `dt_safety` 0.45, 0.2 and 0.1
     alike). Held at the default step's stiffness below it, a smaller step resolves the contacts
     better (the same runs: ≤ +0.5 % at 0.2, ≤ +0.2 % at 0.1); at and above the default nothing changes.
     """

@@ -72,7 +72,7 @@ def johnson_line_load(delta_m, r=R_M, e_star=E_STAR):
     return brentq(lambda p: johnson_delta(p, r, e_star) - delta_m, 1e-30 * hi, hi, xtol=1e-300, rtol=1e-14, maxiter=200)
 
 
-# Exact elliptical Hertz K(Φ) [N/m^1.5] (F = K δ^{3/2}) of two of the study's fibres (E = 15 GPa,
+# Exact elliptical Hertz K(Φ) [N/m^1.5] (F = K δ^{3/2}) of two of the study's fibers (E = 15 GPa,
 # ν = 0.3, R = 0.25 mm) crossing at Φ: docs/verification.md (Johnson,
 # Contact Mechanics, eq. 3.64: B/A = [E(e)/(1−e²) − K(e)]/[K(e) − E(e)], A = sin²(Φ/2)/R,
 # B = cos²(Φ/2)/R; at 90° K = (4/3)E*√R). Written here as numbers, not computed by the law under
@@ -559,7 +559,7 @@ def sliding_parallel(quick: bool = False, p: float = 66.0, speed_m_s: float = 5.
     m = _model([((0, 0, 0), (LA, 0, 0), 20), ((1e-3, 0, zb), (1e-3 + LB, 0, zb), 12)])
     law = make_law("hertz_oriented", E_pa=E_PA, nu=NU)
     # the legacy kernel integrates each overlap exactly; the potential formulation's Gauss points,
-    # fixed on the segments, make the sliding fibre bounce by ±5.6 % (docs/contact.md, "The potential formulation")
+    # fixed on the segments, make the sliding fiber bounce by ±5.6 % (docs/contact.md, "The potential formulation")
     eff = [Clamps(_clamp_all(m, 0)), Loads([LineLoad(1, [0, 0, -p])]),
            contact_hook(m, law=law, formulation="legacy")]
     dist = 0.6e-3 if quick else 1.8e-3

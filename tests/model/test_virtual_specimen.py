@@ -79,7 +79,7 @@ def _check_fits_its_cassette(d, fibers, info, n, width, vf0, min_contacts):
 def test_specimen_fits_its_cassette_at_the_target_vf0(seed3):
     """10 fibers in a 1.5 mm cassette at v_f0 = 30 %, four trial drops per fiber: the study
     specimen's checks (test_study_specimen_fits_its_cassette_at_the_target_vf0, 40 fibers, slow)
-    on a specimen a quarter its size (measured: 15 fibre–fibre contacts at U = 0)."""
+    on a specimen a quarter its size (measured: 15 fiber–fiber contacts at U = 0)."""
     d, fibers, info = seed3
     _check_fits_its_cassette(d, fibers, info, 10, 1.5e-3, 0.3, min_contacts=10)
 

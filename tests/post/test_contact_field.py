@@ -32,7 +32,7 @@ def test_pressed_parallel_fibers_carry_the_johnson_line_load():
 
 @pytest.mark.parametrize("formulation", ["potential", "legacy"])
 def test_the_field_is_the_runs_formulation(formulation):
-    """Two parallel fibres pressed 1 µm that overlap only over the last 50 µm of their ends, where
+    """Two parallel fibers pressed 1 µm that overlap only over the last 50 µm of their ends, where
     the Gauss points of the potential formulation sample the overlap coarsely and the legacy
     kernel's exact overlap does not: the field is the force of the formulation the config names."""
     from fiberpipe.solver import Material, build_model

@@ -1,4 +1,4 @@
-"""Small straight-fibre geometry builders for contact tests and benchmarks (static poses)."""
+"""Small straight-fiber geometry builders for contact tests and benchmarks (static poses)."""
 
 import numpy as np
 
@@ -13,7 +13,7 @@ def fiber(p0, direction, n, le=LE):
 
 
 def assemble(*fibers, radius=R):
-    """Stack polylines into nodes, segments, radius, fibre id; returns (x, seg, rad, fib, node_ranges)."""
+    """Stack polylines into nodes, segments, radius, fiber id; returns (x, seg, rad, fib, node_ranges)."""
     xs, segs, fib, ranges = [], [], [], []
     off = 0
     for k, xf in enumerate(fibers):
@@ -45,9 +45,9 @@ def central_gradient(energy, x, h):
     return g
 
 
-def two_fibre_segments(n, le):
-    """Segments, candidate pairs (every segment of fibre 0 with every one of fibre 1) and reference
-    arc lengths of two fibres of ``n`` segments of length ``le`` each (nodes 0…n and n+1…2n+1)."""
+def two_fiber_segments(n, le):
+    """Segments, candidate pairs (every segment of fiber 0 with every one of fiber 1) and reference
+    arc lengths of two fibers of ``n`` segments of length ``le`` each (nodes 0…n and n+1…2n+1)."""
     seg = np.array([[k, k + 1] for k in range(n)] + [[n + 1 + k, n + 2 + k] for k in range(n)], np.int64)
     pairs = np.array([[i, n + j] for i in range(n) for j in range(n)], np.int64)
     arc = np.zeros((2 * n, 2))

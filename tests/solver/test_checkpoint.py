@@ -152,7 +152,7 @@ def test_resume_with_the_real_contact_hook_is_bit_for_bit(tmp_path):
                 Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.02e-3, velocity_m_s=0.1),
                 contact_hook(model, friction=True, mu=0.3)]
 
-    # default dt_safety (0.9): this scene once gained tens of m/s from the fibre–fibre friction (k_t per
+    # default dt_safety (0.9): this scene once gained tens of m/s from the fiber–fiber friction (k_t per
     # segment pair, not per contact share: unstable tangential springs); see tests/solver/test_friction.py
     settings = dict(SETTINGS)
     saved = []

@@ -64,7 +64,7 @@ def test_crossed_fibers_vs_hertz(phi, kind):
 
 
 def test_contact_at_exact_joint_counted_once():
-    """Crossing point exactly on a node of both fibres (rounding at s = 0/1): counted once."""
+    """Crossing point exactly on a node of both fibers (rounding at s = 0/1): counted once."""
     for phi in (3.0, 5.0, 45.0, 90.0):
         x, seg, rad, fib, rng = _crossed(phi, 1e-6, shift=(0.0, 0.0))
         pairs = all_pairs_between(fib, 0, 1)
@@ -75,7 +75,7 @@ def test_contact_at_exact_joint_counted_once():
 
 
 def test_no_contact_between_adjacent_elements_of_same_fiber():
-    """A sharply kinked fibre: its own adjacent segments overlap geometrically but are excluded."""
+    """A sharply kinked fiber: its own adjacent segments overlap geometrically but are excluded."""
     pts = np.array([[0, 0, 0], [LE, 0, 0], [LE * 0.2, 0.1e-3, 0], [LE, 0.2e-3, 0]])
     x, seg, rad, fib, rng = assemble(pts)
     # segments 0 and 2 are 0.2 mm apart (< 2r) but only 0.26 mm of arc apart (< s_excl = 2r)
@@ -87,7 +87,7 @@ def test_no_contact_between_adjacent_elements_of_same_fiber():
 
 
 def test_parallel_sliding_across_joints_constant_force():
-    """A 6-element fibre pressed on a long parallel neighbour slides by 8 element lengths:
+    """A 6-element fiber pressed on a long parallel neighbour slides by 8 element lengths:
     total normal force constant within 1 % (measured: ~1e-13); unequal element lengths too."""
     law = L.HertzOrientedLaw(blend_length_m=1e-3)
     delta = 1e-6
@@ -106,7 +106,7 @@ def test_parallel_sliding_across_joints_constant_force():
 
 
 def test_crossing_contact_moving_across_joint_is_continuous():
-    """Fibre B (crossing at 10°) translated along A so the contact passes a joint of A:
+    """Fiber B (crossing at 10°) translated along A so the contact passes a joint of A:
     force and its nodal distribution change continuously (max step ≤ 1 % between 1 µm moves)."""
     law = L.HertzOrientedLaw(blend_length_m=1e-3)
     c = math.radians(10.0)
@@ -129,7 +129,7 @@ def test_crossing_contact_moving_across_joint_is_continuous():
 
 
 def test_oriented_kernel_continuous_and_monotone_in_phi():
-    """Two 12 mm fibres crossing at their middles, δ = 1 µm: kernel total force non-increasing in Φ
+    """Two 12 mm fibers crossing at their middles, δ = 1 µm: kernel total force non-increasing in Φ
     from 0° to 20°, line law × length at 0°, crossed Hertz beyond 2°, no jumps."""
     law = L.HertzOrientedLaw(blend_length_m=1e-3)
     phis = np.concatenate([np.arange(0, 3.0, 0.05), [4, 6, 10, 20]])

@@ -1,7 +1,7 @@
 """The energy the contact creates at high loads, on the quickstart bundle (docs/contact.md, "Created
 energy" and "The potential formulation").
 
-Slow (two runs of ≈ 60 s): the quickstart's 14 traced fibres compacted by 2.2 mm without friction.
+Slow (two runs of ≈ 60 s): the quickstart's 14 traced fibers compacted by 2.2 mm without friction.
 With ℓ_blend = 1 mm (the legacy kernel) the point law on long crossings makes the bundle rattle at
 ≈ 10–100 N per contact and creates ≈ 40× the plate work (measured 0.195 J against 0.0047 J); the
 default (potential formulation, ℓ_blend = 0.05 mm) stays conservative. The post stage's bound must

@@ -13,21 +13,21 @@ from fiberpipe.solver.contact_potential import contact_forces_pot, onset
 from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
 
-from _contact_geometry import central_gradient, pot_energy_forces as _energy_forces, two_fibre_segments
+from _contact_geometry import central_gradient, pot_energy_forces as _energy_forces, two_fiber_segments
 
 R = 0.25e-3
 
 
-def _two_fibres(phi_deg, depth, n=3, L=0.9e-3, shift=0.0, bend=0.0, seed=0):
-    """Fibre 0 along x (n segments), fibre 1 crossing it at phi_deg in the x–y plane, above it by
-    2R − depth at the crossing, offset by ``shift`` along fibre 0; small random kinks (``bend``, m)."""
+def _two_fibers(phi_deg, depth, n=3, L=0.9e-3, shift=0.0, bend=0.0, seed=0):
+    """Fiber 0 along x (n segments), fiber 1 crossing it at phi_deg in the x–y plane, above it by
+    2R − depth at the crossing, offset by ``shift`` along fiber 0; small random kinks (``bend``, m)."""
     rng = np.random.default_rng(seed)
     s = np.linspace(-0.5, 0.5, n + 1)
     a = np.c_[s * L, np.zeros_like(s), np.zeros_like(s)]
     ph = math.radians(phi_deg)
     b = np.c_[shift + s * L * math.cos(ph), s * L * math.sin(ph), np.full_like(s, 2 * R - depth)]
     x = np.vstack([a, b]) + bend * rng.standard_normal((2 * (n + 1), 3))
-    return (x, *two_fibre_segments(n, L / n))
+    return (x, *two_fiber_segments(n, L / n))
 
 
 LAWS = {
@@ -59,14 +59,14 @@ def test_force_is_minus_the_gradient_of_the_energy(law_name, phi_deg, depth, shi
 def test_force_is_minus_the_gradient_with_the_patch_criterion_and_unequal_radii(law_name, kw, phi_deg, depth,
                                                                                 shift):
     """The patch criterion's share (its δ and Φ derivatives from the crossed-Hertz ellipse) and, for
-    hertz_oriented, K(Φ) of fibres of unequal radii (the equivalent angle's derivative enters)."""
+    hertz_oriented, K(Φ) of fibers of unequal radii (the equivalent angle's derivative enters)."""
     radius = np.r_[np.full(3, R), np.full(3, 0.7 * R)]
     _check_gradient(make_law(law_name, E_pa=15e9, nu=0.3, **kw), phi_deg, depth, shift, radius=radius,
                     lift=-0.3 * R)
 
 
 def _check_gradient(law, phi_deg, depth, shift, radius=None, lift=0.0):
-    x, seg, pairs, L0 = _two_fibres(phi_deg, depth, shift=shift, bend=0.2e-6, seed=int(10 * phi_deg))
+    x, seg, pairs, L0 = _two_fibers(phi_deg, depth, shift=shift, bend=0.2e-6, seed=int(10 * phi_deg))
     x[4:, 2] += lift
     ds = 1e-7
     ef = lambda xx: _energy_forces(xx, seg, pairs, L0, law, ds, radius=radius)  # noqa: E731
@@ -96,7 +96,7 @@ _POINT = {"blend_length_m": 1e-3}  # the point law at 3° (the default ℓ_blend
     pytest.param("linear", {"stiffness": 1e9}, 1.0, 2e-6, marks=_BLEND_ON_KINK),
 ])
 def test_energy_is_continuous_as_a_contact_slides_over_joints(law_name, kw, phi_deg, kink):
-    """The pair potentials add up to one continuous function while a contact moves along fibre 0
+    """The pair potentials add up to one continuous function while a contact moves along fiber 0
     across its element joints, straight or kinked (convex, concave) by ``kink`` at its inner nodes:
     ownership is handed over where the distances are equal, nothing is counted twice or lost."""
     law = make_law(law_name, E_pa=15e9, nu=0.3, **kw)
@@ -104,7 +104,7 @@ def test_energy_is_continuous_as_a_contact_slides_over_joints(law_name, kw, phi_
     def largest_step(n):
         es = []
         for sh in np.linspace(-0.2e-3, 0.2e-3, n):
-            x, seg, pairs, L0 = _two_fibres(phi_deg, 1e-6, shift=sh)
+            x, seg, pairs, L0 = _two_fibers(phi_deg, 1e-6, shift=sh)
             x[1:3, 2] += kink
             es.append(_energy_forces(x, seg, pairs, L0, law, 1e-7)[0])
         es = np.array(es)
@@ -167,7 +167,7 @@ def test_a_law_with_its_own_kernels_gets_minus_the_gradient(phi_deg):
 
     law = _OwnKernelsLaw()
     kernel = potential_kernels_for(law)
-    x, seg, pairs, arc = _two_fibres(phi_deg, 1e-6, shift=0.05e-3, bend=0.2e-6, seed=3)
+    x, seg, pairs, arc = _two_fibers(phi_deg, 1e-6, shift=0.05e-3, bend=0.2e-6, seed=3)
     gxi, gw = gauss_points(2)
 
     def ef(xx):

@@ -1,6 +1,6 @@
 """The point part's joint share (fiberpipe.solver.contact_potential._joint_share) with the study's
 scaled-stiffness preset: where a crossing passes from one segment pair to the next, and where two
-crossings of bent fibres merge, the pair potentials add up to a continuous function whose gradient
+crossings of bent fibers merge, the pair potentials add up to a continuous function whose gradient
 is the force, so the contact neither creates nor destroys energy there."""
 
 import math
@@ -10,15 +10,15 @@ import pytest
 
 from fiberpipe.solver.laws import make_law
 
-from _contact_geometry import central_gradient, pot_energy_forces, two_fibre_segments
+from _contact_geometry import central_gradient, pot_energy_forces, two_fiber_segments
 
 R = 0.25e-3
 # paper-40's law in configs/paper-40/oblique-6.yaml (the default ℓ_blend)
 PRESET = dict(preset="table1_phi6", blend_length_m=5e-5)
 
-# Two fibres of paper-40 (oblique-6, 46.34 ms; four segments each, µm about their mean) in two
+# Two fibers of paper-40 (oblique-6, 46.34 ms; four segments each, µm about their mean) in two
 # consecutive steps: they cross at 7.5°, bent by a fraction of a degree near a joint of each, so
-# segment 3 of fibre A meets both segments 2 and 3 of fibre B at interior closest points whose
+# segment 3 of fiber A meets both segments 2 and 3 of fiber B at interior closest points whose
 # depths differ by 1e-10 m. In the step the two depths change order; a share that hands the
 # crossing to the nearer pair outright dropped or took up 5.5e-9 J, half the point energy; such
 # switches, many a millisecond, made the run's residual of 1.2 % of its external work.
@@ -59,7 +59,7 @@ def test_the_forces_work_along_a_step_of_two_merging_crossings_equals_the_potent
     the energy change the share once made (5.5e-9 J), and no piece changes Π by more than twice the
     average."""
     law = _law()
-    seg, pairs, arc = two_fibre_segments(4, 0.3e-3)
+    seg, pairs, arc = two_fiber_segments(4, 0.3e-3)
     xa, xb = (np.array(s) * 1e-6 for s in STEP)
     lam = np.linspace(0.0, 1.0, 401)
     es, work = [], 0.0
@@ -82,7 +82,7 @@ def test_force_is_minus_the_gradient_where_two_crossings_merge(lam):
     """Central differences (step 1e-12 m, against the share's ramps of ±(0.1 δ_c + 5 nm)) at points of
     the recorded step, inside a ramp: the share's derivative is in the force."""
     law = _law()
-    seg, pairs, arc = two_fibre_segments(4, 0.3e-3)
+    seg, pairs, arc = two_fiber_segments(4, 0.3e-3)
     xa, xb = (np.array(s) * 1e-6 for s in STEP)
     x = (1.0 - lam) * xa + lam * xb
     e, f = _pot_ef(x, seg, pairs, arc, law)
@@ -94,9 +94,9 @@ def test_force_is_minus_the_gradient_where_two_crossings_merge(lam):
 
 
 def _crossing(phi_deg, depth, shift, kink):
-    """Fibre 0 along x (3 segments of 0.3 mm), its inner nodes moved by ``kink`` sideways (its crossing
-    angle with fibre 1 changes at the joints by ≈ kink/0.3 mm), fibre 1 crossing it at phi_deg above
-    it by 2R − depth, offset by ``shift`` along fibre 0."""
+    """Fiber 0 along x (3 segments of 0.3 mm), its inner nodes moved by ``kink`` sideways (its crossing
+    angle with fiber 1 changes at the joints by ≈ kink/0.3 mm), fiber 1 crossing it at phi_deg above
+    it by 2R − depth, offset by ``shift`` along fiber 0."""
     s = np.linspace(-0.5, 0.5, 4) * 0.9e-3
     ph = math.radians(phi_deg)
     a = np.c_[s, np.zeros(4), np.zeros(4)]
@@ -109,12 +109,12 @@ def _crossing(phi_deg, depth, shift, kink):
                                                (10.0, 0.2e-6, -2e-6)])
 def test_preset_point_contact_sliding_across_a_kinked_joint_keeps_its_energy(phi_deg, depth, kink):
     """A crossing inside the patch blend (0 < w < 1, so the point share depends on the pair's Φ)
-    slides 40 µm along fibre 0 across a joint kinked sideways by ``kink`` (Φ changes by ≈ 0.4° at
-    the joint): the work of the forces on fibre 1 equals the drop of the potential to 1e-4 of the
+    slides 40 µm along fiber 0 across a joint kinked sideways by ``kink`` (Φ changes by ≈ 0.4° at
+    the joint): the work of the forces on fiber 1 equals the drop of the potential to 1e-4 of the
     energy. A share that hands the crossing over within 1e-9 (r_i + r_j) without a force missed
     the step w(Φ₁) − w(Φ₂) of the point energy there, 11–15 % of the energy."""
     law = _law()
-    seg, pairs, arc = two_fibre_segments(3, 0.3e-3)
+    seg, pairs, arc = two_fiber_segments(3, 0.3e-3)
     shifts = np.linspace(0.13e-3, 0.17e-3, 2001)
     es, fx = [], []
     for sh in shifts:

@@ -9,7 +9,7 @@ from fiberpipe.config import ContactConfig
 from fiberpipe.solver.contact_effect import ContactSlopeWatch, penalty_step_bound
 from fiberpipe.solver.contact_state import new_stats
 from fiberpipe.solver.laws import make_law
-from fiberpipe.verification.six_fibres import six_fibres, six_fibres_run
+from fiberpipe.verification.six_fibers import six_fibers, six_fibers_run
 
 
 def _preset(name):
@@ -29,7 +29,7 @@ def test_scaled_stiffness_slope_follows_eq_1_and_stops_growing_after_n_segments(
 
 
 def test_the_watch_warns_once_when_the_slope_outgrows_the_step_and_resets_its_peak():
-    model, _ = six_fibres()
+    model, _ = six_fibers()
     dt = 0.9 * model.material.wave_speed_m_s ** -1 * float(model.el_L0.min())
     law = _preset("table1_phi2")
     stats = new_stats()
@@ -56,15 +56,15 @@ def test_a_run_whose_law_stiffens_past_the_step_says_so():
     # 4 × 0.9² the run's dt_safety keeps for the beams, and the run creates 12 % of its work; under
     # 30 N/m 3.0, and it creates none
     for q in (1000.0, 300.0):
-        _, res = six_fibres_run(_preset("table1_phi2"), q)
+        _, res = six_fibers_run(_preset("table1_phi2"), q)
         assert len(res.warnings) == 1 and "needs dt ≤" in res.warnings[0] and "dt_safety" in res.warnings[0]
     for q in (30.0, 3.0):
-        _, res = six_fibres_run(_preset("table1_phi2"), q)
+        _, res = six_fibers_run(_preset("table1_phi2"), q)
         assert res.warnings == []
 
 
 def test_the_watch_keeps_the_runs_dt_safety_margin():
-    model, _ = six_fibres()
+    model, _ = six_fibers()
     dt = 0.9 * model.material.wave_speed_m_s ** -1 * float(model.el_L0.min())
     law = make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3)
     _, _, k_lim = penalty_step_bound(model, dt, 0.0)
@@ -79,7 +79,7 @@ def test_the_watch_keeps_the_runs_dt_safety_margin():
 
 def test_the_watch_takes_a_hertz_laws_tangent_as_three_halves_of_its_largest_secant():
     # F ∝ δ^{3/2}: dF/dδ = 3/2 F/δ; the watch reads the largest F_n/δ of the pairs since its last look
-    model, _ = six_fibres()
+    model, _ = six_fibers()
     dt = 0.9 * model.material.wave_speed_m_s ** -1 * float(model.el_L0.min())
     law = make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3)
     assert law.tangent_over_secant == 1.5 and ContactSlopeWatch.watched(law)
@@ -96,11 +96,11 @@ def test_the_watch_takes_a_hertz_laws_tangent_as_three_halves_of_its_largest_sec
 
 
 def test_a_run_records_the_largest_secant_of_its_pairs_and_a_hertz_law_too_stiff_for_the_step_warns():
-    # the crossed law with a modulus 100× the fibres' under 30 N/m: its tangent needs a step below
+    # the crossed law with a modulus 100× the fibers' under 30 N/m: its tangent needs a step below
     # the run's (measured over 2 ms: 100× creates 7 % of W and warns, 60× warns, 30× is silent and
-    # conservative, 150× diverges); the fibres' own modulus stays silent
+    # conservative, 150× diverges); the fibers' own modulus stays silent
     stiff = make_law("hertz_crossed", phi_deg=90.0, E_pa=100 * 15e9, nu=0.3)
-    _, res = six_fibres_run(stiff, 30.0, t_end_s=4e-4)
+    _, res = six_fibers_run(stiff, 30.0, t_end_s=4e-4)
     assert len(res.warnings) == 1 and "'hertz_crossed' reached a tangent" in res.warnings[0]
-    _, res = six_fibres_run(make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3), 30.0, t_end_s=4e-4)
+    _, res = six_fibers_run(make_law("hertz_crossed", phi_deg=90.0, E_pa=15e9, nu=0.3), 30.0, t_end_s=4e-4)
     assert res.warnings == []

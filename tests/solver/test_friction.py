@@ -28,7 +28,7 @@ def _slide(v_rel, n_steps, hist=None):
     x, seg, pairs, buf, rng = _pressed_pair()
     fn = buf.fn[0]
     v = np.zeros_like(x)
-    v[rng[0][0]:rng[0][1], 0] = v_rel  # fibre A slides along x
+    v[rng[0][0]:rng[0][1], 0] = v_rel  # fiber A slides along x
     hist = np.zeros((1, 3)) if hist is None else hist
     diss = 0.0
     for _ in range(n_steps):

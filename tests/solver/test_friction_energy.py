@@ -59,15 +59,15 @@ def test_sliding_fiber_is_stopped_by_friction_and_stays_stopped():
 
 def test_sliding_fiber_state_residual_stays_below_one_percent():
     """The state-function balance (stored contact energy, springs included, from the first step's)
-    closes within 1 % while friction stops the fibre (it read 1.7–2 % with the legacy kernel)."""
+    closes within 1 % while friction stops the fiber (it read 1.7–2 % with the legacy kernel)."""
     m, res, a, b, v0 = _slide()
     assert np.max(np.abs(res.history["energy/residual"][1:])) < 0.01
 
 
 def test_booked_dissipation_is_the_forces_work_under_chatter():
-    """A fibre on a plate, undamped, its nodes launched with alternating velocities (the highest
+    """A fiber on a plate, undamped, its nodes launched with alternating velocities (the highest
     modes): the plate friction's slip turns back and forth from step to step. ALLFD is the energy the
-    friction forces took from the fibre (energy/friction_work, booked by the step loop) less what
+    friction forces took from the fiber (energy/friction_work, booked by the step loop) less what
     their springs store, so the state-function residual closes; the end-of-step product μ f_n × slip
     books 3.4× that work here (residual 1.1e-2). No contact gives energy back."""
     from test_contact_dynamics import _model

@@ -11,7 +11,7 @@ from fiberpipe.solver import laws as L
 E, NU, R = 15e9, 0.3, 0.25e-3
 ESTAR = E / (2 * (1 - NU**2))
 
-# docs/verification.md: exact crossed-cylinder Hertz K(Φ) for our fibres, N/m^1.5
+# docs/verification.md: exact crossed-cylinder Hertz K(Φ) for our fibers, N/m^1.5
 K_REF = {2.0: 2.29e9, 6.0: 9.28e8, 10.0: 6.21e8, 30.0: 2.81e8, 90.0: 1.74e8}
 
 
@@ -140,7 +140,7 @@ def test_presets_values_from_study():
 
 @pytest.mark.parametrize("blend_length_m", [1e-3, 5e-5])
 def test_oriented_continuous_and_monotone_in_phi(blend_length_m):
-    """hertz_oriented, two straight 12 mm fibres crossing at their middles (law_blended): F(Φ) is
+    """hertz_oriented, two straight 12 mm fibers crossing at their middles (law_blended): F(Φ) is
     non-increasing from 0° to 90°, continuous (halving the Φ step halves the largest jump: no step
     discontinuity), equals the line law × length at 0° and, with ℓ_blend = 1 mm, crossed Hertz at 2°
     (the ellipse fits; with the default 0.05 mm the line law takes 2° at δ = 1 µm, 1.5× Hertz)."""

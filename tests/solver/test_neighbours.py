@@ -9,7 +9,7 @@ from fiberpipe.solver.neighbours import VerletList, build_pairs, max_displacemen
 
 
 def random_bundle(n_fib, n_el, seed, box=2.5e-3):
-    """Quasi-parallel wavy fibres along x, random positions in a box (overlaps allowed)."""
+    """Quasi-parallel wavy fibers along x, random positions in a box (overlaps allowed)."""
     rng = np.random.default_rng(seed)
     xs, segs, fib = [], [], []
     off = 0
@@ -19,7 +19,7 @@ def random_bundle(n_fib, n_el, seed, box=2.5e-3):
         s = np.arange(n_el + 1) * LE
         amp = rng.uniform(0, 0.3e-3)
         xf = np.stack([s, y0 + th[0] * s + amp * np.sin(s / 2e-3 + k), z0 + th[1] * s], axis=1)
-        if k % 7 == 3:  # a U-turned fibre: far parts of the same fibre can touch
+        if k % 7 == 3:  # a U-turned fiber: far parts of the same fiber can touch
             half = n_el // 2
             xf[half:, 0] = xf[half, 0] - (xf[half:, 0] - xf[half, 0])
             xf[half:, 1] += np.linspace(0, 2 * R, n_el + 1 - half)
@@ -60,7 +60,7 @@ def test_same_pairs_as_brute_force(seed):
     assert got == ref and len(ref) > 20
     k = vl.keys[: vl.n_pairs]
     assert np.all(np.diff(k) > 0) and np.all(k == vl.pairs[: vl.n_pairs, 0] * len(seg) + vl.pairs[: vl.n_pairs, 1])
-    # same-fibre contacts between far parts exist in the U-turned fibres
+    # same-fiber contacts between far parts exist in the U-turned fibers
     same = [(i, j) for i, j in ref if fib[i] == fib[j]]
     assert len(same) > 0
 

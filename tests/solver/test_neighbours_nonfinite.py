@@ -7,8 +7,8 @@ from fiberpipe.solver.laws import make_law
 from fiberpipe.solver.neighbours import build_pairs, segment_arclength
 
 
-def _two_fibres(n=11):
-    """Two parallel 10-element fibres 0.5 mm apart: positions, segments, radii, fibre ids, arc
+def _two_fibers(n=11):
+    """Two parallel 10-element fibers 0.5 mm apart: positions, segments, radii, fiber ids, arc
     lengths and the pair/key output buffers of build_pairs."""
     x = np.c_[np.zeros(2 * n), np.repeat([0.0, 0.5e-3], n), np.tile(np.linspace(0, 3e-3, n), 2)]
     seg = np.array([[i, i + 1] for f in range(2) for i in range(f * n, f * n + n - 1)], np.int64)
@@ -19,7 +19,7 @@ def _two_fibres(n=11):
 
 
 def test_non_finite_positions_build_no_pairs():
-    x, seg, radius, fib, arc, pairs, keys = _two_fibres()
+    x, seg, radius, fib, arc, pairs, keys = _two_fibers()
     assert build_pairs(x, seg, radius, fib, arc, 5e-5, 5e-4, pairs, keys) > 0
     for bad in (np.nan, np.inf, -np.inf):
         y = x.copy()
@@ -44,7 +44,7 @@ def test_guard_holds_when_called_from_a_fastmath_kernel():
     def from_fastmath(x, seg, radius, fib, arc, pairs, keys):
         return build_pairs(x, seg, radius, fib, arc, 5e-5, 5e-4, pairs, keys)
 
-    x, seg, radius, fib, arc, pairs, keys = _two_fibres()
+    x, seg, radius, fib, arc, pairs, keys = _two_fibers()
     assert from_fastmath(x, seg, radius, fib, arc, pairs, keys) > 0
     for bad in (np.nan, np.inf, -np.inf):
         y = x.copy()

@@ -106,7 +106,7 @@ def test_the_penalty_over_the_listed_nodes_equals_the_one_over_every_node():
         assert np.array_equal(a, b)
 
 
-def test_a_fibre_falling_through_the_plane_lists_margin_meets_the_plate_as_with_every_node_visited():
+def test_a_fiber_falling_through_the_plane_lists_margin_meets_the_plate_as_with_every_node_visited():
     # under 1000 m/s² from 4 r above the plate it closes the list's margin (0.2 r) several times on
     # the way down, so the step loop lists the nodes again; a margin of 0 lists them at every step
     from fiberpipe.solver import Gravity

@@ -1,4 +1,4 @@
-"""The energy residual starts from the whole stored energy at t = 0: two fibres whose small initial
+"""The energy residual starts from the whole stored energy at t = 0: two fibers whose small initial
 overlap acts at once (below the release threshold) start with a stored contact potential, which
 the damping then takes; the state-function residual counts it as the start, not as created."""
 

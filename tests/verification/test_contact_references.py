@@ -64,7 +64,7 @@ def test_hertz_oriented_point_law_gives_spec_k(phi, delta):
 
 
 def test_johnson_line_contact_values_and_inverse():
-    # 66 N/m (the study's 0.066 N/mm) → 32.05 nm for our fibres (E* = 8.2418 GPa, b = 1.1289 µm)
+    # 66 N/m (the study's 0.066 N/mm) → 32.05 nm for our fibers (E* = 8.2418 GPa, b = 1.1289 µm)
     assert johnson_delta(66.0) == pytest.approx(3.2049e-8, rel=1e-4)
     for p in (6.6, 66.0, 660.0, 2.95e3):
         d = johnson_delta(p)

@@ -78,7 +78,7 @@ def test_three_beam_static_uses_the_setup_angle_and_can_fail():
 
 
 def test_references():
-    # Johnson: 66 N/m → 32.05 nm (our fibres) and back; kinematic rearrangement curve starts at 0
+    # Johnson: 66 N/m → 32.05 nm (our fibers) and back; kinematic rearrangement curve starts at 0
     assert johnson_delta(66.0) == pytest.approx(3.2049e-8, rel=1e-3)
     assert johnson_line_load(3.2049e-8) == pytest.approx(66.0, rel=1e-3)
     assert kinematic_uy(0.0) == pytest.approx(0.0, abs=1e-15)
@@ -114,7 +114,7 @@ def test_parallel_contact_closes_its_state_function_balance_within_1e_3():
 
 def test_two_degree_crossing_with_the_point_law_closes_its_balance_within_1e_3():
     """The 2° crossing runs the point law (blend_length 1 mm), whose crossing sits near element
-    joints of both fibres: the smooth joint share keeps it conservative (6.7e-5); the share that
+    joints of both fibers: the smooth joint share keeps it conservative (6.7e-5); the share that
     switched without a force gained 1.0e-2 at the first contact."""
     from fiberpipe.verification.energy_residual import recording
 

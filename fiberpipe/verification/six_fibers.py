@@ -1,8 +1,8 @@
-"""The six-fibre conservation scene: four parallel fibres on a fixed plate between walls, two on top
+"""The six-fiber conservation scene: four parallel fibers on a fixed plate between walls, two on top
 crossing them at ±Φ, pressed by a line load, undamped and frictionless.
 
 Nothing dissipates, so the state functions (the leapfrog kinetic term ½ v_{n−½}·M v_{n+½}, the
-strain energy ALLSE and the stored contact potential of plates, walls and fibres) may not exceed the
+strain energy ALLSE and the stored contact potential of plates, walls and fibers) may not exceed the
 loads' work f·(x_n − x0): :func:`energy_excess` is the largest excess over the history rows, a
 fraction of max|W|. Used by ``tests/solver/test_contact_energy_balance.py`` and
 :mod:`fiberpipe.benchmarks.bench_step_energy`.
@@ -31,7 +31,7 @@ LAWS = [("hertz_oriented", {}), ("hertz_parallel", {}), ("linear", {"stiffness":
         ("scaled_stiffness", {"preset": "table1_parallel"}), ("scaled_stiffness", {"preset": "table3_identified"})]
 
 
-def six_fibres_law(name, kw):
+def six_fibers_law(name, kw):
     """The law as a config builds it: with the schema's blend length (the patch criterion)."""
     from ..config import ContactConfig
     from ..solver.laws import make_law
@@ -44,34 +44,34 @@ def law_label(name, kw) -> str:
     return " ".join([name] + [str(v) if k == "preset" else f"{k}={v:g}" for k, v in kw.items()])
 
 
-def six_fibres(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
-    """``(model, pitch [m])``: the fibres of 6 mm in 20 elements, the top two lifted until their
+def six_fibers(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
+    """``(model, pitch [m])``: the fibers of 6 mm in 20 elements, the top two lifted until their
     smallest surface gap to the lower ones is ``GAP_M`` (plus ``lift_m``, a perturbation for
     ensembles of this chaotic scene)."""
     R = RADIUS_M
     pitch = 2 * R + GAP_M
     s = np.linspace(-0.5, 0.5, n_el + 1)
-    fibres = [np.c_[L / 2 + s * L, np.full_like(s, GAP_M + R + k * pitch), np.full_like(s, R + GAP_M)]
+    fibers = [np.c_[L / 2 + s * L, np.full_like(s, GAP_M + R + k * pitch), np.full_like(s, R + GAP_M)]
               for k in range(4)]
     ph = math.radians(phi_deg)
     for yc, sg in ((GAP_M + R + 0.5 * pitch, 1.0), (GAP_M + R + 2.5 * pitch, -1.0)):
         f = np.c_[L / 2 + s * L * math.cos(ph), yc + sg * s * L * math.sin(ph), np.zeros_like(s)]
         tt = np.linspace(0, 1, 400)[:, None]
         pts = f[0] + tt * (f[-1] - f[0])
-        dy = np.abs(pts[:, 1][:, None] - np.array([g[0, 1] for g in fibres])[None, :]).min(axis=1)
+        dy = np.abs(pts[:, 1][:, None] - np.array([g[0, 1] for g in fibers])[None, :]).min(axis=1)
         dz = np.sqrt(np.maximum((2 * R + GAP_M) ** 2 - dy**2, 0.0))
         f[:, 2] = R + GAP_M + float(dz.max()) + lift_m
-        fibres.append(f)
-    off = np.cumsum([0] + [len(f) for f in fibres])
-    return build_model(np.vstack(fibres), off, R, MATERIAL), pitch
+        fibers.append(f)
+    off = np.cumsum([0] + [len(f) for f in fibers])
+    return build_model(np.vstack(fibers), off, R, MATERIAL), pitch
 
 
-def six_fibres_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
+def six_fibers_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
                    penalty_factor=DEFAULT_PENALTY_FACTOR, onset_fraction=DEFAULT_ONSET_FRACTION, steps=None):
-    """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibres
+    """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibers
     (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;
     ``steps``: run that many steps instead of ``t_end_s``)."""
-    m, pitch = six_fibres(lift_m=lift_m)
+    m, pitch = six_fibers(lift_m=lift_m)
     planes = dict(penalty_factor=penalty_factor, onset_fraction=onset_fraction)
 
     def effects():
@@ -94,5 +94,5 @@ def energy_excess(res) -> tuple[float, np.ndarray]:
     h = res.history
     ke, se, st, wk = (h[f"energy/{k}"] for k in ("kinetic_leapfrog", "strain", "contact_stored", "external"))
     if not (st.max() > 0 and h["contacts"].max() > 0):
-        raise ValueError("no contact in the six-fibre run: the check tests nothing")
+        raise ValueError("no contact in the six-fiber run: the check tests nothing")
     return float(np.max((ke + se + st - wk) / np.max(np.abs(wk)))), ke
