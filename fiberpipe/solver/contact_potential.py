@@ -1,7 +1,7 @@
 """Fiber–fiber normal contact in which every force is minus the gradient of one stored potential.
 
-Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.contact_forces_ex`
-(the hook picks one of the two). The potential of a candidate segment pair (A = segment i, B = j) is
+The normal contact pass of the step loop's contact hook (:mod:`fiberpipe.solver.contact_effect`). The
+potential of a candidate segment pair (A = segment i, B = j) is
 
     Π_AB = (1 − w(Φ)) Π_line + w(Φ) s_joint Π_point
 
@@ -17,7 +17,7 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   end cap), so the integrand is ``e_line`` of the distance to fiber B's polyline: a function of the
   node positions only, continuous across straight and kinked joints.
   ``Π_line = Σ_g w_g L0_A λ_AB e_line(g(δ_g))`` both ways (A on B and B on A), with the end weight
-  ``λ_AB = ½ (1 + a_A − a_B)`` (:func:`_line_part`): ½ away from fiber ends; over a fiber's end
+  ``λ_AB = (1 + a_A)(1 − a_B)/(2(1 − a_A a_B))`` (:func:`_line_part`): ½ away from fiber ends; over a fiber's end
   segment its own way takes the weight over smoothly (a = 3τ² − 2τ³ rising to 1 at the free end), so
   a fiber end moving past the other way's fixed points does not step the integral. The closest point
   is stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions;
@@ -47,7 +47,7 @@ from numba import njit, prange
 from .._prefetch import prefetch_row
 from .._tasks import task_count
 from ._specialise import specialise
-from .contact import record_pair
+from .contact_pairs import record_pair
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
@@ -235,18 +235,21 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
             continue
         weight = gw[g]
         has_terms = 0.0  # the columns _G_ENDS … _G_R2 are written and read only near an end
-        if ends:  # near a fiber end: the end weight m = 1 + a_A − a_B
+        if ends:  # near a fiber end: the end weight m = 2 λ_AB (_line_part)
             a_b, da_own, da_near = _other_end_nearness(x, (p0, p1, p2), t_raw, (nb0, nb1, b_prev, b_next), b_ends)
-            m = 1.0 + _own_end_nearness(a_ends, xi) - a_b
+            a_a = _own_end_nearness(a_ends, xi)  # < 1: Gauss points are inside their segment
+            inv = 1.0 / (1.0 - a_a * a_b)
+            m = (1.0 + a_a) * (1.0 - a_b) * inv
             if m <= 0.0:  # beyond the other fiber's end: this direction's points carry none of it
                 continue
             weight = gw[g] * m
             if da_own != 0.0 or da_near != 0.0:
+                dm_da = -(1.0 - a_a * a_a) * inv * inv  # ∂m/∂a_B
                 has_terms = 1.0
                 gbuf[n, _G_C1] = _T_OWN if da_own != 0.0 else _T_NONE
-                gbuf[n, _G_R1] = -gw[g] * da_own
+                gbuf[n, _G_R1] = gw[g] * dm_da * da_own
                 gbuf[n, _G_C2] = _T_NONE if da_near == 0.0 else (_T_NEXT if t_raw > 0.5 else _T_PREV)
-                gbuf[n, _G_R2] = -gw[g] * da_near
+                gbuf[n, _G_R2] = gw[g] * dm_da * da_near
         gbuf[n, _G_XI] = xi
         gbuf[n, _G_T] = t
         gbuf[n, _G_D0] = d0
@@ -388,18 +391,20 @@ def _line_part(gbuf, counts, nodes4, geo, law_id, law_params, scale, ds, f_out, 
     end the way whose points lie on the ending fiber therefore takes the weight over, smoothly:
 
         Π_line = Σ_g w_g L0_A (1 − w) λ_AB(p_g) e(g(δ_g))  +  (A ↔ B),
-        λ_AB(p) = ½ (1 + a_A(p) − a_B(p)),
+        λ_AB = (1 + a_A)(1 − a_B) / (2 (1 − a_A a_B)),
 
     with a_F the end nearness of fiber F (:func:`_own_end_nearness`): a = S(τ) = 3τ² − 2τ³ over the
     fiber's last segment (τ its parameter, 1 at the free end), S(1 − τ) over its first, 0 elsewhere.
-    a_A is read at the Gauss point's own parameter (fixed), a_B at its projection on fiber B's end
-    segment. At one place λ_AB + λ_BA = 1, so the sum still integrates e once; in the interior
-    λ = ½ (the forces of full overlaps are as before bit for bit). On the ending fiber's last segment
-    its own way's weight ½(1 + S) is a cubic, integrated exactly by two or more Gauss points, and the
-    other way's weight falls to 0 with zero slope at the end, so its integrand no longer steps. The
-    force carries λ's gradient, −w_g L0_A (1 − w) e ½ ∂a_B/∂τ ∇τ, with τ the projection parameter on
-    B's end segment (from the neighbouring pair, at a kinked joint, too: both owners read the same
-    a_B). Beyond B's end λ_AB = ½ a_A: the hemispherical end cap counts only between two ends."""
+    a_A is read at the Gauss point's own parameter (fixed, < 1: Gauss points lie inside their
+    segment), a_B at its projection on fiber B's end segment. At one place λ_AB + λ_BA = 1, so the
+    sum still integrates e once; in the interior λ = ½ (the forces of full overlaps are as before bit
+    for bit). λ_AB is 0 where B ends (a_B = 1), with zero slope, whether or not A ends nearby too, so
+    the integrand of the way whose points are fixed on A no longer steps there. Where only B ends,
+    λ_BA = ½(1 + a_B), a cubic on B's end segment, integrated exactly by two or more Gauss points.
+    The force carries λ's gradient, −w_g L0_A (1 − w) e ∂λ_AB/∂a_B ∂a_B/∂τ ∇τ, with τ the projection
+    parameter on B's end segment (from the neighbouring pair, at a kinked joint, too: both owners
+    read the same a_B). Beyond B's end λ_AB = 0: the line part has no end cap (a fiber end meets
+    another fiber's side through its end segment, and a crossing through the point part)."""
     # Strategy: the Gauss points are found first (geometry, before the pair's blend, so it overlaps
     # the point part's), then the law runs on all of them, then the forces are applied: the same
     # arithmetic in the same order as one loop per point, but the law's latency (log, table) no
@@ -690,7 +695,7 @@ _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="alwa
 # columns of a pair's result row in the contact pass (:func:`_pairs_pass`): its force block (rows
 # a0, a1, b0, b1 of the pair's nodes, then the far nodes of the segments before and after each,
 # 3 components each), its accumulator
-# (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle, its new skip threshold, and
+# (:func:`fiberpipe.solver.contact_pairs.record_pair`), its crossing angle, its new skip threshold, and
 # for the merge after the tasks its energy and its outcome, and whether the joint share's forces
 # reach the far nodes (rows 4–7 of the block; zeros otherwise, which the merge then skips)
 _R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME, _R_FAR = 0, 24, 32, 33, 34, 35, 36
@@ -914,10 +919,37 @@ def _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look):
 def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
                         out, c_off, reach):
     """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
-    ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
-    [m], the arc length of each segment's ends along its fiber (their difference, the reference
-    length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
-    ``(energy, n_active)``; ``energy`` is the potential itself.
+    ``f_out``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    seg_nodes : (E, 2) int64 — node indices of each segment. seg_radius : (E,) float64, m.
+    seg_arc : (E, 2) float64, m — the arc length of each segment's ends along its fiber (their
+        difference, the reference length, weighs the line part's Gauss points).
+    pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
+    law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
+    gxi, gw : Gauss nodes on (0, 1) and weights summing to 1
+        (:func:`fiberpipe.solver.contact_pairs.gauss_points`).
+    ds : float, m — the onset length δ_s (0: the laws as they are).
+    f_out : (N, 3) float64, N — accumulated into (not zeroed).
+    out : :class:`fiberpipe.solver.contact_state.PairRecords` — per pair, out: ``fn``, ``normal``,
+        ``s``, ``t``, ``phi``, ``delta``; if size > 0, ``share`` (the pair's contact share: point part
+        its blend weight × joint share, line part the weighted fraction of the segment length in
+        contact; a full-length parallel contact or a crossing counts 1), ``fsum`` (Σ|f| of its
+        contact points [N]) and ``active`` (the indices of the pairs in contact, in order, so that
+        friction and statistics visit only those). ``gap`` (size > 0): in/out, each pair's skip
+        threshold, with ``reach``.
+    c_off : (P,) float64, m — per-pair initial-overlap offset subtracted from every penetration of
+        the pair (size 0: none).
+    reach : float, m — twice a bound on the path any node has travelled since the last
+        neighbour-list build (``2 Σ Δt max_i |v_i|``, non-decreasing). A pair with ``gap > reach``
+        is skipped: when it was last evaluated, at reach ``R_c``, its clamped centre-line distance
+        minus ``r_i + r_j`` was ``g_c`` and ``gap = R_c + g_c``; every point of a segment is a convex
+        combination of its nodes, so since then the gap closed by at most ``reach − R_c``. The
+        build sets ``gap = g_b`` at reach 0; every evaluated pair found apart sets it anew.
+
+    Returns ``(energy, n_active)``: the potential itself [J] and the number of pairs in contact.
 
     ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
     (``solver.threads`` > 1) in ``prange`` tasks once there are pairs for two, with the same

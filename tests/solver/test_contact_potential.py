@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from fiberpipe.solver.contact import gauss_points
+from fiberpipe.solver.contact_pairs import gauss_points
 from fiberpipe.solver.contact_potential import contact_forces_pot, onset
 from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
