@@ -348,13 +348,13 @@ class ContactConfig(Section):
         "law takes over by a = 2 ℓ_blend (a sixth of a 0.3 mm element: a crossing whose ellipse spans elements hops "
         "across joints and, as a point force, creates energy; docs/contact.md)"
     )
-    formulation: Literal["legacy", "potential"] = Field(
-        "potential", description="normal contact kernel: 'potential' makes every force minus the gradient of one "
-        "stored potential (Gauss points fixed on each segment, the angle blend with its derivatives); 'legacy' "
-        "integrates each overlap exactly, without the derivatives of its interval and blend (docs/contact.md)"
+    formulation: Literal["potential"] = Field(
+        "potential", description="normal contact kernel: 'potential' (the one there is) makes every force minus the "
+        "gradient of one stored potential (Gauss points fixed on each segment with end weights, the angle blend "
+        "with its derivatives; docs/contact.md)"
     )
     onset: Length = Field(
-        0.0, description="formulation 'potential': penetration over which force and stiffness rise from zero "
+        0.0, description="penetration over which the fiber–fiber contact's force and stiffness rise from zero "
         "(0: the laws as they are)"
     )
     gauss_points: int = Field(
@@ -651,8 +651,8 @@ class SolverConfig(Section):
     threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (4 prange tasks "
                          "of contiguous nodes) and for the potential contact pass's pairs (up to 8 tasks once 64 pairs are "
                          "within reach; the same forces bit for bit) and the fiber–fiber friction's pairs (up to 8 tasks of at "
-                         "least 256 pairs in contact, once 512 are; the same forces bit for bit); the legacy contact pass and the plane "
-                         "friction stay serial; "
+                         "least 256 pairs in contact, once 512 are; the same forces bit for bit); the plane "
+                         "friction stays serial; "
                          "> 1 uses a step loop of its own (with the built-in contact: compiled once and cached, ≈ 1 min); "
                          "pays on an idle machine with a core per thread (docs/benchmarks.md); numba runs at most "
                          "NUMBA_NUM_THREADS threads (read when it starts; fiberpipe study and fit set it to the largest "
