@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, Material, State, build_model
-from fiberpipe.verification.case_config import contact_hook
+from fiberpipe.benchmarks.scenes import default_contact
 from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step
 
 R = 0.25e-3
@@ -49,7 +49,7 @@ def fiberpipe_setup(n_fibers=40, n_el=50):
     off = np.arange(n_fibers + 1) * (n_el + 1)
     m = build_model(np.vstack(xs), off, R, Material(E_PA, RHO, NU))
     eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(ALPHA), Gravity([0, -9.81, 0]),
-           contact_hook(m, friction=True)]
+           default_contact(m, friction=True)]
     dt, _ = choose_time_step(m, eff, SimulationSettings())
     return m, eff, dt
 

@@ -45,8 +45,8 @@ def measure(n_fibers: int, steps: int, repeats: int = 3, contact: bool = False) 
     m = bundle(n_fibers)
     eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
     if contact:
-        from fiberpipe.verification.case_config import contact_hook
-        eff.append(contact_hook(m, friction=True))
+        from fiberpipe.benchmarks.scenes import default_contact
+        eff.append(default_contact(m, friction=True))
     dt, _ = choose_time_step(m, eff, SimulationSettings())
     integ = Integrator(m, eff, dt, history_rows=steps * (repeats + 1) // 100 + 2, history_every=100)
     st = State.at_rest(m)

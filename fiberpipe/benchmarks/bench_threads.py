@@ -10,7 +10,7 @@ means something only on an idle machine (each thread needs a core).
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --state runs/bench/p40_708000.npz
 
 ``--state``: paper-40 at the study's settings from states saved by
-:mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40``) instead of the bench bundle.
+``benchmarks/paper40_states.py`` of a source checkout (``make profile-paper40``) instead of the bench bundle.
 ``--config``: the scene of a run config (mesh built in memory) from rest, after 300 steps, e.g. the
 400-fiber specimen's (``make bench-400-threads``):
 
@@ -25,7 +25,7 @@ import os
 import statistics
 import time
 
-from fiberpipe.benchmarks.paper40_states import scene_and_state
+from fiberpipe.benchmarks.scenes import scene_and_state
 
 
 def _bench_scene(n_fibers: int, contact: bool):
@@ -37,8 +37,8 @@ def _bench_scene(n_fibers: int, contact: bool):
     m = bundle(n_fibers)
     eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
     if contact:
-        from fiberpipe.verification.case_config import contact_hook
-        eff.append(contact_hook(m, friction=True))
+        from fiberpipe.benchmarks.scenes import default_contact
+        eff.append(default_contact(m, friction=True))
     dt, _ = choose_time_step(m, eff, SimulationSettings())
     return m, eff, dt, State.at_rest(m)
 
