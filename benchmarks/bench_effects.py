@@ -39,10 +39,10 @@ R = 0.25e-3
 
 def _prepare(model, effects, steps, repeats):
     dt, _ = choose_time_step(model, effects, SimulationSettings())
-    integ = Integrator(model, effects, dt, history_rows=steps * (repeats + 1) // 100 + 4, history_every=100)
-    st = State.at_rest(model)
-    integ.advance(st, 20)  # compile or load from cache
-    return integ, st, dt
+    integrator = Integrator(model, effects, dt, history_rows=steps * (repeats + 1) // 100 + 4, history_every=100)
+    state = State.at_rest(model)
+    integrator.advance(state, 20)  # compile or load from cache
+    return integrator, state, dt
 
 
 def _round_robin(prepared: dict, steps: int, repeats: int) -> dict:
@@ -50,9 +50,9 @@ def _round_robin(prepared: dict, steps: int, repeats: int) -> dict:
     core shifts all of them alike."""
     best = {k: np.inf for k in prepared}
     for _ in range(repeats):
-        for k, (integ, st, _) in prepared.items():
+        for k, (integrator, state, _) in prepared.items():
             t = time.perf_counter()
-            integ.advance(st, steps)
+            integrator.advance(state, steps)
             best[k] = min(best[k], time.perf_counter() - t)
     return {k: v / steps for k, v in best.items()}
 

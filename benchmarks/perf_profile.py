@@ -73,15 +73,15 @@ def _child(a) -> None:
     from fiberpipe.benchmarks.scenes import scene_and_state
     from fiberpipe.solver.integrator import Integrator
 
-    model, effects, dt, st = scene_and_state(a.state, a.config)
-    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
+    model, effects, dt, state = scene_and_state(a.state, a.config)
+    integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
     print(f"PID {os.getpid()}", flush=True)  # the map's name, for the parent to remove it
-    if integ.advance(st, a.warmup)[0] != 0:
+    if integrator.advance(state, a.warmup)[0] != 0:
         raise SystemExit("the warm-up steps stopped (the state diverges at these settings)")
     write_perf_map()
     t0 = time.clock_gettime(time.CLOCK_MONOTONIC)
     w0 = time.perf_counter()
-    status = integ.advance(st, a.steps)[0]
+    status = integrator.advance(state, a.steps)[0]
     wall = time.perf_counter() - w0
     t1 = time.clock_gettime(time.CLOCK_MONOTONIC)
     if status != 0:

@@ -280,9 +280,9 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([base]))
     cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None
     try:
-        return _search(base, ps, U_t, F_t, seed_list, out, workers,
-                       cluster.scheduler_address if cluster is not None else scheduler, where, echo, config, target,
-                       budget, keys)
+        evaluator = _Evaluator(base, ps, U_t, F_t, seed_list, out, workers,
+                               cluster.scheduler_address if cluster is not None else scheduler, where, echo)
+        return _search(evaluator, config, target, budget)
     finally:
         if cluster is not None:
             cluster.close()
@@ -299,11 +299,12 @@ def _local_cluster(workers: int):
                         env={"NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS", "1")})
 
 
-def _search(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo, config, target, budget, keys) -> dict:
+def _search(ev: _Evaluator, config, target, budget: int) -> dict:
     """The search of :func:`run_fit` with its evaluator; writes the outputs."""
     from scipy.optimize import minimize, minimize_scalar
 
-    ev = _Evaluator(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo)
+    ps, U_t, F_t, seed_list, out, echo = ev.params, ev.U_t, ev.F_t, ev.seeds, ev.out, ev.echo
+    keys = [p["key"] for p in ps]
     echo(f"fit {', '.join(keys)} of {config} to {target} ({len(U_t)} samples), {len(seed_list)} seed(s), "
          f"budget {budget} evaluations")
     lo, hi = np.array([p["lo"] for p in ps]), np.array([p["hi"] for p in ps])
