@@ -200,7 +200,7 @@ def _threads_part(quick: bool, echo) -> list[str]:
             body.append(f"failed{' ' + extra[0] if extra else ''}: {out.stderr.strip()[-300:]}")
         else:
             body += rows[2:] if any(b.startswith("|") for b in body) else rows  # one header
-    return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 {' '.join(args[1:])} [--no-contact]` (wall time, alternating rounds in one "
+    return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 python {' '.join(args[1:])} [--no-contact]` (wall time, alternating rounds in one "
             "process; the ratio holds only on an idle machine).", ""] + body + [""]
 
 
