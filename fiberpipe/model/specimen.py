@@ -154,16 +154,7 @@ def _push_specimen(centres, rng, layout: CassetteLayout, height: float, z) -> tu
         if inside and info_overlap["max_overlap_after_m"] <= 1e-8:
             break
     fibers = Polylines.from_list(list(pts), radius_m)
-    area = n_fibers * np.pi * radius_m**2
-    info = {
-        "width_m": width_m,
-        "height_m": float(height),
-        "length_m": length_m,
-        "volume_fraction": float(area * length_m / (width_m * height * length_m)),
-        "box_min_m": [-width_m / 2, 0.0, 0.0],
-        "box_max_m": [width_m / 2, float(height), length_m],
-    }
-    return fibers, info
+    return fibers, _box_info(width_m, height, length_m, n_fibers * np.pi * radius_m**2 * length_m)
 
 
 def _box_info(width_m, height_m, length_m, fiber_volume_m3) -> dict:
