@@ -9,8 +9,8 @@ means something only on an idle machine (each thread needs a core).
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads [--fibers 160 640]
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --state runs/bench/p40_708000.npz
 
-``--state``: paper-40 at the study's settings from states saved by
-``benchmarks/paper40_states.py`` of a source checkout (``make profile-paper40``) instead of the bench bundle.
+``--state``: paper-40 at the study's settings from states saved by ``benchmarks/paper40_states.py``
+of a source checkout (``make profile-paper40``) instead of the bench bundle.
 ``--config``: the scene of a run config (mesh built in memory) from rest, after 300 steps, e.g. the
 400-fiber specimen's (``make bench-400-threads``):
 
