@@ -86,14 +86,14 @@ bench-pyelastica: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(PY) -m fiberpipe.benchmarks.bench_pyelastica
 
-# every benchmark in one run (solver, contact, PyElastica, paper-40, imaging) into
+# the headline benchmarks in one run (solver, contact, PyElastica, paper-40, imaging, threads) into
 # docs/benchmarks.md; ~10 min on an idle machine
 bench: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(FP) bench
 
-# developer measurements: scripts of benchmarks/ (outside the package). paper-40's solver profile,
-# against a reference checkout (REFERENCE=path with its own .venv), the largest stable step and the
+# developer measurements, scripts of benchmarks/ (outside the package): paper-40's solver profile,
+# against a reference checkout (REFERENCE=path with its own .venv), the largest stable step; the
 # threads (docs/benchmarks.md); minutes each, behind these targets only
 .PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy three-beam-energy test-benchmarks
 REFERENCE ?= ../wt-base
