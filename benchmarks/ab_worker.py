@@ -69,7 +69,7 @@ def main():
             integrator.advance(state, n)
             curve.append((state.t, float(integrator.pl_force[upper])))
         c1, w1 = time.process_time(), time.perf_counter()
-        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {st.step - s0} {st.t:.9g} {float(integ.pl_force[upper]):.6g}", flush=True)
+        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {state.step - s0} {state.t:.9g} {float(integrator.pl_force[upper]):.6g}", flush=True)
 
 
 if __name__ == "__main__":

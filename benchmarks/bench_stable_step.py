@@ -77,7 +77,7 @@ def main(argv=None) -> list[str]:
     mt = modal_time_step(model, probe.fix_mask, penalty_factor=probe.penalty_factor, x=state.x, q=state.q)
     dt_el = stable_time_step(model).dt_stable_s
     ref = run_at(model, effects, 0.95 * dt_el, a.state, a.span)
-    lines = [f"state t = {st.t * 1e3:.2f} ms; {mt.summary()}; element bound {dt_el:.4g} s", "",
+    lines = [f"state t = {state.t * 1e3:.2f} ms; {mt.summary()}; element bound {dt_el:.4g} s", "",
              "| dt | dt / dt_modes | steps | status | largest speed (m/s) | stable | load cell (N) | CPU (s) |",
              "|---|---|---|---|---|---|---|---|",
              f"| {ref['dt_s']:.4g} s (0.95 × element bound) | {ref['dt_s'] / mt.dt_stable_s:.3f} | {ref['steps']} | "

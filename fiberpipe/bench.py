@@ -282,9 +282,9 @@ def _imaging_part(quick: bool, echo) -> list[str]:
     imaging_bench = _load("bench_imaging")
     shape = (250, 200, 400) if quick else (1000, 200, 400)
     with tempfile.TemporaryDirectory() as td:
-        head, tab, acc = imaging_bench.perf_part(shape, 12.0, [], Path(td))
+        head, stage_table, acc = imaging_bench.perf_part(shape, 12.0, [], Path(td))
     return [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
-            f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({load()}). {head}", "", tab, "", acc, ""]
+            f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({load()}). {head}", "", stage_table, "", acc, ""]
 
 
 def _write_between_markers(out: Path, text: str) -> None:

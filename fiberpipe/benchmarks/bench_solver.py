@@ -73,7 +73,6 @@ def table(rows) -> list[str]:
         lines.append(f"| {r['fibers']} | {r['elements']} | {'on' if r['contact'] else 'off'} | {r['steps']} | "
                      f"{r['us_per_step']:.1f} | {r['ns_per_element_step']:.1f} | {r['Melem_steps_per_s']:.2f} | "
                      f"{r.get('pairs', '')} | {r.get('active', '')} |")
-    base = {r["fibers"]: r for r in rows}
     for c in (False, True):
         rs = [r for r in rows if r["contact"] == c]
         r40 = next((r for r in rs if r["fibers"] == 40), None)

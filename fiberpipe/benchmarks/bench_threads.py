@@ -75,7 +75,7 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
     per = [a / b for a, b in zip(t[1], t[threads])]
     return {"fibers": label,
             "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
-            "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
+            "s_1": min(t[1]), "s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
             "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
 
 

@@ -439,19 +439,19 @@ def _material_and_interaction_lines(cfg, mesh, planes: list[dict], figures: dict
                               float(scene.damping.beta) if damped else 0.0, damping=damped)]
     mu = float(scene.friction.mu) if "friction" in effects else 0.0
     if "contact" in effects:
-        tab = pressure_overclosure(cfg, mesh)
-        figures.update(contact_fit_error_full_scale=tab.fit_error_full_scale,
-                       contact_fit_error_relative=tab.fit_error_relative)
+        table = pressure_overclosure(cfg, mesh)
+        figures.update(contact_fit_error_full_scale=table.fit_error_full_scale,
+                       contact_fit_error_relative=table.fit_error_relative)
         lines += ["**", "** INTERACTIONS", "**",
-                  f"** fiber-fiber normal law: {tab.law}",
-                  f"** pressure = {tab.force_to_pressure}",
-                  f"** table fit error over 0-{_f(tab.range_m)} m: {100 * tab.fit_error_full_scale:.3g} % of full scale, "
-                  f"{100 * tab.fit_error_relative:.3g} % relative above 5 % of the range",
+                  f"** fiber-fiber normal law: {table.law}",
+                  f"** pressure = {table.force_to_pressure}",
+                  f"** table fit error over 0-{_f(table.range_m)} m: {100 * table.fit_error_full_scale:.3g} % of full scale, "
+                  f"{100 * table.fit_error_relative:.3g} % relative above 5 % of the range",
                   "*SURFACE INTERACTION, NAME=FIBER_FIBER"]
         if mu > 0:
             lines += ["*FRICTION", f"{mu:g}"]
         lines += ["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=TABULAR"]
-        lines += [f"{_f(p)}, {_f(h)}" for p, h in tab.rows]
+        lines += [f"{_f(p)}, {_f(h)}" for p, h in table.rows]
     if planes:
         lines += ["*SURFACE INTERACTION, NAME=FIBER_PLANE"]
         if mu > 0:

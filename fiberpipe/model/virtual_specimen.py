@@ -53,23 +53,23 @@ def check_fits(specimen, radius_m: float, where: str) -> None:
     """Refuse, before anything is drawn, a specimen whose fibers cannot fit its cassette."""
     free = specimen.width - 2 * radius_m - 2 * specimen.gap
     if free <= 0:
-        raise ConfigError(f"specimen.width = {sp.width * 1e3:.4g} mm cannot hold a fiber of diameter "
+        raise ConfigError(f"specimen.width = {specimen.width * 1e3:.4g} mm cannot hold a fiber of diameter "
                           f"{2 * radius_m * 1e3:.4g} mm (plus the clearance): widen the cassette", where=where)
     radii = [specimen.bow.spool_radius] if specimen.bow.spool_radius is not None else list(specimen.bow.spool_radius_range or [])
     if radii and min(radii) <= specimen.length / 2:
         raise ConfigError(f"specimen.bow: a spool radius of {min(radii) * 1e3:.4g} mm cannot bend a "
-                          f"{sp.length * 1e3:.4g} mm fiber (it must exceed half the length)", where=where)
+                          f"{specimen.length * 1e3:.4g} mm fiber (it must exceed half the length)", where=where)
     if radii and specimen.bow.plane != "upright":
         rmin = min(radii)
         sag = rmin - math.sqrt(rmin**2 - specimen.length**2 / 4)
         if sag > 0.9 * free:
             raise ConfigError(f"specimen: a fiber bowed by the spool radius {rmin * 1e3:.4g} mm spans {sag * 1e3:.3g} mm "
                               f"across, more than the {0.9 * free * 1e3:.3g} mm its cassette (specimen.width = "
-                              f"{sp.width * 1e3:.4g} mm) leaves: widen it, raise the spool radius or set "
+                              f"{specimen.width * 1e3:.4g} mm) leaves: widen it, raise the spool radius or set "
                               "specimen.bow.plane: upright", where=where)
     h = target_height_m(specimen, radius_m)
     if specimen.upper_plate == "target" and h < 2 * radius_m:
-        raise ConfigError(f"specimen.volume_fraction = {sp.volume_fraction:g} makes the cassette {h * 1e3:.3g} mm high, "
+        raise ConfigError(f"specimen.volume_fraction = {specimen.volume_fraction:g} makes the cassette {h * 1e3:.3g} mm high, "
                           f"less than a fiber diameter: lower it or add fibers", where=where)
 
 
@@ -94,7 +94,7 @@ def cassette_height_m(specimen, radius_m: float, top_m: float, pile: str, where:
         vmax = specimen.n_fibers * math.pi * radius_m**2 / (specimen.width * top_m)
         raise ConfigError(
             f"specimen: the {pile} pile (top {top_m * 1e3:.4g} mm) does not fit its "
-            f"cassette under the upper plate at {height * 1e3:.4g} mm (v_f0 = {sp.volume_fraction:g}): lower "
+            f"cassette under the upper plate at {height * 1e3:.4g} mm (v_f0 = {specimen.volume_fraction:g}): lower "
             f"specimen.volume_fraction to at most {vmax:.4g}, raise specimen.candidates (a denser pile) or set "
             "specimen.upper_plate: pile", where=where)
     return height
@@ -132,8 +132,8 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
             fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures, progress=bar)
         except ValueError as exc:
             if "does not fit the cassette" in str(exc):
-                raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
-                                  f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
+                raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(specimen.phi_mean):.3g} deg "
+                                  f"does not fit the {specimen.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
                                   where=where) from None
             raise
     deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
@@ -253,12 +253,12 @@ def specimen_report(info: dict, out: Path) -> str:
         f"the pile's own {info['pile_volume_fraction']:.4f}, top {info['pile_top_m'] * 1e3:.5g} mm)",
         f"  contacts at U = 0: {c['fiber_fiber']} fiber-fiber ({2 * c['fiber_fiber'] / max(n, 1):.2f} per fiber), "
         f"{c['fibers_on_lower_plate']} fibers on the lower plate, {c['fibers_at_upper_plate']} at the upper plate",
-        f"  Phi of neighbours: mean {st['phi_mean_deg']:.2f} deg (median {st['phi_median_deg']:.2f}, "
-        f"10-90 % {st['phi_p10_deg']:.2f}-{st['phi_p90_deg']:.2f}), {st['neighbour_pairs']} pairs",
+        f"  Phi of neighbours: mean {settle_cfg['phi_mean_deg']:.2f} deg (median {settle_cfg['phi_median_deg']:.2f}, "
+        f"10-90 % {settle_cfg['phi_p10_deg']:.2f}-{settle_cfg['phi_p90_deg']:.2f}), {settle_cfg['neighbour_pairs']} pairs",
         "  Phi histogram (deg: pairs): " + ", ".join(
             f"{int(e)}-{int(e) + 1}: {k}" for e, k in zip(info["phi_histogram_deg"]["edges"], info["phi_histogram_deg"]["counts"])
             if k),
-        f"  Table 4 curvatures at U = 0: XZ {st['curvature_xz_per_m']:.4g} 1/m, YZ {st['curvature_yz_per_m']:.4g} 1/m",
+        f"  Table 4 curvatures at U = 0: XZ {settle_cfg['curvature_xz_per_m']:.4g} 1/m, YZ {settle_cfg['curvature_yz_per_m']:.4g} 1/m",
     ]
     if "wall_time_s" in info.get("deposit", {}):
         lines.append(f"  deposited {n} fibers in {info['deposit']['wall_time_s']:.0f} s wall")
