@@ -28,7 +28,7 @@ def test_the_package_holds_no_developer_script_and_imports_no_test_or_verificati
 
     for script in ("bench_ab", "ab_worker", "bench_inprocess", "perf_profile", "bench_profile", "paper40_states",
                    "bench_stable_step", "bench_step_energy", "bench_three_beam_energy", "bench_bundle_cost",
-                   "bench_fast_ensemble", "bench_effects"):
+                   "bench_fast_ensemble", "bench_effects", "bench_contact_variants"):
         assert not (DATA.parent / f"{script}.py").exists(), script
         assert (ROOT / "benchmarks" / f"{script}.py").is_file(), script
     for path in [*DATA.parent.glob("*.py"), *(ROOT / "benchmarks").glob("*.py")]:
