@@ -201,7 +201,7 @@ bench-400: specimen-400
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_bundle_cost.py runs/specimens/bundle-400/config.yaml
 
 # the 400-fiber specimen compacted at the study's settings and with mass scaling 100 (alpha / 100),
-# two threads each (docs/benchmarks.md, "Virtual specimens"; ≈ 30 min on two cores)
+# two threads each (docs/benchmarks.md, "Headline figures"; ≈ 30 min on two cores)
 .PHONY: fast-400
 fast-400: specimen-400
 	$(FP) study configs/studies/bundle-400/fast-settings.yaml --out runs/studies/bundle400-fast-settings
