@@ -41,7 +41,7 @@ def main():
     dt, _ = choose_time_step(model, effects, settings)
     threads = int(getattr(settings, "threads", 1) or 1)
     kw = {"threads": threads} if threads > 1 else {}
-    integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9, **kw)
+    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, **kw)
     from fiberpipe.solver.effects import SceneArrays
     probe = SceneArrays(model, dt)
     for e in effects:
@@ -51,9 +51,9 @@ def main():
     # compile (or load from the cache) the step loop before the first timed span, on a scene of its own
     m2, e2, _ = build_simulation(mesh, cfg)
     Integrator(m2, e2, dt, history_rows=10, history_every=10**9, **kw).advance(State.at_rest(m2), 2)
-    state = State.at_rest(model)
+    st = State.at_rest(model)
     print(f"ready {model.n_elements} {dt:.9g} {end:.9g}", flush=True)
-    upper = int(integrator.pl_force.shape[0] > 1)
+    upper = int(integ.pl_force.shape[0] > 1)
     curve = []
     for line in sys.stdin:
         words = line.split()
@@ -63,13 +63,13 @@ def main():
             print(" ".join(f"{t:.9g},{f:.6g}" for t, f in curve), flush=True)
             continue
         target = float(words[1])
-        c0, w0, s0 = time.process_time(), time.perf_counter(), state.step
-        while state.t < target * (1.0 - 1e-12):
-            n = min(2000, max(1, int(round((target - state.t) / dt + 0.5))))
-            integrator.advance(state, n)
-            curve.append((state.t, float(integrator.pl_force[upper])))
+        c0, w0, s0 = time.process_time(), time.perf_counter(), st.step
+        while st.t < target * (1.0 - 1e-12):
+            n = min(2000, max(1, int(round((target - st.t) / dt + 0.5))))
+            integ.advance(st, n)
+            curve.append((st.t, float(integ.pl_force[upper])))
         c1, w1 = time.process_time(), time.perf_counter()
-        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {state.step - s0} {state.t:.9g} {float(integrator.pl_force[upper]):.6g}", flush=True)
+        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {st.step - s0} {st.t:.9g} {float(integ.pl_force[upper]):.6g}", flush=True)
 
 
 if __name__ == "__main__":

@@ -27,10 +27,10 @@ def measure(bundle_config: Path, steps: int = 400, rounds: int = 6) -> dict:
     for name, cfg in (("paper-40", None), ("bundle", Path(bundle_config))):
         model, effects, settings, dt = scene(config=cfg)
         total_steps[name] = _plan_run(model, effects, settings, None, None).total_steps
-        integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
-        state = State.at_rest(model)
-        integrator.advance(state, 300)  # compile and warm
-        runs[name] = [integrator, state, model.n_elements, dt, 0.0, 0]
+        integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+        st = State.at_rest(model)
+        integ.advance(st, 300)  # compile and warm
+        runs[name] = [integ, st, model.n_elements, dt, 0.0, 0]
     ratio = max(1, round(runs["bundle"][2] / runs["paper-40"][2]))
     n_steps = {"paper-40": steps * ratio, "bundle": steps}
     for r in range(rounds):
@@ -41,10 +41,10 @@ def measure(bundle_config: Path, steps: int = 400, rounds: int = 6) -> dict:
             run[4] += time.process_time() - t0
             run[5] += n_steps[name]
     out = {}
-    for name, (integrator, state, n_el, dt, cpu, done) in runs.items():
+    for name, (integ, st, n_el, dt, cpu, done) in runs.items():
         out[name] = {"elements": n_el, "dt_s": dt, "us_per_step": cpu / done * 1e6,
-                     "ns_per_element_step": cpu / done / n_el * 1e9, "t_s": state.t,
-                     "contacts": int(integrator.scene.contact_data.stats.n_active[0]),
+                     "ns_per_element_step": cpu / done / n_el * 1e9, "t_s": st.t,
+                     "contacts": int(integ.scene.contact_data.stats.n_active[0]),
                      # the whole loading at the cost per step from rest: a lower bound (a compacted
                      # step costs more, paper-40's 1.6× its early one)
                      "total_steps": int(total_steps[name]), "solution_s_from_rest_cost": cpu / done * total_steps[name]}

@@ -46,8 +46,8 @@ def step_variants(state_path, steps: int, warmup: int, repeats: int) -> list[dic
     from fiberpipe.solver.integrator import Integrator
 
     runs = []
-    for name, effect_names in VARIANTS:
-        model, effects, settings, dt = scene({"scene.effects": effect_names})
+    for name, eff in VARIANTS:
+        model, effects, settings, dt = scene({"scene.effects": eff})
         runs.append((name, model, effects, dt))
     # the scene's own dt for every variant (the plates and the contact do not change it)
     dt = runs[-1][3]
@@ -55,15 +55,15 @@ def step_variants(state_path, steps: int, warmup: int, repeats: int) -> list[dic
     info = {}
     for r in range(repeats):
         for name, model, effects, _ in runs:
-            integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
-            state = load_state(state_path)
-            integrator.advance(state, warmup)
-            hook = integrator.scene.contact_data
-            b0 = int(hook.stats.n_builds[0]) if integrator.scene.contact_on else 0
+            integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+            st = load_state(state_path)
+            integ.advance(st, warmup)
+            hook = integ.scene.contact_data
+            b0 = int(hook.stats.n_builds[0]) if integ.scene.contact_on else 0
             t = time.process_time()
-            integrator.advance(state, steps)
+            integ.advance(st, steps)
             best[name] = min(best[name], (time.process_time() - t) / steps)
-            if integrator.scene.contact_on:
+            if integ.scene.contact_on:
                 s = hook.stats
                 info[name] = {"pairs": int(s.n_pairs[0]), "active": int(s.n_active[0]),
                               "builds_per_step": (int(s.n_builds[0]) - b0) / steps}
@@ -82,50 +82,50 @@ def kernel_times(state_path) -> dict:
     from fiberpipe.solver.neighbours import build_pairs, max_displacement2_speed2
 
     model, effects, settings, dt = scene()
-    integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
-    state = load_state(state_path)
-    integrator.advance(state, 2)
-    x, q, v = state.x, state.q, state.v
-    m = integrator.model_arrays
+    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+    st = load_state(state_path)
+    integ.advance(st, 2)
+    x, q, v = st.x, st.q, st.v
+    m = integ.model_arrays
     eb = np.zeros((model.n_elements, EB_SIZE))
     sp = np.zeros((0, 6))
     out = {}
-    work = integrator._kernel_args()[1]
+    work = integ._kernel_args()[1]
     out["beam pass, vectorised (beam_pass_all, the step loop's)"] = _best(lambda: beam_pass_all(x, q, m, work), 2000)
     out["beam pass, per element (beam_resultants, large rotations and β > 0)"] = _best(lambda: beam_resultants(
         x, q, m.el_n1, m.el_invL0, m.el_C, m.el_Dk, m.gamma_rest, m.theta_rest, eb, False, 0.0, sp, m.node_offsets), 2000)
-    scene_arrays = integrator.scene
-    n, P = x.shape[0], scene_arrays.pl_axis.size
+    sc = integ.scene
+    n, P = x.shape[0], sc.pl_axis.size
     f = np.zeros((n, 3))
     pf, pi, pv = np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P)
     out["planes (plane_contacts, all nodes)"] = _best(lambda: plane_contacts(
-        x, m.radius_node, integrator.k_pen, integrator.pen_onset, scene_arrays.pl_axis, scene_arrays.pl_sign, integrator.pl_pos, f, pf, pi, pv), 2000)
-    data = scene_arrays.contact_data
-    segs, params = data.segs, data.params
+        x, m.radius_node, integ.k_pen, integ.pen_onset, sc.pl_axis, sc.pl_sign, integ.pl_pos, f, pf, pi, pv), 2000)
+    data = sc.contact_data
+    segs, prm = data.segs, data.params
     pl = data.lists[1]
     out["neighbour list build (build_pairs)"] = _best(lambda: build_pairs(
-        x, segs.nodes, segs.radius, segs.fiber, segs.arc, params.skin_m, params.exclusion_m, pl.pairs, pl.keys), 20)
+        x, segs.nodes, segs.radius, segs.fiber, segs.arc, prm.skin_m, prm.exclusion_m, pl.pairs, pl.keys), 20)
     out["displacement test (max_displacement2_speed2)"] = _best(lambda: max_displacement2_speed2(x, data.x_ref, v), 2000)
     npairs = int(data.stats.n_pairs[0])
     pairs = data.lists[0].pairs
-    gxi, gw = gauss_points(len(params.gauss_xi))
+    gxi, gw = gauss_points(len(prm.gauss_xi))
     # the default normal kernel (potential formulation) on every candidate: records without the gap
     # array, so no pair is skipped (the step loop skips those whose gap exceeds their path bound)
     recs = new_records(max(npairs, 1))._replace(gap=np.zeros(0))
     none = np.zeros(0)
-    res = contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, pairs, npairs, params.law_id, params.law_params, gxi,
-                             gw, params.onset_m, f, recs, none, 0.0)
+    res = contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, pairs, npairs, prm.law_id, prm.law_params, gxi,
+                             gw, prm.onset_m, f, recs, none, 0.0)
     out["contact, every candidate evaluated (contact_forces_pot)"] = _best(lambda: contact_forces_pot(
-        x, segs.nodes, segs.radius, segs.arc, pairs, npairs, params.law_id, params.law_params, gxi, gw, params.onset_m, f,
+        x, segs.nodes, segs.radius, segs.arc, pairs, npairs, prm.law_id, prm.law_params, gxi, gw, prm.onset_m, f,
         recs, none, 0.0), 500)
     # the friction kernels of the step on its pairs in contact and plane candidates (the records and
     # histories of the state's last step; each call restarts the histories it visits, as a contact
     # that opened would: the same work per call)
     rec, n_act, calls = data.records[0], int(data.stats.n_active[0]), int(data.stats.calls[0])
     out["friction, fiber–fiber (friction_forces_ex, pairs in contact)"] = _best(lambda: friction_forces_ex(
-        v, segs.nodes, pairs, npairs, rec, params.mu, params.kt_n_per_m, dt, data.lists[0].friction, f, n_act, calls), 2000)
+        v, segs.nodes, pairs, npairs, rec, prm.mu, prm.kt_n_per_m, dt, data.lists[0].friction, f, n_act, calls), 2000)
     out["friction, plates and walls (plane_friction, candidate nodes)"] = _best(lambda: plane_friction(
-        x, v, data.planes, params.mu, params.kt_n_per_m, dt, f, calls, True), 2000)
+        x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, f, calls, True), 2000)
     out["_candidates"] = npairs
     out["_in_contact"] = int(res[1])
     out["_elements"] = model.n_elements

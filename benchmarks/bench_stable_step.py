@@ -27,26 +27,26 @@ def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.solver.layout import STATUS_OK
 
-    integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
-    state = load_state(state_path)
+    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
+    st = load_state(state_path)
     # the integrator's clock is step × Δt: re-base the saved step count on this Δt (a shift of
     # < Δt/2), else the plates would jump to the time the old step count gives at the new step
-    state.step = int(round(state.t / dt))
-    state.t = state.step * dt
+    st.step = int(round(st.t / dt))
+    st.t = st.step * dt
     n = int(round(span_s / dt))
     vmax = 0.0
     status, done = STATUS_OK, 0
     t0 = time.process_time()
     while done < n and status == STATUS_OK:
         k = min(500, n - done)
-        status, d, _ = integrator.advance(state, k)
+        status, d, _ = integ.advance(st, k)
         done += d
-        if np.isfinite(state.v).all():
-            vmax = max(vmax, float(np.sqrt(np.max(np.sum(state.v**2, axis=1)))))
+        if np.isfinite(st.v).all():
+            vmax = max(vmax, float(np.sqrt(np.max(np.sum(st.v**2, axis=1)))))
         else:
             vmax = np.inf
     return {"dt_s": dt, "steps": done, "status": int(status), "vmax_m_s": vmax,
-            "cpu_s": time.process_time() - t0, "load_cell_N": float(integrator.pl_force[-1] if integrator.pl_force.size else 0.0)}
+            "cpu_s": time.process_time() - t0, "load_cell_N": float(integ.pl_force[-1] if integ.pl_force.size else 0.0)}
 
 
 def _with_fixed_penalties(dt: float, dt0: float, kt0: float):
@@ -73,11 +73,11 @@ def main(argv=None) -> list[str]:
     for e in effects:
         if not isinstance(e, ContactHook):
             e.setup(model, probe)
-    state = load_state(a.state)
-    mt = modal_time_step(model, probe.fix_mask, penalty_factor=probe.penalty_factor, x=state.x, q=state.q)
+    st = load_state(a.state)
+    mt = modal_time_step(model, probe.fix_mask, penalty_factor=probe.penalty_factor, x=st.x, q=st.q)
     dt_el = stable_time_step(model).dt_stable_s
     ref = run_at(model, effects, 0.95 * dt_el, a.state, a.span)
-    lines = [f"state t = {state.t * 1e3:.2f} ms; {mt.summary()}; element bound {dt_el:.4g} s", "",
+    lines = [f"state t = {st.t * 1e3:.2f} ms; {mt.summary()}; element bound {dt_el:.4g} s", "",
              "| dt | dt / dt_modes | steps | status | largest speed (m/s) | stable | load cell (N) | CPU (s) |",
              "|---|---|---|---|---|---|---|---|",
              f"| {ref['dt_s']:.4g} s (0.95 × element bound) | {ref['dt_s'] / mt.dt_stable_s:.3f} | {ref['steps']} | "
@@ -90,8 +90,8 @@ def main(argv=None) -> list[str]:
         lines[0] += f"; penalties fixed at the 0.95 × element-bound step's (k_t = {kt0:.4g} N/m)"
     for f in a.factors:
         dt = f * mt.dt_stable_s
-        stable_model, stable_effects = _with_fixed_penalties(dt, ref["dt_s"], kt0) if a.fixed_penalties else (model, effects)
-        r = run_at(stable_model, stable_effects, dt, a.state, a.span)
+        m_, e_ = _with_fixed_penalties(dt, ref["dt_s"], kt0) if a.fixed_penalties else (model, effects)
+        r = run_at(m_, e_, dt, a.state, a.span)
         ok = r["status"] == 0 and r["vmax_m_s"] < 10 * ref["vmax_m_s"]
         lines.append(f"| {r['dt_s']:.4g} s | {f:.3f} | {r['steps']} | {r['status']} | {r['vmax_m_s']:.3g} | "
                      f"{'yes' if ok else 'no'} | {r['load_cell_N']:.4g} | {r['cpu_s']:.1f} |")
