@@ -45,13 +45,13 @@ def test_six_fibers_create_no_energy_with_the_point_part_alone_at_300_n_per_m():
     assert excess < 0.01, excess
 
 
-def test_a_pressed_undamped_bundle_gains_no_kinetic_energy_over_1e5_steps():
-    """The six fibers resting under 30 N/m, undamped, for 1e5 steps: the state energy stays at or
-    below the loads' work, and the kinetic energy of the last eighth is no larger than that of the
-    second (the first is the fall onto the lower fibers). Measured: ratio 0.91, excess −0.0000."""
+def test_a_pressed_undamped_bundle_creates_no_energy_over_1e5_steps():
+    """The six fibers under 30 N/m, undamped and frictionless, for 1e5 steps: the state energy stays at
+    or below the loads' work at every row. Nothing holds the fibers along their axes, and the line
+    part's potential is smooth along them (its end weights), so they slide out of the set and the
+    top ones fall (as at 100 N/m and above within 5e4 steps): the kinetic energy grows from the loads'
+    work (measured: the last eighth's 3.8× the second's, excess −6.6e-6 of W)."""
     _, res = six_fibers_run(six_fibers_law("hertz_oriented", {}), 30.0, steps=100_000)
     assert res.steps == 100_000
-    excess, ke = energy_excess(res)
+    excess, _ = energy_excess(res)
     assert excess < 0.01, excess
-    n = len(ke) // 8
-    assert np.mean(ke[-n:]) < 1.1 * np.mean(ke[n:2 * n]), (np.mean(ke[-n:]), np.mean(ke[n:2 * n]))
