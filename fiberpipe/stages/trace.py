@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_json_atomic
-from fiberpipe.config import Config
+from fiberpipe.config import MIN_FIBER_LENGTH_DIAMETERS, Config, element_length_m, min_fiber_length_m
 from fiberpipe.errors import InputError
 from fiberpipe.stages._common import input_hashes
 from fiberpipe.stages.skeletonize import eval_list
@@ -37,6 +37,7 @@ def run_trace(
     mask = art["mask"]
     voxel_size = eval_list(art.attrs["voxel_size_m"])
     t = cfg.trace
+    check_voxel_size(cfg, voxel_size, t.expected_radius or cfg.fiber.radius)
     method, orient_mask = choose_method(cfg, mask, voxel_size)
     kwargs = dict(
         voxel_size_m=voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
@@ -82,9 +83,12 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
     from fiberpipe.imaging.orientation import fiber_orientation
 
     t = cfg.trace
-    fibers, folds = split_folds_for_mesh(cfg, fibers)
-    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length",
-                                        None if cfg.trace.min_length is not None else "two mesh.element_length")
+    radius = fiber_radius_m(cfg, fibers)
+    fibers, folds = split_folds_for_mesh(cfg, fibers, radius)
+    min_length = min_length_m(cfg, radius)
+    fibers, dropped = drop_short_fibers(fibers, min_length, "trace.min_length",
+                                        None if cfg.trace.min_length is not None else
+                                        f"{MIN_FIBER_LENGTH_DIAMETERS:g} fiber diameters, at least two mesh elements")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
     orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
     write_json_atomic(Path(out).with_name("orientation.json"), orientation)
@@ -98,7 +102,8 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
         "joined_gaps": int(fibers.meta.get("n_joins", 0)),
         "cut_folds": folds,
         "dropped_short_fibers": dropped,
-        "min_length_m": min_length_m(cfg),
+        "min_length_m": min_length,
+        "element_length_m": element_length_m(cfg.mesh, radius),
         "off_axis": off_axis,
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
@@ -142,9 +147,35 @@ def load_grey(cfg: Config, volume_path: Path, shape) -> np.ndarray:
     return vol
 
 
-def min_length_m(cfg: Config) -> float:
-    """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
-    return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
+def fiber_radius_m(cfg: Config, fibers) -> float:
+    """The radius the scan-derived length defaults follow: ``fiber.radius``, else the traced fibers'
+    median radius (m)."""
+    if cfg.fiber.radius is not None:
+        return float(cfg.fiber.radius)
+    return float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0
+
+
+def min_length_m(cfg: Config, radius_m: float) -> float:
+    """``trace.min_length``, by default derived from the fiber radius (config.min_fiber_length_m)."""
+    return min_fiber_length_m(cfg.trace, cfg.mesh, radius_m)
+
+
+def check_voxel_size(cfg: Config, voxel_size, radius_m: float | None) -> None:
+    """A nominal radius (``trace.expected_radius`` or ``fiber.radius``) that spans less than 1.5
+    voxels across the fibers is a one-line error: no tracer resolves such fibers, and it usually
+    means a voxel size in the wrong unit."""
+    if radius_m is None:
+        return
+    diameter_vox = 2.0 * float(radius_m) / float(min(voxel_size))
+    if diameter_vox < MIN_DIAMETER_VOX:
+        key = "trace.expected_radius" if cfg.trace.expected_radius else "fiber.radius"
+        raise InputError(f"input.voxel_size = {min(voxel_size) * 1e6:.4g} um makes the fibers ({key} = "
+                         f"{radius_m * 1e6:.4g} um) {diameter_vox:.2g} voxels across, thinner than {MIN_DIAMETER_VOX:g}: "
+                         "check the voxel size and its unit")
+
+
+#: Fibers thinner than this many voxels across are not traced (an error naming the voxel size).
+MIN_DIAMETER_VOX = 1.5
 
 
 def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
@@ -175,13 +206,15 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     return t.method, orient
 
 
-def split_folds_for_mesh(cfg: Config, fibers):
+def split_folds_for_mesh(cfg: Config, fibers, radius_m: float):
     """Cut traced fibers where they fold back (a turn above 90 deg between two consecutive mesh
     elements, nodes placed as the mesh stage places them), which the mesh stage would refuse."""
     from fiberpipe.imaging.fragments import split_folds
     from fiberpipe.model.mesh import resample_polyline
 
-    el, sm = cfg.mesh.element_length, cfg.mesh.smooth_sigma
+    if not fibers.n_fibers:
+        return fibers, 0
+    el, sm = element_length_m(cfg.mesh, radius_m), cfg.mesh.smooth_sigma
     return split_folds(fibers, lambda p: resample_polyline(p, el, smooth_sigma_m=sm), max_turn_deg=90.0)
 
 
@@ -198,7 +231,7 @@ def drop_short_fibers(fibers, min_length: float, key: str, default_of: str | Non
     if len(dropped) and kept.n_fibers == 0:
         origin = f" (unset: {default_of}; a length without a unit is in metres)" if default_of else ""
         raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm{origin} "
-                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key} or mesh.element_length")
+                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key}")
     if len(dropped):
         log.warning("%s: dropped %d of %d fibers shorter than %s = %.3g mm", key.split(".")[0], len(dropped),
                     fibers.n_fibers, key, min_length * 1e3)
@@ -235,6 +268,7 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     t = cfg.trace
     with open_checked(mask_path, "mask") as f:
         voxel_size = eval_list(f.attrs["voxel_size_m"])
+    check_voxel_size(cfg, voxel_size, t.expected_radius or cfg.fiber.radius)
     src = SliceSource(mask_path, "mask")
     sample = StridedSample(src.open())
     method, orient_mask = choose_method(cfg, sample, voxel_size)
