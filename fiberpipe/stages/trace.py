@@ -44,7 +44,8 @@ def run_trace(
         method=method,
         expected_radius_m=t.expected_radius or cfg.fiber.radius,
     )
-    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method == "slices" else ("min_length_vox", "smooth_sigma_vox")
+    options = (("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method in ("slices", "dense")
+               else ("min_length_vox", "smooth_sigma_vox"))
     kwargs.update({k: getattr(t, k) for k in options if getattr(t, k) is not None})
     inputs = {"mask": Path(mask_path)}
     if method == "skeleton" and skeleton_path is not None and Path(skeleton_path).exists():
@@ -54,9 +55,12 @@ def run_trace(
         inputs["skeleton"] = Path(skeleton_path)
     if t.join_gap_vox is not None:
         kwargs["join_gap_vox"] = t.join_gap_vox
-    if method == "slices":
+    if method == "dense" and volume_path is None:
+        raise InputError("trace.method dense finds the fiber centres in the grey volume, and this run has none "
+                         "(input.volume): set trace.method: slices")
+    if method in ("slices", "dense"):
         kwargs["off_axis"] = t.off_axis
-        if t.grey and volume_path is not None:
+        if (t.grey or method == "dense") and volume_path is not None:
             kwargs["grey"] = load_grey(cfg, volume_path, mask.shape)
             inputs["volume"] = Path(volume_path)
     fibers = trace(mask, **kwargs)
@@ -195,7 +199,7 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or along_axes or not orient.get("n_samples")
     frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
     if t.method == "auto":
-        method = "slices" if parallel else "skeleton"
+        method = ("dense" if dense_pack(mask, orient) else "slices") if parallel else "skeleton"
         log.info("trace: %.0f %% of the fiber volume within 45 deg of axis %s: method %s", frac,
                  orient.get("nearest_volume_axis"), method)
         return method, orient
@@ -204,6 +208,27 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
                     "trace.min_aligned_fraction = %g): the slices tracer needs quasi-parallel fibers; set "
                     "trace.method: skeleton (or auto)", frac, t.min_aligned_fraction)
     return t.method, orient
+
+
+def dense_pack(mask, orient: dict) -> bool:
+    """Whether a quasi-parallel scan is a dense pack of thin fibers (``trace.method: auto`` then
+    picks ``dense``): the mask's volume fraction and its radius across the dominant axis
+    (:func:`fiberpipe.imaging.dense.is_dense_pack`). A chunked mask (a dataset) is sampled."""
+    from fiberpipe.imaging.dense import is_dense_pack
+    from fiberpipe.imaging.trace import estimate_radius_vox
+
+    if not isinstance(mask, np.ndarray):
+        return False
+    ax = {"z": 0, "y": 1, "x": 2}.get(orient.get("nearest_volume_axis"), 0)
+    mask_t = mask.transpose((ax,) + tuple(i for i in range(3) if i != ax))
+    fraction = float(np.count_nonzero(mask[::2, ::2, ::2])) / max(1, mask[::2, ::2, ::2].size)
+    if fraction < 0.3:
+        return False
+    try:
+        radius = estimate_radius_vox(mask_t, np.ones(2))
+    except InputError:
+        return False
+    return is_dense_pack(fraction, radius)
 
 
 def split_folds_for_mesh(cfg: Config, fibers, radius_m: float):
@@ -283,7 +308,7 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     fr = axis_fractions(sample, voxel_size)
     split = any(b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION for b in range(3))
     grey, inputs = None, {"mask": Path(mask_path)}
-    if t.grey and volume_path is not None:
+    if (t.grey or method == "dense") and volume_path is not None:
         grey = grey_source(cfg, volume_path, src.shape)
         inputs["volume"] = Path(volume_path)
     opts = {k: getattr(t, k) for k in ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox")

@@ -108,7 +108,7 @@ def test_mask_only_tracer_loses_the_dense_pack(dense):
 
 @pytest.mark.parametrize("off_axis", ["trace", "drop"])
 def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_path, write_yaml, caplog, dense, off_axis):
-    """The stage: auto picks slices (fibers along volume axes), trace.grey reads the volume, one warning, counts in summary.json."""
+    """The stage: auto picks dense (a dense pack along volume axes), which reads the volume, one warning, counts in summary.json."""
     import json
 
     from fiberpipe.config import load_config
@@ -125,7 +125,7 @@ def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_p
     with caplog.at_level("WARNING", logger="fiberpipe"):
         run_pipeline(cfg, tmp_path / "run", to_stage="trace")
     tr = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]["trace"]
-    assert tr["method"] == "slices" and tr["aligned_fraction_45deg_mask"] < 0.9
+    assert tr["method"] == "dense" and tr["aligned_fraction_45deg_mask"] < 0.9
     info = tr["off_axis"]["x"]
     msgs = [r.getMessage() for r in caplog.records if "across the slicing axis" in r.getMessage()]
     assert len(msgs) == 1 and "\n" not in msgs[0] and "trace.off_axis" in msgs[0]
