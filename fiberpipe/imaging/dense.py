@@ -19,6 +19,10 @@ DENSE_MIN_VOLUME_FRACTION = 0.35
 #: Largest fiber radius (voxels, from the mask) of a dense pack the grey tracer is for: above it the
 #: mask separates the fibers by itself (the study's bundles, 16 voxels).
 DENSE_MAX_RADIUS_VOX = 8.0
+#: Blur of the fitted disk template (:func:`fiberpipe.imaging.trace.fit_centres`), pixels: the
+#: in-slice denoising of the grey slices (0.7) with a scanner's point spread of about one voxel
+#: (0.7, the phantoms' 0.8 less the partial-volume ramp it already includes).
+FIT_SIGMA_VOX = 1.0
 #: Radii tried by :func:`estimate_radius_grey`, as factors of the start value.
 _RADIUS_FACTORS = np.arange(0.45, 1.26, 0.05)
 
@@ -29,7 +33,7 @@ def is_dense_pack(volume_fraction: float, radius_vox: float) -> bool:
     return volume_fraction >= DENSE_MIN_VOLUME_FRACTION and radius_vox <= DENSE_MAX_RADIUS_VOX
 
 
-def estimate_radius_grey(grey_slices, mask_t, samp: np.ndarray, r_start: float, *, n_slices: int = 8) -> float:
+def estimate_radius_grey(grey_slices, mask_t, samp: np.ndarray, r_start: float, detect, *, n_slices: int = 8) -> float:
     """The fiber radius (pixels) that explains the grey slices best: for each trial radius, fiber
     centres are detected and blurred disks of that radius fitted to a few slices together
     (:func:`fiberpipe.imaging.trace.fit_centres`'s model); the radius with the least squared
@@ -37,10 +41,10 @@ def estimate_radius_grey(grey_slices, mask_t, samp: np.ndarray, r_start: float, 
 
     ``grey_slices``: the normalised grey slices (``trace._GreySlices``); ``mask_t``: the mask, same
     axes; ``r_start``: the mask's estimate, which a merged pack overestimates (the trial radii run
-    from 0.45 to 1.25 times it).
+    from 0.45 to 1.25 times it); ``detect(mask_slice, grey_slice, r)``: the tracer's centre
+    detection in one slice, (n, 2) pixel indices.
     """
     from ._kernels import fit_disk_centres
-    from .trace import FIT_SIGMA_VOX, detect_slice
 
     n = mask_t.shape[0]
     ks = np.unique(np.linspace(0.2 * (n - 1), 0.8 * (n - 1), n_slices).round().astype(int))
@@ -56,8 +60,7 @@ def estimate_radius_grey(grey_slices, mask_t, samp: np.ndarray, r_start: float, 
     cost = np.zeros(len(radii))
     for i, r in enumerate(radii):
         for g, sl in slices:
-            c, _, _ = detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5,
-                                   grey=g)
+            c = detect(sl, g, r)
             if len(c) == 0:
                 cost[i] += float(np.sum(g.astype(np.float64) ** 2))
                 continue

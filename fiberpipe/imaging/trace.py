@@ -151,12 +151,6 @@ def _refine_centroids(sl: np.ndarray, peaks: np.ndarray, R: float, samp: np.ndar
     return sites
 
 
-#: Blur of the fitted disk template (:func:`fit_centres`), pixels: the in-slice denoising of the grey
-#: slices (0.7) with a scanner's point spread of about one voxel (0.7, the phantoms' 0.8 less the
-#: partial-volume ramp it already includes).
-FIT_SIGMA_VOX = 1.0
-
-
 def fit_centres(grey: np.ndarray, centres: np.ndarray, r_vox: float, samp: np.ndarray, *, n_iter: int = 5):
     """Sub-voxel centres of touching fibers in a grey slice (background 0, fiber 1): blurred disks of
     radius ``r_vox`` fitted to the slice together by least squares (the kernel
@@ -172,6 +166,7 @@ def fit_centres(grey: np.ndarray, centres: np.ndarray, r_vox: float, samp: np.nd
     Returns the centres (n, 2) and the amplitudes (n,).
     """
     from ._kernels import fit_disk_centres
+    from .dense import FIT_SIGMA_VOX
 
     start = np.ascontiguousarray(centres, dtype=np.float64)
     c, amplitude, _ = fit_disk_centres(np.ascontiguousarray(grey, dtype=np.float32), start, np.ones(len(centres)),
@@ -744,7 +739,11 @@ def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.nda
     vt = voxel_size_zyx_m[list(perm)]
     samp = vt[1:] / vt[1:].min()
     r0 = estimate_radius_vox(mask_t, samp)
-    return estimate_radius_grey(_GreySlices(grey.transpose(perm), mask_t, samp), mask_t, samp, r0)
+
+    def detect(sl, g, r):
+        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
+
+    return estimate_radius_grey(_GreySlices(grey.transpose(perm), mask_t, samp), mask_t, samp, r0, detect)
 
 
 def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, min_fraction: float,

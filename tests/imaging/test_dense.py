@@ -9,7 +9,7 @@ from fiberpipe.imaging.accuracy import trace_accuracy
 from fiberpipe.imaging.dense import estimate_radius_grey, is_dense_pack
 from fiberpipe.imaging.phantom_dense import make_dense_phantom, pack_disks
 from fiberpipe.imaging.segment import segment
-from fiberpipe.imaging.trace import _GreySlices, _refine_centroids, estimate_radius_vox, fit_centres, trace
+from fiberpipe.imaging.trace import _GreySlices, _refine_centroids, detect_slice, estimate_radius_vox, fit_centres, trace
 
 
 @pytest.mark.parametrize("radius_vox", [3.0, 5.0])
@@ -21,7 +21,10 @@ def test_the_grey_radius_of_a_merged_pack_is_within_ten_percent(radius_vox):
     mask, _ = segment(vol)
     samp = np.ones(2)
     r_mask = estimate_radius_vox(mask, samp)
-    r_grey = estimate_radius_grey(_GreySlices(vol, mask, samp), mask, samp, r_mask)
+    def detect(sl, g, r):
+        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
+
+    r_grey = estimate_radius_grey(_GreySlices(vol, mask, samp), mask, samp, r_mask, detect)
     assert abs(r_grey / radius_vox - 1) <= 0.10, (r_mask, r_grey)
 
 
