@@ -243,8 +243,8 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     seeds : (m, 2) float ndarray, optional
         Predicted centres (pixel indices) of fibers already tracked, in priority order. They are
         refined like peaks and win over EDT peaks within ``seed_nms * r_vox``.
-    refine : bool
-        Sub-voxel centroid refinement.
+    refine : bool or "fit"
+        Sub-voxel centroid refinement; "fit": then the joint disk fit (:func:`fit_centres`, grey).
     smooth_edt : bool
         Blur the EDT (sigma 1 pixel) before looking for maxima.
     seed_nms, peak_nms : float
@@ -304,25 +304,29 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     rad = np.where(source >= 0, seed_nms * r_vox, peak_nms * r_vox)
     keep = _nms(cand, rad, samp)
     cand, source = cand[keep], source[keep]
-    if refine:
-        w = sl if grey is None else np.clip(grey, 0.0, 1.0)
-        c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
-        if refine == "fit" and grey is not None and len(c):
-            # the grey of another region (a cross ply beside this one) is no fiber of this slice's model
-            near = ndi.binary_dilation(sl, iterations=2)
-            c, amplitude = fit_centres(np.where(near, grey, 0.0), c, r_vox, samp)
-            c, source = c[amplitude >= MIN_FIT_AMPLITUDE], source[amplitude >= MIN_FIT_AMPLITUDE]
-        # candidates that converged onto an earlier (higher-priority) one are duplicates
-        keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
-        c, source = c[keep], source[keep]
-    else:
-        c = cand
+    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine) if refine else (cand, source)
     ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
     ridge = edt[ci[:, 0], ci[:, 1]]
     ok = (ridge >= thr) & sl[ci[:, 0], ci[:, 1]]
     if grey is not None:  # the radius of a grey detection is the expected one
         ridge = np.full(len(ridge), float(r_vox))
     return c[ok], ridge[ok], source[ok]
+
+
+def _refine(sl, grey, cand, source, r_vox: float, samp, refine):
+    """Sub-voxel centres of the candidates (:func:`detect_slice`): the centroids of their Voronoi
+    cells, then (``refine="fit"``, grey) the joint disk fit, fitted disks below
+    :data:`MIN_FIT_AMPLITUDE` dropped; candidates that converged onto an earlier (higher-priority)
+    one are duplicates and dropped."""
+    w = sl if grey is None else np.clip(grey, 0.0, 1.0)
+    c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
+    if refine == "fit" and grey is not None and len(c):
+        # the grey of another region (a cross ply beside this one) is no fiber of this slice's model
+        near = ndi.binary_dilation(sl, iterations=2)
+        c, amplitude = fit_centres(np.where(near, grey, 0.0), c, r_vox, samp)
+        c, source = c[amplitude >= MIN_FIT_AMPLITUDE], source[amplitude >= MIN_FIT_AMPLITUDE]
+    keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
+    return c[keep], source[keep]
 
 
 # ----------------------------------------------------------------------------------------------
