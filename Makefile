@@ -77,6 +77,11 @@ bench-dense-phantoms: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(PY) benchmarks/bench_dense_phantoms.py --seeds 0-9
 
+# the real cross-ply CT example (qim3d's fibers_150x150x150.tif, fetched with pip download), pictures into docs/img
+.PHONY: bench-cross-ply
+bench-cross-ply: setup
+	$(PY) benchmarks/bench_cross_ply.py --pictures docs/img
+
 .PHONY: bench-contact bench-pyelastica fast-settings docs config-reference
 bench-contact: setup
 	$(PY) -m fiberpipe.benchmarks.bench_contact

@@ -185,9 +185,11 @@ MIN_DIAMETER_VOX = 1.5
 def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     """The tracer to run and the mask's orientation distribution.
 
-    ``trace.method: auto`` picks ``slices`` when at least ``trace.min_aligned_fraction`` of the
-    fiber volume runs within 45 deg of one volume axis, else ``skeleton``; an explicit ``slices`` on
-    fibers that are not quasi-parallel runs, with one warning line naming the key.
+    ``trace.method: auto`` picks ``dense`` on a dense pack of thin fibers (:func:`dense_pack`) that
+    is quasi-parallel or runs at least half along volume axes, else ``slices`` when at least
+    ``trace.min_aligned_fraction`` of the fiber volume runs within 45 deg of one volume axis, else
+    ``skeleton``; an explicit ``slices`` on fibers that are not quasi-parallel runs, with one
+    warning line naming the key.
     """
     from fiberpipe.imaging.orientation import is_quasi_parallel, mask_orientation
 
@@ -199,7 +201,10 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or along_axes or not orient.get("n_samples")
     frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
     if t.method == "auto":
-        method = ("dense" if dense_pack(mask, orient) else "slices") if parallel else "skeleton"
+        # a dense pack's mask is one merged region whose skeleton cannot separate its fibers: the
+        # dense tracer takes it, region by region, whenever most of it runs along volume axes
+        along = float(orient.get("axis_aligned_fraction_30deg", 0.0)) >= DENSE_MIN_AXIS_ALIGNED_FRACTION
+        method = "dense" if (parallel or along) and dense_pack(mask, orient) else "slices" if parallel else "skeleton"
         log.info("trace: %.0f %% of the fiber volume within 45 deg of axis %s: method %s", frac,
                  orient.get("nearest_volume_axis"), method)
         return method, orient
@@ -208,6 +213,11 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
                     "trace.min_aligned_fraction = %g): the slices tracer needs quasi-parallel fibers; set "
                     "trace.method: skeleton (or auto)", frac, t.min_aligned_fraction)
     return t.method, orient
+
+
+#: ``trace.method: auto`` picks the dense tracer on a dense pack when at least this share of the fiber
+#: volume runs within 30 deg of a volume axis (a cross ply: each ply along its own axis).
+DENSE_MIN_AXIS_ALIGNED_FRACTION = 0.5
 
 
 def dense_pack(mask, orient: dict) -> bool:

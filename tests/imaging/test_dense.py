@@ -68,3 +68,25 @@ def test_dense_tracer_with_only_the_voxel_size():
 def test_a_dense_pack_is_recognised_and_a_loose_bundle_is_not():
     assert is_dense_pack(0.55, 3.0) and is_dense_pack(0.6, 5.8)
     assert not is_dense_pack(0.2, 3.0) and not is_dense_pack(0.45, 16.0)
+
+
+def test_the_trace_stage_picks_the_dense_tracer_with_only_the_voxel_size(tmp_path, write_yaml):
+    """auto on a dense pack with a cross ply: dense, the input volume read again without
+    trace.grey, the radius from the grey slices, the cross ply traced along x."""
+    import json
+
+    from fiberpipe.config import load_config
+    from fiberpipe.imaging.io import save_volume_tif
+    from fiberpipe.pipeline import run_pipeline
+
+    vol, truth = make_dense_phantom(shape=(60, 64, 64), radius_vox=3.5, fiber_volume_fraction=0.55,
+                                    contrast_to_noise=3.0, cross_ply_fraction=0.3, seed=4)
+    vs = truth.meta["voxel_size_m"]
+    save_volume_tif(tmp_path / "ply.tif", vol, vs)
+    cfg = load_config(write_yaml(f"input: {{volume: {tmp_path / 'ply.tif'}, voxel_size: {vs * 1e6:.6g} um}}\n"
+                                 "skeletonize: {enabled: false}\ntrace: {pictures: false}\n"))
+    run_pipeline(cfg, tmp_path / "run", to_stage="trace")
+    tr = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]["trace"]
+    assert tr["method"] == "dense" and tr["off_axis"]["x"]["fibers"] >= 0.9 * truth.meta["n_cross"]
+    assert abs(tr["median_radius_m"] / vs / 3.5 - 1) <= 0.1
+    assert abs(tr["fibers"] - truth.n_fibers) <= 0.05 * truth.n_fibers
