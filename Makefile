@@ -78,6 +78,15 @@ bench-dense-phantoms: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(PY) benchmarks/bench_dense_phantoms.py --seeds 0-9
 
+# touching pairs at r = 5.5 voxels, 24 volumes; the structure-tensor package against fiberpipe's orientation
+.PHONY: bench-touching-pairs bench-structure-tensor
+bench-touching-pairs: setup
+	$(PY) benchmarks/bench_touching_pairs.py --seeds 0-11
+
+bench-structure-tensor: setup
+	$(PY) -m pip install --quiet structure-tensor
+	$(PY) benchmarks/bench_structure_tensor.py
+
 # the real cross-ply CT example (qim3d's fibers_150x150x150.tif, fetched with pip download), pictures into docs/img
 .PHONY: bench-cross-ply
 bench-cross-ply: setup
