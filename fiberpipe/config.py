@@ -205,7 +205,9 @@ def element_length_m(mesh: "MeshConfig", radius_m: float) -> float:
 
 def max_overlap_shift_m(mesh: "MeshConfig", radius_m: float) -> float:
     """``mesh.max_overlap_shift``, or :data:`MAX_OVERLAP_SHIFT_RADII` fiber radii when unset."""
-    return float(mesh.max_overlap_shift) if mesh.max_overlap_shift is not None else MAX_OVERLAP_SHIFT_RADII * float(radius_m)
+    if mesh.max_overlap_shift is not None:
+        return float(mesh.max_overlap_shift)
+    return MAX_OVERLAP_SHIFT_RADII * float(radius_m)
 
 
 def min_fiber_length_m(trace: "TraceConfig", mesh: "MeshConfig", radius_m: float) -> float:
@@ -220,9 +222,10 @@ class TraceConfig(Section):
     """Tracing options; ``None`` means the tracer's own default, scaled by the fiber radius."""
 
     method: Literal["auto", "slices", "dense", "skeleton"] = Field(
-        "auto", description="auto: slices when the fibers are quasi-parallel (see min_aligned_fraction), dense when "
-        "they are besides a dense pack of thin fibers (mask volume fraction >= 0.35, radius <= 8 voxels), else "
-        "skeleton; dense: the slices tracer on the grey volume (read again) with the radius read from it")
+        "auto", description="auto: dense on a dense pack of thin fibers (mask volume fraction >= 0.35, radius <= 8 "
+        "voxels) that is quasi-parallel or runs mostly along volume axes, else slices when the fibers are "
+        "quasi-parallel (see min_aligned_fraction), else skeleton; dense: the slices tracer on the grey volume (read "
+        "again) with the radius read from it")
     min_aligned_fraction: float = Field(0.9, ge=0, le=1, description="auto picks the slices tracer when at least this "
                                         "fraction of the fiber volume runs within 45 deg of one volume axis (mask "
                                         "structure tensor); slices below it warns")
