@@ -223,7 +223,8 @@ DENSE_MIN_AXIS_ALIGNED_FRACTION = 0.5
 def dense_pack(mask, orient: dict) -> bool:
     """Whether a quasi-parallel scan is a dense pack of thin fibers (``trace.method: auto`` then
     picks ``dense``): the mask's volume fraction and its radius across the dominant axis
-    (:func:`fiberpipe.imaging.dense.is_dense_pack`). A chunked mask (a dataset) is sampled."""
+    (:func:`fiberpipe.imaging.dense.is_dense_pack`). A chunked mask (a dataset on disk, not an
+    array) is not judged: False."""
     from fiberpipe.imaging.dense import is_dense_pack
     from fiberpipe.imaging.trace import estimate_radius_vox
 
