@@ -52,13 +52,15 @@ def test_the_joint_disk_fit_removes_the_centroid_bias_of_touching_fibers():
     assert np.all(np.abs(amplitude[inner] - 1) < 0.15)
 
 
-def test_dense_tracer_with_only_the_voxel_size():
-    """A v_f 0.55 pack of r = 3.5 voxel fibers at CNR 3, no radius given."""
+@pytest.mark.parametrize("refine", [True, "fit"])
+def test_dense_tracer_with_only_the_voxel_size(refine):
+    """A v_f 0.55 pack of r = 3.5 voxel fibers at CNR 3, no radius given; centres by Voronoi
+    centroids (the default) or refined by the joint disk fit."""
     vol, truth = make_dense_phantom(shape=(60, 64, 64), radius_vox=3.5, fiber_volume_fraction=0.55,
                                     contrast_to_noise=3.0, cross_ply_fraction=0.0, seed=4)
     vs = truth.meta["voxel_size_m"]
     mask, info = segment(vol)
-    fibers = trace(mask, voxel_size_m=vs, method="dense", grey=vol)
+    fibers = trace(mask, voxel_size_m=vs, method="dense", grey=vol, refine=refine)
     acc = trace_accuracy(fibers, truth, voxel_size_m=vs)
     assert abs(fibers.meta["radius_vox_estimate"] / 3.5 - 1) <= 0.1
     assert acc["recall"] >= 0.98 and acc["precision"] >= 0.98, acc
