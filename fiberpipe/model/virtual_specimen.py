@@ -96,6 +96,10 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
 
     cfg, sp = specimen_config(raw, where)
     seed = sp.seed if seed is None else int(seed)
+    if sp.kind != "cassette":  # the literature's specimens (fiberpipe.model.specimen_networks)
+        from fiberpipe.model.specimen_networks import build_network_specimen
+
+        return build_network_specimen(cfg, raw, out, where=where, seed=seed)
     r = float(cfg.fiber.radius)
     check_fits(sp, r, where)
     curvatures, kappa = fiber_curvatures(sp, seed)
@@ -237,6 +241,10 @@ def run_specimen_command(config: str, out: Path, *, seed: int | None = None, ove
 
 def specimen_report(info: dict, out: Path) -> str:
     """The command's summary: v_f0, contacts at U = 0, the Φ histogram, Table 4's curvatures."""
+    if info.get("kind", "cassette") != "cassette":
+        from fiberpipe.model.specimen_networks import network_report
+
+        return network_report(info, out)
     st, c = info["statistics"], info["contacts_at_U0"]
     n = info["generator"]["n_fibers"]
     lines = [
