@@ -479,7 +479,7 @@ def validate(quick, out, docs_page, cases):
     Exit status 1 when a checked row fails."""
     from fiberpipe.validation.registry import run_cases, write_outputs
 
-    summary = run_cases(cases or None, quick=quick, echo=_echo)
+    summary = run_cases(cases or None, quick=quick, echo=_echo, work=Path(out) / ("work-quick" if quick else "work"))
     write_outputs(summary, Path(out), docs_page=Path(docs_page) if docs_page else None)
     _echo(f"{summary['passed']}/{summary['checked']} checked rows pass; {out}/summary.json")
     sys.exit(0 if summary["passed"] == summary["checked"] else 1)

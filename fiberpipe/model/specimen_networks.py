@@ -64,9 +64,10 @@ def check_network_fits(cfg, sp, where: str) -> Cell:
             raise ConfigError(f"specimen.wave.span = {sp.wave.span * 1e3:.4g} mm spans {sp.wave.span / h:.2g} elements "
                               f"of mesh.element_length = {h * 1e3:.4g} mm: the mesh cannot resolve the waviness "
                               f"(at least {MIN_ELEMENTS_PER_SPAN}); shorten the elements", where=where)
-        if cell.depth_m < sp.length:
-            raise ConfigError(f"specimen.depth = {cell.depth_m * 1e3:.4g} mm is shorter than the aligned fibers "
-                              f"(specimen.length = {sp.length * 1e3:.4g} mm): lengthen the cell", where=where)
+        if cell.depth_m < sp.length + 2 * (r + sp.gap):
+            raise ConfigError(f"specimen.depth = {cell.depth_m * 1e3:.4g} mm cannot hold the aligned fibers "
+                              f"(specimen.length = {sp.length * 1e3:.4g} mm plus a radius and the clearance at each "
+                              "end): lengthen the cell", where=where)
         if sp.wave.rise + 2 * r > cell.height_m:
             raise ConfigError(f"specimen.wave.rise = {sp.wave.rise * 1e3:.4g} mm does not fit the cell's height "
                               f"{cell.height_m * 1e3:.4g} mm with a fiber's diameter", where=where)

@@ -37,11 +37,16 @@ def case_function(name: str):
     return getattr(module, f"validate_{name}", None) or module.validate
 
 
-def run_cases(names=None, *, quick: bool = False, echo=print) -> dict:
-    """Run the cases ``names`` (default all) and return the summary: rows (as dicts) and wall times."""
+def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None = None) -> dict:
+    """Run the cases ``names`` (default all) and return the summary: rows (as dicts) and wall times.
+    ``work``: the folder of the specimens and runs (default a temporary one)."""
+    from .compaction_runs import WORK
+
     names = list(names or CASES)
     for name in names:
         case_function(name)  # refuse an unknown name before anything runs
+    if work is not None:
+        WORK["dir"] = Path(work)
     summary = {"quick": quick, "cases": {}}
     for name in names:
         t0 = time.perf_counter()
