@@ -99,9 +99,13 @@ def final_volume_fraction(run: CompactionRun) -> float:
     return float(vf[-1])
 
 
+#: the specimen seeds of every compaction case (``fiberpipe validate --seeds``)
+SEEDS = {"seeds": (0, 1, 2)}
+
+
 def seeds_for(quick: bool) -> list[int]:
-    """Three specimen seeds for every case (the quick variants too, on smaller specimens)."""
-    return [0, 1, 2]
+    """The specimen seeds of every case, three by default (the quick variants too, on smaller specimens)."""
+    return list(SEEDS["seeds"])
 
 
 def finite_mean(values) -> float:

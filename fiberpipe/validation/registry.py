@@ -37,17 +37,22 @@ def case_function(name: str):
     return getattr(module, f"validate_{name}", None) or module.validate
 
 
-def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None = None) -> dict:
+def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None = None, seeds=None) -> dict:
     """Run the cases ``names`` (default all) and return the summary: rows (as dicts) and wall times.
-    ``work``: the folder of the specimens and runs (default a temporary one)."""
-    from .compaction_runs import WORK
+    ``work``: the folder of the specimens and runs (default a temporary one); ``seeds``: the
+    specimen seeds of the compaction cases (default 0, 1, 2)."""
+    from .compaction_runs import SEEDS, WORK
 
     names = list(names or CASES)
     for name in names:
         case_function(name)  # refuse an unknown name before anything runs
+    if seeds is not None:
+        if not seeds or any(s < 0 for s in seeds):
+            raise FiberpipeError(f"validate: --seeds must be one or more seeds >= 0, got {list(seeds)}")
+        SEEDS["seeds"] = tuple(seeds)
     if work is not None:
         WORK["dir"] = Path(work)
-    summary = {"quick": quick, "cases": {}}
+    summary = {"quick": quick, "seeds": list(SEEDS["seeds"]), "cases": {}}
     for name in names:
         t0 = time.perf_counter()
         rows = case_function(name)(quick=quick)

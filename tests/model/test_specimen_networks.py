@@ -95,7 +95,8 @@ def test_wavy_bundle_has_the_span_and_rise_it_was_given(tmp_path):
     ({"volume_fraction": 0.8}, "specimen.volume_fraction = 0.8 makes the cell"),
     ({"n_fibers": 400, "volume_fraction": 0.3}, "random addition placed"),
 ])
-def test_bad_network_specimens_are_refused_in_one_line_naming_the_key(change, key, tmp_path):
+def test_bad_network_specimens_are_refused_in_one_line_naming_the_key(change, key, tmp_path, monkeypatch):
+    monkeypatch.setattr("fiberpipe.model.specimen_networks.MAX_DRAWS_PER_FIBER", 300)  # a full cell fails sooner
     with pytest.raises(ConfigError) as info:
         build_specimen(base("network_3d", **change), tmp_path / "x", where="net.yaml", seed=0)
     message = str(info.value)

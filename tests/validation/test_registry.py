@@ -44,3 +44,8 @@ def test_outputs_written_and_docs_section_replaced(tmp_path):
     assert "| 1 wavy | K | 10 N/m | beam | 10.1 N/m (1) | 1 % | 3 % | PASS |" in text
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["cases"]["wavy_fiber"]["rows"][0]["passed"]
     assert table_markdown(summary) in (tmp_path / "out" / "validation.md").read_text()
+
+
+def test_bad_seeds_are_a_one_line_error():
+    result = CliRunner().invoke(main, ["validate", "--seeds", "0,x", "wavy_fiber"])
+    assert result.exit_code != 0 and result.output.count("\n") == 1 and "--seeds must be integers" in result.output
