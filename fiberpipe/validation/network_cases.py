@@ -34,7 +34,7 @@ QUICK = {
                         "specimen.strain": 0.5},
     "planar-mat.yaml": {"specimen.n_fibers": 30, "specimen.width": "10 mm", "specimen.depth": "10 mm",
                         "specimen.strain": 0.5},
-    "wavy-bundle.yaml": {"specimen.n_fibers": 20, "specimen.width": "3 mm", "specimen.strain": 0.3},
+    "wavy-bundle.yaml": {"specimen.n_fibers": 20, "specimen.width": "3 mm"},
 }
 
 
