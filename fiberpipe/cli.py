@@ -474,8 +474,10 @@ def verify(quick):
               help="Also write the table into this page's generated section (make validate: docs/validation.md).")
 @click.option("--seeds", default="0,1,2", show_default=True,
               help="Specimen seeds of the compaction cases, comma-separated (a law is judged on their mean).")
+@click.option("--reuse", is_flag=True,
+              help="Read the runs already in DIR/work and leave out the seeds without one (runs nothing new).")
 @click.argument("cases", nargs=-1)
-def validate(quick, out, docs_page, seeds, cases):
+def validate(quick, out, docs_page, seeds, reuse, cases):
     """Bundle-scale virtual experiments against published compaction laws (docs/validation.md):
     reference and source, tolerance, measured value (mean ± spread over the seeds), pass or fail.
     Exit status 1 when a checked row fails."""
@@ -486,7 +488,7 @@ def validate(quick, out, docs_page, seeds, cases):
     except ValueError:
         raise FiberpipeError(f"validate: --seeds must be integers separated by commas, got {seeds!r}") from None
     summary = run_cases(cases or None, quick=quick, echo=_echo, work=Path(out) / ("work-quick" if quick else "work"),
-                        seeds=seed_list)
+                        seeds=seed_list, reuse_only=reuse)
     write_outputs(summary, Path(out), docs_page=Path(docs_page) if docs_page else None)
     _echo(f"{summary['passed']}/{summary['checked']} checked rows pass; {out}/summary.json")
     sys.exit(0 if summary["passed"] == summary["checked"] else 1)

@@ -17,7 +17,11 @@ import numpy as np
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "validation"
 #: where the specimens and runs go: ``fiberpipe validate --out DIR`` sets DIR/work; a run already
 #: there (its post summary written) is read, not rerun, so cases that share runs build them once
-WORK = {"dir": None}
+WORK = {"dir": None, "reuse_only": False}
+
+
+class MissingRun(Exception):
+    """``fiberpipe validate --reuse``: the work folder holds no finished run of this name."""
 
 
 def work_dir() -> Path:
@@ -34,6 +38,7 @@ class CompactionRun(NamedTuple):
     simulation: object  # fiberpipe.post.history.SimulationData
     run_dir: Path
     config: object  # the ready config (fiberpipe.config.Config)
+    seed: int
 
 
 def compact(config_name: str, seed: int, work: Path | None = None, overrides: dict | None = None) -> CompactionRun:
@@ -54,12 +59,31 @@ def compact(config_name: str, seed: int, work: Path | None = None, overrides: di
     run_dir = folder / "run"
     if (run_dir / "post" / "summary.json").exists() and (folder / "specimen.json").exists():
         specimen = read_json_mapping(folder / "specimen.json")
+    elif WORK["reuse_only"]:
+        raise MissingRun(folder.name)
     else:
         specimen = build_specimen(raw, folder, where=str(path), seed=seed, echo=lambda *_: None)
         run_pipeline(load_config(folder / "config.yaml"), run_dir)
     summary = read_json_mapping(run_dir / "post" / "summary.json")
     return CompactionRun(specimen, summary, load_simulation(run_dir / "simulation.h5"), run_dir,
-                         load_config(folder / "config.yaml"))
+                         load_config(folder / "config.yaml"), seed)
+
+
+def runs_over_seeds(config_name: str, overrides: dict, seeds) -> dict:
+    """seed → run for ``seeds``; with ``--reuse`` the seeds without a finished run are left out."""
+    out = {}
+    for seed in seeds:
+        try:
+            out[seed] = compact(config_name, seed, overrides=overrides)
+        except MissingRun:
+            continue
+    return out
+
+
+def paired(*by_seed: dict) -> list[tuple]:
+    """The runs of the seeds every dict holds, seed by seed (runs of one specimen compared)."""
+    common = sorted(set.intersection(*(set(d) for d in by_seed)))
+    return [tuple(d[s] for d in by_seed) for s in common]
 
 
 def pressure_curve(run: CompactionRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .network_cases import runs_of
+from .network_cases import runs_by_seed
 from .rows import ValidationRow
 
 BALANCE_TOLERANCE = 0.02
@@ -71,8 +71,12 @@ def validate(quick: bool = False) -> list[ValidationRow]:
     for key, value in (QUICK["network-3d.yaml"] if quick else {}).items():
         set_dotted_config(cfg, key, value)
     overrides = cycle_overrides(float(cfg.specimen.strain), cell_height(cfg))
-    rough = [loop_figures(r) for r in runs_of("network-3d.yaml", quick, overrides)]
-    smooth = [loop_figures(r) for r in runs_of("network-3d.yaml", quick, {**overrides, "scene.friction.mu": 0.0})]
+    from .compaction_runs import paired
+
+    pairs = paired(runs_by_seed("network-3d.yaml", quick, overrides),
+                   runs_by_seed("network-3d.yaml", quick, {**overrides, "scene.friction.mu": 0.0}))
+    rough = [loop_figures(r) for r, _ in pairs]
+    smooth = [loop_figures(s) for _, s in pairs]
     case = "5 friction and cycles (network 3D)"
     balance = [abs(f["work_J"] - f["dissipated_J"] - f["stored_change_J"]) / abs(f["work_J"]) for f in rough]
     return [

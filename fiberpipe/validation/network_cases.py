@@ -15,7 +15,7 @@ test suite) compact smaller specimens of the same kind less far (``QUICK``)."""
 
 from __future__ import annotations
 
-from .compaction_runs import (compact, final_contacts_per_fiber, final_orientation_averages, final_volume_fraction,
+from .compaction_runs import (final_contacts_per_fiber, runs_over_seeds, final_orientation_averages, final_volume_fraction,
                               seeds_for)
 from .rows import ValidationRow
 
@@ -38,10 +38,15 @@ QUICK = {
 }
 
 
-def runs_of(config_name: str, quick: bool, overrides: dict | None = None) -> list:
-    """The case's compaction runs over its seeds (shared between cases through the work folder)."""
+def runs_by_seed(config_name: str, quick: bool, overrides: dict | None = None) -> dict:
+    """seed → the case's compaction run (shared between cases through the work folder)."""
     merged = {**(QUICK[config_name] if quick else {}), **(overrides or {})}
-    return [compact(config_name, seed, overrides=merged) for seed in seeds_for(quick)]
+    return runs_over_seeds(config_name, merged, seeds_for(quick))
+
+
+def runs_of(config_name: str, quick: bool, overrides: dict | None = None) -> list:
+    """The case's compaction runs over its seeds, in seed order."""
+    return list(runs_by_seed(config_name, quick, overrides).values())
 
 
 def _fit(run, law: str) -> dict:
@@ -90,9 +95,12 @@ def validate_planar_mat(quick: bool = False) -> list[ValidationRow]:
 
 def validate_wavy_bundle(quick: bool = False) -> list[ValidationRow]:
     """Case 4: β from Gutowski's fitted A_s against the specimen's own span/rise."""
+    from .compaction_runs import validation_config
+
     runs = runs_of("wavy-bundle.yaml", quick)
     fits = [_fit(r, "gutowski") for r in runs]
-    beta = runs[0].specimen["wave"]["beta"]
+    wave = validation_config("wavy-bundle.yaml").specimen.wave
+    beta = wave.span / wave.rise
     values = [f.get("beta", float("nan")) for f in fits]
     note = ", ".join(f"V_0 {f['v0']:.3g}, V_a {f['va']:.3g}" for f in fits if "v0" in f)
     errors = [f["error"] for f in fits if "error" in f]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .network_cases import runs_of
+from .network_cases import runs_by_seed
 from .rows import ValidationRow
 
 CURVE_TOLERANCE = 0.05
@@ -46,10 +46,13 @@ def kinetic_over_strain(run) -> float:
 
 
 def validate(quick: bool = False) -> list[ValidationRow]:
-    base = runs_of("network-3d.yaml", quick)
-    speed = base[0].config.scene.loading.velocity
-    slow = runs_of("network-3d.yaml", quick, {"scene.loading.velocity": speed / 2})
-    changes = [curve_change(b, s) for b, s in zip(base, slow)]
+    from .compaction_runs import paired, validation_config
+
+    speed = validation_config("network-3d.yaml").scene.loading.velocity
+    pairs = paired(runs_by_seed("network-3d.yaml", quick),
+                   runs_by_seed("network-3d.yaml", quick, {"scene.loading.velocity": speed / 2}))
+    base, slow = [b for b, _ in pairs], [s for _, s in pairs]
+    changes = [curve_change(b, s) for b, s in pairs]
     ratios = [kinetic_over_strain(r) for r in base]
     case = "7 quasi-static (network 3D)"
     return [

@@ -37,10 +37,12 @@ def case_function(name: str):
     return getattr(module, f"validate_{name}", None) or module.validate
 
 
-def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None = None, seeds=None) -> dict:
+def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None = None, seeds=None,
+              reuse_only: bool = False) -> dict:
     """Run the cases ``names`` (default all) and return the summary: rows (as dicts) and wall times.
     ``work``: the folder of the specimens and runs (default a temporary one); ``seeds``: the
-    specimen seeds of the compaction cases (default 0, 1, 2)."""
+    specimen seeds of the compaction cases (default 0, 1, 2); ``reuse_only``: read the runs already in
+    ``work`` and leave out the seeds without one (nothing is run)."""
     from .compaction_runs import SEEDS, WORK
 
     names = list(names or CASES)
@@ -52,7 +54,8 @@ def run_cases(names=None, *, quick: bool = False, echo=print, work: Path | None 
         SEEDS["seeds"] = tuple(seeds)
     if work is not None:
         WORK["dir"] = Path(work)
-    summary = {"quick": quick, "seeds": list(SEEDS["seeds"]), "cases": {}}
+    WORK["reuse_only"] = reuse_only
+    summary = {"quick": quick, "seeds": list(SEEDS["seeds"]), "reuse_only": reuse_only, "cases": {}}
     for name in names:
         t0 = time.perf_counter()
         rows = case_function(name)(quick=quick)
