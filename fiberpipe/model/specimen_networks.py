@@ -156,15 +156,15 @@ def toll_contacts_per_fiber(volume_fraction: float, aspect_ratio: float, f: floa
     return 4 * volume_fraction * ((2 / math.pi) * aspect_ratio * f + g + 1)
 
 
-def build_network_specimen(cfg, raw: dict, out: Path, *, where: str, seed: int) -> dict:
+def build_network_specimen(cfg, raw: dict, out: Path, *, where: str, seed: int, ready_config_text) -> dict:
     """``fiberpipe specimen`` for the kinds network_3d, planar_mat and wavy_bundle: place the fibers,
     write fibers.h5, specimen.json and the ready config.yaml (plates at 0 and the cell's height,
-    walls at the cell's x and z faces); returns specimen.json's dict."""
+    walls at the cell's x and z faces; ``ready_config_text`` is the cassette's writer,
+    :func:`fiberpipe.model.virtual_specimen.ready_config_text`); returns specimen.json's dict."""
     import copy
 
     from fiberpipe.artifacts import write_fibers, write_json_atomic, write_text_atomic
     from fiberpipe.model.specimen_settle import fiber_contacts
-    from fiberpipe.model.virtual_specimen import ready_config_text
     from fiberpipe.polylines import Polylines
 
     sp = cfg.specimen

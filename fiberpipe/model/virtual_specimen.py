@@ -99,7 +99,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     if sp.kind != "cassette":  # the literature's specimens (fiberpipe.model.specimen_networks)
         from fiberpipe.model.specimen_networks import build_network_specimen
 
-        return build_network_specimen(cfg, raw, out, where=where, seed=seed)
+        return build_network_specimen(cfg, raw, out, where=where, seed=seed, ready_config_text=ready_config_text)
     r = float(cfg.fiber.radius)
     check_fits(sp, r, where)
     curvatures, kappa = fiber_curvatures(sp, seed)
