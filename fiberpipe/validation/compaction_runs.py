@@ -87,14 +87,15 @@ def paired(*by_seed: dict) -> list[tuple]:
 
 
 def pressure_curve(run: CompactionRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(U, v_f, p) over the history rows: the mean of the two plates' forces over the plate area
-    (the cell's width × depth), v_f = N π r² L / (area × the plate gap)."""
+    """(U, v_f, p) over the history rows: the upper (fixed) plate's force, the load cell's, over the
+    plate area (the cell's width × depth; the moving plate's force also carries the damping's drag
+    on the fibers it pushes), v_f = N π r² L / (area × the plate gap)."""
     spec, h = run.specimen, run.simulation.history
     area = spec["width_m"] * spec["depth_m"]
     solid = spec["volume_fraction"] * area * spec["height_m"]
     travel = np.asarray(h["plate_displacement"], float).sum(axis=1)
     gap = spec["height_m"] - travel
-    force = np.asarray(h["plate_force"], float).mean(axis=1)
+    force = np.asarray(h["plate_force"], float)[:, 1]
     return travel, solid / (area * gap), force / area
 
 

@@ -52,6 +52,18 @@ def runs_of(config_name: str, quick: bool, overrides: dict | None = None) -> lis
     return list(runs_by_seed(config_name, quick, overrides).values())
 
 
+def curves_of(runs: list, points: int = 120) -> list[dict]:
+    """Each run's p(v_f) over its first loading, thinned to about ``points`` rows, for the figure."""
+    from .compaction_runs import pressure_curve
+
+    out = []
+    for run in runs:
+        _, vf, p = pressure_curve(run)
+        step = max(1, len(vf) // points)
+        out.append({"seed": run.seed, "vf": vf[::step].tolist(), "pressure_pa": p[::step].tolist()})
+    return out
+
+
 def _fit(run, law: str) -> dict:
     return run.summary.get("mesoscale_laws", {}).get(law, {})
 
@@ -68,7 +80,7 @@ def _exponent_row(case: str, runs: list, reference: float, source: str) -> Valid
     if errors:
         note += f"; refused: {errors[0]}"
     return ValidationRow(case, "exponent n of p = kE(v_f^n − v_0^n)", reference, values, EXPONENT_TOLERANCE, source,
-                         note=note, data={"fits": fits})
+                         note=note, data={"fits": fits, "curves": curves_of(runs)})
 
 
 def validate_network_3d(quick: bool = False) -> list[ValidationRow]:
@@ -113,7 +125,7 @@ def validate_wavy_bundle(quick: bool = False) -> list[ValidationRow]:
     if errors:
         note += f"; refused: {errors[0]}"
     return [ValidationRow("4 aligned wavy bundle", "β = (3πE/A_s)^¼ from the fitted A_s vs span/rise", beta, values,
-                          BETA_TOLERANCE, GUTOWSKI, note=note, data={"fits": fits})]
+                          BETA_TOLERANCE, GUTOWSKI, note=note, data={"fits": fits, "curves": curves_of(runs)})]
 
 
 def validate(quick: bool = False) -> list[ValidationRow]:

@@ -115,6 +115,7 @@ def write_outputs(summary: dict, out: Path, *, docs_page: Path | None = None) ->
     write_json_atomic(out / "summary.json", summary)
     table = table_markdown(summary)
     figure = write_figure(summary, out / "validation.png")
+    curves = write_curves_figure(summary, out / "validation_curves.png")
     write_text_atomic(out / "validation.md", table + "\n")
     if docs_page is not None:
         image_dir = docs_page.parent / "img"
@@ -126,6 +127,9 @@ def write_outputs(summary: dict, out: Path, *, docs_page: Path | None = None) ->
             target = image_dir / "validation.png"
             target.write_bytes(figure.read_bytes())
             text += ["", "![measured against reference, each row's error over its tolerance](img/validation.png)"]
+        if curves is not None:
+            (image_dir / "validation_curves.png").write_bytes(curves.read_bytes())
+            text += ["", "![pressure against v_f of every compaction run, one colour per seed](img/validation_curves.png)"]
         replace_section(docs_page, "\n".join(text))
 
 
@@ -149,6 +153,32 @@ def write_figure(summary: dict, path: Path) -> Path | None:
     ax.set_yticks(range(len(rows)), [f"{r['case'].split()[0]}: {r['quantity'][:60]}" for r in rows], fontsize=7)
     ax.invert_yaxis()
     ax.set_xlabel("error / tolerance (pass below 1)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_curves_figure(summary: dict, path: Path) -> Path | None:
+    """log p against log v_f of the compaction runs behind the law rows, one panel per row."""
+    panels = [(r["case"], r["data"]["curves"]) for c in summary["cases"].values() for r in c["rows"]
+              if r.get("data", {}).get("curves")]
+    if not panels:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 3.4), squeeze=False)
+    for ax, (case, curves) in zip(axes[0], panels):
+        for curve in curves:
+            kept = [(v, q) for v, q in zip(curve["vf"], curve["pressure_pa"]) if q > 0]
+            ax.loglog([v for v, _ in kept], [q for _, q in kept], label=f"seed {curve['seed']}")
+        ax.set_title(case, fontsize=9)
+        ax.set_xlabel("fiber volume fraction v_f [-]")
+        ax.set_ylabel("pressure p [Pa]")
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
