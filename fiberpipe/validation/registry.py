@@ -98,7 +98,7 @@ def table_markdown(summary: dict) -> str:
             tol = f"{100 * r['tolerance']:.3g} %" if r["relative"] else f"≤ {r['tolerance']:.3g}"
             err = f"{100 * r['error']:.3g} %" if r["relative"] and math.isfinite(r["error"]) else (
                 f"{r['error']:.3g}" if math.isfinite(r["error"]) else "–")
-            note = f" {r['note']}" if r["note"] else ""
+            note = f" — {r['note']}" if r["note"] else ""
             flag = " (seed spread above the tolerance)" if r["spread_exceeds_tolerance"] else ""
             lines.append(f"| {r['case']} | {r['quantity']}{note} | {format_value(r['reference'], r['unit'])} | "
                          f"{r['source']} | {format_value(r['measured'], r['unit'])}{spread} ({r['seeds']}){flag} | "
