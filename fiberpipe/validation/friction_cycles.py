@@ -83,7 +83,7 @@ def validate(quick: bool = False) -> list[ValidationRow]:
         ValidationRow(case, "force at U on first loading, μ = 0 over μ = 0.2", 0.0,
                       [s["force_at_turn_N"] / r["force_at_turn_N"] for s, r in zip(smooth, rough)], 1.0,
                       SOURCE_SHIFT, relative=False),
-        ValidationRow(case, "loop (μ = 0.2): |W − ALLFD − ALLVD − ΔE| / W over the unload–reload", 0.0, balance,
+        ValidationRow(case, "loop (μ = 0.2): the size of W − ALLFD − ALLVD − ΔE over W, unload–reload", 0.0, balance,
                       BALANCE_TOLERANCE, SOURCE_BALANCE, relative=False,
                       note="W " + ", ".join(f"{f['work_J']:.3g}" for f in rough) + " J", data={"loops": rough}),
         ValidationRow(case, "loop area μ = 0 over μ = 0.2", 0.0, [s["work_J"] / r["work_J"] for s, r in zip(smooth, rough)],

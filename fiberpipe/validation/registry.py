@@ -92,16 +92,20 @@ def table_markdown(summary: dict) -> str:
     the seeds), error, tolerance, result."""
     lines = ["| case | quantity | reference | source | measured (mean ± spread, seeds) | error | tolerance | result |",
              "|---|---|---|---|---|---|---|---|"]
+    def cell(text: str) -> str:  # a cell's own bars (|sin γ|) would split the row
+        return str(text).replace("|", "\\|")
+
     for case in summary["cases"].values():
         for r in case["rows"]:
-            spread = f" ± {r['spread']:.3g}" if r["seeds"] > 1 else ""
+            spread = f" ± {r['spread']:.3g}" if r["seeds"] > 1 and math.isfinite(r["spread"]) else ""
             tol = f"{100 * r['tolerance']:.3g} %" if r["relative"] else f"≤ {r['tolerance']:.3g}"
             err = f"{100 * r['error']:.3g} %" if r["relative"] and math.isfinite(r["error"]) else (
                 f"{r['error']:.3g}" if math.isfinite(r["error"]) else "–")
             note = f" — {r['note']}" if r["note"] else ""
             flag = " (seed spread above the tolerance)" if r["spread_exceeds_tolerance"] else ""
-            lines.append(f"| {r['case']} | {r['quantity']}{note} | {format_value(r['reference'], r['unit'])} | "
-                         f"{r['source']} | {format_value(r['measured'], r['unit'])}{spread} ({r['seeds']}){flag} | "
+            reference = format_value(r["reference"], r["unit"]) if r["relative"] else "–"
+            lines.append(f"| {cell(r['case'])} | {cell(r['quantity'] + note)} | {reference} | "
+                         f"{cell(r['source'])} | {format_value(r['measured'], r['unit'])}{spread} ({r['seeds']}){flag} | "
                          f"{err} | {tol} | {r['status']} |")
     return "\n".join(lines)
 
@@ -120,9 +124,13 @@ def write_outputs(summary: dict, out: Path, *, docs_page: Path | None = None) ->
     if docs_page is not None:
         image_dir = docs_page.parent / "img"
         image_dir.mkdir(exist_ok=True)
-        text = [f"`fiberpipe validate{' --quick' if summary['quick'] else ''}`: {summary['passed']} of "
-                f"{summary['checked']} checked rows pass; wall time per case: " + ", ".join(
-                    f"{name} {c['wall_time_s']:.0f} s" for name, c in summary["cases"].items()) + ".", "", table]
+        command = "fiberpipe validate" + (" --quick" if summary["quick"] else "") + (" --reuse" if summary.get("reuse_only") else "")
+        times = ("the compaction cases read from the runs in the work folder; " if summary.get("reuse_only") else "") + \
+            "wall time per case: " + ", ".join(f"{name} {c['wall_time_s']:.0f} s" for name, c in summary["cases"].items())
+        seeds = f" (seeds {', '.join(map(str, summary['seeds']))})" if summary.get("seeds") else ""
+        text = [f"`{command}`{seeds}: {summary['passed']} of "
+                f"{summary['checked']} checked rows pass; {times}. A seed count below 3 in the table: the seeds "
+                "whose runs were not in the work folder are left out.", "", table]
         if figure is not None:
             target = image_dir / "validation.png"
             target.write_bytes(figure.read_bytes())

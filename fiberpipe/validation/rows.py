@@ -43,6 +43,7 @@ class ValidationRow:
     def spread(self) -> float:
         """Half the range over the seeds (0 for one value)."""
         v = np.asarray(self.values, float)
+        v = v[np.isfinite(v)]
         return float((v.max() - v.min()) / 2) if v.size > 1 else 0.0
 
     @property

@@ -40,7 +40,7 @@ def test_outputs_written_and_docs_section_replaced(tmp_path):
     page.write_text("intro\n<!-- validation: begin x -->\nold\n<!-- validation: end -->\nafter\n")
     write_outputs(summary, tmp_path / "out", docs_page=page)
     text = page.read_text()
-    assert text.startswith("intro\n") and text.endswith("after\n") and "old" not in text
+    assert text.startswith("intro\n") and text.endswith("after\n") and "\nold\n" not in text
     assert "| 1 wavy | K | 10 N/m | beam | 10.1 N/m (1) | 1 % | 3 % | PASS |" in text
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["cases"]["wavy_fiber"]["rows"][0]["passed"]
     assert table_markdown(summary) in (tmp_path / "out" / "validation.md").read_text()
