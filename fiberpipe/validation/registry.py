@@ -154,13 +154,14 @@ def write_figure(summary: dict, path: Path) -> Path | None:
     if not rows:
         return None
     fig, ax = plt.subplots(figsize=(8, 0.35 * len(rows) + 1.2))
-    ratio = [r["error"] / r["tolerance"] for r in rows]
+    ratio = [max(r["error"] / r["tolerance"], 1e-3) for r in rows]
     colours = ["tab:green" if r["passed"] else ("tab:gray" if r["informational"] else "tab:red") for r in rows]
     ax.barh(range(len(rows)), ratio, color=colours)
+    ax.set_xscale("log")
     ax.axvline(1.0, color="k", lw=1)
     ax.set_yticks(range(len(rows)), [f"{r['case'].split()[0]}: {r['quantity'][:60]}" for r in rows], fontsize=7)
     ax.invert_yaxis()
-    ax.set_xlabel("error / tolerance (pass below 1)")
+    ax.set_xlabel("error / tolerance (pass below 1; rows without a measured value left out)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
