@@ -82,9 +82,6 @@ def long_functions(pkg: Path = PKG) -> list[str]:
 # Functions of the solver, imaging and verification packages that other branches refactor to the
 # limits: this list only shrinks, and is empty once they have merged.
 PENDING_ELSEWHERE = {
-    "fiberpipe/imaging/fragments.py join_fragments", "fiberpipe/imaging/phantom.py make_phantom",
-    "fiberpipe/imaging/skeleton_trace.py trace_skeleton", "fiberpipe/imaging/trace.py trace_slices",
-    "fiberpipe/imaging/trace_chunked.py trace_chunked",
     "fiberpipe/solver/_kernels_beam.py _resultants_range", "fiberpipe/solver/_kernels_beam.py beam_resultants",
     "fiberpipe/solver/_kernels_beam.py beam_forces", "fiberpipe/solver/_kernels_boundary.py plane_contacts_listed",
     "fiberpipe/solver/_kernels_boundary.py _plane_pass", "fiberpipe/solver/_kernels_integrate.py update_range",
