@@ -161,7 +161,7 @@ def write_figure(summary: dict, path: Path) -> Path | None:
     ax.axvline(1.0, color="k", lw=1)
     ax.set_yticks(range(len(rows)), [f"{r['case'].split()[0]}: {r['quantity'][:60]}" for r in rows], fontsize=7)
     ax.invert_yaxis()
-    ax.set_xlabel("error / tolerance (pass below 1; rows without a measured value left out)")
+    ax.set_xlabel("error / tolerance (pass below 1; rows without a value left out)", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
