@@ -15,6 +15,7 @@ help:
 	@echo "make demo     run configs/quickstart.yaml on the bundled sample (runs/quickstart)"
 	@echo "make test     run the default test suite"
 	@echo "make verify   print the verification table (docs/verification.md)"
+	@echo "make validate bundle-scale virtual experiments against published laws into docs/validation.md"
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
 	@echo "make test-benchmarks  the checks of the developer scripts in benchmarks/"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
@@ -41,6 +42,11 @@ test-all: setup
 
 verify: setup
 	$(PY) -m fiberpipe.verification
+
+# the bundle-scale validation cases, full variants, into docs/validation.md (each case <= 15 min on 2 cores)
+.PHONY: validate
+validate: setup
+	$(FP) validate --out runs/validation --docs docs/validation.md
 
 bench-imaging: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'

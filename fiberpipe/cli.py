@@ -464,6 +464,34 @@ def verify(quick):
     sys.exit(vmain.main(["--quick"] if quick else []))
 
 
+@main.command()
+@click.option("--quick", is_flag=True, help="The quick variants (the default test suite's; seconds to a minute).")
+@click.option("--out", type=click.Path(file_okay=False), default="runs/validation", show_default=True,
+              help="Folder for summary.json, validation.md and the figure.")
+@click.option("--docs", "docs_page", type=click.Path(dir_okay=False), default=None,
+              help="Also write the table into this page's generated section (make validate: docs/validation.md).")
+@click.option("--seeds", default="0,1,2", show_default=True,
+              help="Specimen seeds of the compaction cases, comma-separated (a law is judged on their mean).")
+@click.option("--reuse", is_flag=True,
+              help="Read the runs already in DIR/work and leave out the seeds without one (runs nothing new).")
+@click.argument("cases", nargs=-1)
+def validate(quick, out, docs_page, seeds, reuse, cases):
+    """Bundle-scale virtual experiments against published compaction laws (docs/validation.md):
+    reference and source, tolerance, measured value (mean ± spread over the seeds), pass or fail.
+    Exit status 1 when a checked row fails."""
+    from fiberpipe.validation.registry import run_cases, write_outputs
+
+    try:
+        seed_list = [int(s) for s in seeds.split(",")]
+    except ValueError:
+        raise FiberpipeError(f"validate: --seeds must be integers separated by commas, got {seeds!r}") from None
+    summary = run_cases(cases or None, quick=quick, echo=_echo, work=Path(out) / ("work-quick" if quick else "work"),
+                        seeds=seed_list, reuse_only=reuse)
+    write_outputs(summary, Path(out), docs_page=Path(docs_page) if docs_page else None)
+    _echo(f"{summary['passed']}/{summary['checked']} checked rows pass; {out}/summary.json")
+    sys.exit(0 if summary["passed"] == summary["checked"] else 1)
+
+
 @main.group()
 def export():
     """Write a config's scene, or traced fibers, in another program's format."""

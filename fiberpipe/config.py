@@ -792,9 +792,27 @@ class SpecimenSettleConfig(Section):
     frames: int = Field(9, ge=2)
 
 
+class SpecimenWaveConfig(Section):
+    span: Length = Field(2.5e-3, description="wavy_bundle: half-wavelength of each fiber's sinusoid (the span between "
+                         "its crests and troughs, Gutowski's span)")
+    rise: Length = Field(0.05e-3, description="wavy_bundle: peak-to-trough height of the sinusoid (Gutowski's rise; "
+                         "β = span/rise)")
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("specimen.wave.span", self.span)
+        _positive("specimen.wave.rise", self.rise)
+        return self
+
+
 class SpecimenConfig(Section):
     """A virtual specimen: ``n_fibers`` fibers of ``fiber.radius`` deposited in a cassette."""
 
+    kind: Literal["cassette", "network_3d", "planar_mat", "wavy_bundle"] = Field(
+        "cassette", description="cassette: quasi-parallel fibers deposited and settled in the cassette (below); "
+        "network_3d: straight fibers of isotropic orientation, planar_mat: straight fibers in random horizontal "
+        "directions, wavy_bundle: aligned sinusoidal fibers (specimen.wave), each placed at random without overlap in "
+        "a cell of width × depth at the target v_f0 (docs/specimen.md)")
     seed: int = 0
     n_fibers: int = Field(40, ge=1, le=100000)
     length: Length = 15e-3
@@ -813,6 +831,9 @@ class SpecimenConfig(Section):
     strain: Optional[float] = Field(
         None, gt=0, lt=1, description="nominal compaction strain U/h0 of the ready config: its "
         "scene.loading.displacement becomes strain × the plate gap (none: the base config's displacement)")
+    depth: Optional[Length] = Field(None, description="network_3d, planar_mat, wavy_bundle: the cell's size along z "
+                                    "(walls at 0 and depth; default: the width)")
+    wave: SpecimenWaveConfig = Field(default_factory=SpecimenWaveConfig)
     bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
     waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
     settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)

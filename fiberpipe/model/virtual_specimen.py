@@ -113,6 +113,10 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
 
     cfg, specimen = specimen_config(raw, where)
     seed = specimen.seed if seed is None else int(seed)
+    if specimen.kind != "cassette":  # the literature's specimens (fiberpipe.model.specimen_networks)
+        from fiberpipe.model.specimen_networks import build_network_specimen
+
+        return build_network_specimen(cfg, raw, out, where=where, seed=seed, ready_config_text=ready_config_text)
     r = float(cfg.fiber.radius)
     check_fits(specimen, r, where)
     curvatures, kappa = fiber_curvatures(specimen, seed)
@@ -244,6 +248,10 @@ def run_specimen_command(config: str, out: Path, *, seed: int | None = None, ove
 
 def specimen_report(info: dict, out: Path) -> str:
     """The command's summary: v_f0, contacts at U = 0, the Φ histogram, Table 4's curvatures."""
+    if info.get("kind", "cassette") != "cassette":
+        from fiberpipe.model.specimen_networks import network_report
+
+        return network_report(info, out)
     settle_cfg, c = info["statistics"], info["contacts_at_U0"]
     n = info["generator"]["n_fibers"]
     lines = [

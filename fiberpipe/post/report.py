@@ -15,6 +15,7 @@ from fiberpipe.artifacts import read_fibers, read_json_mapping, write_json_atomi
 from fiberpipe.config import Config
 from fiberpipe.post import plots
 from fiberpipe.post.compaction import fit_van_wyk, mean_field_contacts
+from fiberpipe.post.mesoscale_laws import mesoscale_fits, report_lines as mesoscale_report_lines
 from fiberpipe.post.curves import force_displacement
 from fiberpipe.post.energies import contact_energy_created_figures, energy_balance, quasi_static_ratio
 from fiberpipe.post.geometry import fiber_volume_m3, projected_curvature, volume_fraction
@@ -250,6 +251,7 @@ def _compaction_fit_outputs(cfg: Config, sim, t_hist, geo: dict, box: Box, loadi
     fit = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus) if loaded.sum() >= 5 else {}
     fit3 = fit_van_wyk(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus, n=3.0) if loaded.sum() >= 5 else {}
     summary["van_wyk_fit"] = {"free_n": fit, "n3": fit3, "plate_area_m2": area}
+    summary["mesoscale_laws"] = mesoscale_fits(vf_hist[loaded], pressure[loaded], cfg.material.youngs_modulus)
     plots.plot_series(out_dir / "pressure_vf.png", vf_hist, {"simulated": pressure}, xlabel="fiber volume fraction v_f [-]", ylabel="pressure P [Pa]")
     made.append("pressure_vf.png")
 
@@ -322,6 +324,7 @@ def _report(cfg: Config, s: dict, made: list[str]) -> str:
     from fiberpipe.post.loops import report_lines
 
     lines += report_lines(s, _fmt)
+    lines += mesoscale_report_lines(s, _fmt)
     walls = s.get("wall_time_s_per_stage")
     if walls:
         lines += ["", "## Wall time per stage", "", "| stage | s |", "| --- | --- |"]

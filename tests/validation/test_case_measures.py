@@ -1,0 +1,62 @@
+"""The measures of cases 5–7 on synthetic runs whose answers are known: the loop's energy terms,
+the turning point, the curve change at half speed, K_e/S_e over the loaded phase, Janssen's ratio."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fiberpipe.validation.friction_cycles import cycle_overrides, loop_figures, turning_row
+from fiberpipe.validation.janssen import janssen_figures
+from fiberpipe.validation.quasi_static import curve_change, kinetic_over_strain
+
+
+def synthetic_run(travel, force_upper, energy=None, walls=None, specimen=None, mu=0.2):
+    history = {"time": np.arange(len(travel), dtype=float),
+               "plate_displacement": np.column_stack([travel, np.zeros_like(travel)]),
+               "plate_force": np.column_stack([force_upper * 1.1, force_upper]),
+               "wall_force": walls if walls is not None else np.zeros((len(travel), 4))}
+    config = SimpleNamespace(scene=SimpleNamespace(friction=SimpleNamespace(mu=mu)))
+    return SimpleNamespace(simulation=SimpleNamespace(history=history, energy=energy or {}), specimen=specimen or {},
+                           config=config, summary={})
+
+
+def test_loop_figures_take_the_terms_from_the_turning_point_on():
+    travel = np.array([0.0, 1.0, 2.0, 1.5, 1.2, 1.6, 2.0])
+    ramp = np.arange(7.0)
+    energy = {"external": 10 * ramp, "friction": 3 * ramp, "damping": 2 * ramp, "strain": 4 * ramp,
+              "contact_stored": 0.5 * ramp, "kinetic": 0.5 * ramp}
+    run = synthetic_run(travel, np.linspace(0, 6, 7), energy)
+    assert turning_row(run) == 2
+    f = loop_figures(run)
+    assert f["work_J"] == pytest.approx(40.0) and f["dissipated_J"] == pytest.approx(20.0)
+    assert f["stored_change_J"] == pytest.approx(20.0) and f["force_at_turn_N"] == pytest.approx(2.0)
+
+
+def test_cycle_path_goes_to_the_strain_back_to_0_6_and_again():
+    o = cycle_overrides(0.6, 10e-3)
+    assert o["scene.loading.path"] == pytest.approx([6e-3, 3.6e-3, 6e-3])
+    assert o["scene.loading.displacement"] == pytest.approx(6e-3) and o["specimen.strain"] is None
+
+
+def test_curve_change_and_kinetic_ratio():
+    travel = np.linspace(0, 1, 101)
+    base = synthetic_run(travel, 10 * travel, {"kinetic": np.full(101, 1e-3), "strain": np.linspace(0, 1, 101)})
+    slow = synthetic_run(travel, 10 * travel * 1.03)
+    assert curve_change(base, slow) == pytest.approx(0.03 * 0.95, rel=0.02)  # the last window's mean, 0.95 of max
+    # loaded phase: force above 1 % of its peak, i.e. from the second row, where S_e = 0.01
+    assert kinetic_over_strain(base) == pytest.approx(1e-3 / 0.02, rel=1e-9)
+
+
+def test_janssen_ratio_from_the_measured_lateral_coefficient():
+    n = 100
+    walls = np.tile([2.0, 2.0, 0.0, 0.0], (n, 1))
+    spec = {"height_m": 5e-3, "width_m": 2e-3, "depth_m": 10e-3}
+    run = synthetic_run(np.full(n, 1e-3), np.full(n, 1.0), walls=walls, specimen=spec)
+    f = janssen_figures(run)
+    sigma_h = 2.0 / (4e-3 * 10e-3)
+    sigma_v = 0.5 * (1.1 + 1.0) / (2e-3 * 10e-3)
+    assert f["K"] == pytest.approx(sigma_h / sigma_v)
+    assert f["ratio_measured"] == pytest.approx(1.0 / 1.1)
+    assert f["ratio_janssen"] == pytest.approx(math.exp(-2 * 0.2 * f["K"] * 4e-3 / 2e-3))

@@ -1,0 +1,51 @@
+"""fiberpipe validate: the case registry, its one-line errors, and the summary, table and docs section it writes."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from fiberpipe.cli import main
+from fiberpipe.errors import FiberpipeError
+from fiberpipe.validation.registry import CASES, case_function, run_cases, table_markdown, write_outputs
+from fiberpipe.validation.rows import ValidationRow
+
+
+def test_every_registered_case_has_a_validate_function():
+    for name in CASES:
+        assert callable(case_function(name))
+
+
+def test_unknown_case_is_a_one_line_error_naming_the_cases():
+    with pytest.raises(FiberpipeError, match="unknown case 'nope'; the cases are wavy_fiber, network_3d"):
+        run_cases(["nope"])
+    result = CliRunner().invoke(main, ["validate", "nope"])
+    assert result.exit_code != 0
+    assert result.output.count("\n") == 1 and "unknown case 'nope'" in result.output
+
+
+def test_row_judged_on_the_mean_and_spread_flagged():
+    row = ValidationRow("c", "q", 3.0, [2.0, 3.0, 4.3], 1 / 3, "src")
+    assert row.measured == pytest.approx(3.1) and row.passed
+    assert row.spread == pytest.approx(1.15) and row.spread_exceeds_tolerance
+    bound = ValidationRow("c", "ratio", 0.0, [0.04, 0.07], 0.05, "src", relative=False)
+    assert bound.error == pytest.approx(0.055) and not bound.passed and bound.status == "FAIL"
+
+
+def test_outputs_written_and_docs_section_replaced(tmp_path):
+    summary = {"quick": True, "passed": 1, "checked": 1, "cases": {"wavy_fiber": {
+        "description": "d", "wall_time_s": 1.0,
+        "rows": [ValidationRow("1 wavy", "K", 10.0, [10.1], 0.03, "beam", unit="N/m").as_dict()]}}}
+    page = tmp_path / "page.md"
+    page.write_text("intro\n<!-- validation: begin x -->\nold\n<!-- validation: end -->\nafter\n")
+    write_outputs(summary, tmp_path / "out", docs_page=page)
+    text = page.read_text()
+    assert text.startswith("intro\n") and text.endswith("after\n") and "\nold\n" not in text
+    assert "| 1 wavy | K | 10 N/m | beam | 10.1 N/m (1) | 1 % | 3 % | PASS |" in text
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["cases"]["wavy_fiber"]["rows"][0]["passed"]
+    assert table_markdown(summary) in (tmp_path / "out" / "validation.md").read_text()
+
+
+def test_bad_seeds_are_a_one_line_error():
+    result = CliRunner().invoke(main, ["validate", "--seeds", "0,x", "wavy_fiber"])
+    assert result.exit_code != 0 and result.output.count("\n") == 1 and "--seeds must be integers" in result.output
