@@ -146,16 +146,46 @@ def _default_out(config) -> Path:
 @click.option("--from", "from_stage", help="First stage to run.")
 @click.option("--to", "to_stage", help="Last stage to run.")
 @click.option("--force", is_flag=True, help="Rerun stages even when their inputs and settings are unchanged.")
-@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there (chunks.scheduler).")
+@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there "
+              "(chunks.scheduler), an ensemble its runs.")
+@click.option("--seeds", help="An ensemble of specimens (replaces specimen.seeds): N seeds from specimen.seed on, "
+              "or a list 0,1,2; F(U) as their mean with a band.")
 @click.pass_context
-def run(ctx, config, out, from_stage, to_stage, force, scheduler=None):
+def run(ctx, config, out, from_stage, to_stage, force, scheduler=None, seeds=None):
     """Run the stages CONFIG asks for, skipping those that are up to date."""
     from fiberpipe.pipeline import run_pipeline
 
+    if seeds is not None or _has_ensemble(config):
+        return _run_ensemble(config, out, seeds, scheduler)
     cfg = _with_scheduler(_load(config), scheduler)
     out = Path(out) if out else _default_out(config)
     run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=_echo, progress=_progress())
     _echo(f"run folder: {out}")
+
+
+def _has_ensemble(config) -> bool:
+    """CONFIG asks for an ensemble (specimen.seeds); a file that cannot be read says so in the run."""
+    from fiberpipe.config import load_raw
+
+    try:
+        specimen = load_raw(config).get("specimen")
+    except FiberpipeError:
+        return False
+    return isinstance(specimen, dict) and specimen.get("seeds") is not None
+
+
+def _run_ensemble(config, out, seeds, scheduler) -> None:
+    """``run`` of an ensemble: one specimen per seed, built and compacted (fiberpipe.studies.ensemble)."""
+    from fiberpipe.artifacts import ensure_output_dir
+    from fiberpipe.config import load_raw
+    from fiberpipe.studies.ensemble import ensemble_seeds, run_ensemble
+
+    raw = load_raw(config)
+    seed_list = ensemble_seeds(raw, seeds, str(config))
+    out = Path(out) if out else _default_out(config)
+    ensure_output_dir(out)
+    run_ensemble(raw, seed_list, out, scheduler=scheduler, where=str(config), echo=_echo)
+    _echo(f"ensemble folder: {out} (ensemble.csv, ensemble.json, ensemble.png)")
 
 
 def _stage_command(name: str, doc: str):

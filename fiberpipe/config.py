@@ -749,6 +749,9 @@ class SpecimenConfig(Section):
     """A virtual specimen: ``n_fibers`` fibers of ``fiber.radius`` deposited in a cassette."""
 
     seed: int = 0
+    seeds: Optional[list[int]] = Field(
+        None, description="an ensemble: one specimen per seed, each built and compacted (fiberpipe run, study "
+        "and fit report F(U) as the seeds' mean with a band); none: the one specimen of seed")
     n_fibers: int = Field(40, ge=1, le=100000)
     length: Length = 15e-3
     width: Length = 3e-3
@@ -775,7 +778,20 @@ class SpecimenConfig(Section):
         _positive("specimen.length", self.length)
         _positive("specimen.width", self.width)
         _positive("specimen.gap", self.gap)
+        if self.seeds is not None:
+            check_seeds(self.seeds, "specimen.seeds")
         return self
+
+
+def check_seeds(seeds: list[int], key: str) -> None:
+    """An ensemble's seeds: at least one, none twice, none negative (``key`` names them in the error)."""
+    if not seeds:
+        raise ValueError(f"{key} is empty: give at least one seed (e.g. [0, 1, 2, 3])")
+    twice = sorted({s for s in seeds if seeds.count(s) > 1})
+    if twice:
+        raise ValueError(f"{key} gives seed {twice[0]} more than once: each seed is one specimen")
+    if min(seeds) < 0:
+        raise ValueError(f"{key}: seeds must be >= 0, got {min(seeds)}")
 
 
 class Config(Section):

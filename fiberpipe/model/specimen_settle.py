@@ -19,7 +19,8 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
                  frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None) -> dict:
     """The raw config of the settling run made from the compaction config ``raw``: its material,
     fiber, mesh, contact law and solver settings; the lower plate fixed at y = 0, no upper plate,
-    walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), damping α =
+    walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), the mass scaling
+    ``mass_scaling`` (not the compaction's), damping α =
     ``alpha_per_s``, friction μ = ``mu`` and, with ``lock`` = "all" | "ends", the axial lock."""
     from fiberpipe.config import GravityConfig
     from fiberpipe.units import to_si
@@ -45,7 +46,9 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
     given = (sc.get("gravity") or {}).get("acceleration")
     g = float(np.linalg.norm([to_si(a, "acceleration") for a in (given or GravityConfig().acceleration)]))
     sc["gravity"] = {"acceleration": [0.0, -g * float(gravity_scale or 1.0), 0.0]}
-    solver = {k: v for k, v in (raw.get("solver") or {}).items() if k not in ("checkpoint_every", "settle_time")}
+    # the compaction's mass scaling is a speed setting of the compaction: the settling has its own
+    solver = {k: v for k, v in (raw.get("solver") or {}).items()
+              if k not in ("checkpoint_every", "settle_time", "mass_scaling")}
     raw["solver"] = {**solver, "end_time": float(time_s), "output_frames": int(frames)}
     if mass_scaling is not None and mass_scaling != 1.0:
         raw["solver"]["mass_scaling"] = float(mass_scaling)

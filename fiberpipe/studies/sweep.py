@@ -456,7 +456,7 @@ def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
                 return _collect({jid: pool.submit(_run_point, raw, d, where) for jid, raw, d in jobs}, echo)
         if scheduler:
             echo(f"  on the Dask scheduler {scheduler}")
-            with Client(scheduler) as client:
+            with _connect(Client, scheduler) as client:
                 return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
         echo(f"  on a local Dask cluster ({nworkers} worker processes)")
         # the cluster in its own context: a Client given a cluster does not close it
@@ -471,6 +471,19 @@ def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
 
 
 execute = _execute
+
+
+CONNECT_TIMEOUT_S = 10.0  # how long a scheduler address is tried before it is refused
+
+
+def _connect(client_type, address: str):
+    """A Dask client of the scheduler at ``address``, or a one-line error naming it."""
+    timeout_s = CONNECT_TIMEOUT_S
+    try:
+        return client_type(address, timeout=f"{timeout_s:g}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError(f"--scheduler {address}: no Dask scheduler answers there within {timeout_s:g} s ({reason})") from None
 
 
 def _collect(futures: dict, echo) -> dict:
