@@ -379,7 +379,9 @@ def inspect(artifact, check):
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Study folder (default: runs/studies/<name>).")
 @click.option("--workers", type=click.IntRange(min=1), help="Points run in parallel (local processes, or Dask workers).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
-def study(study_file, out, workers, scheduler):
+@click.option("--seeds", help="Every point an ensemble of specimens (replaces the base's specimen.seeds): N seeds "
+              "from specimen.seed on, or a list 0,1,2.")
+def study(study_file, out, workers, scheduler, seeds):
     """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
     from fiberpipe.studies.sweep import run_study
 
@@ -389,7 +391,7 @@ def study(study_file, out, workers, scheduler):
     created = not out.exists()
     ensure_output_dir(out)
     try:
-        run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo)
+        run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo, seeds=seeds)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a bad study file leaves no empty folder behind
@@ -402,7 +404,8 @@ def study(study_file, out, workers, scheduler):
 @click.option("--target", required=True, type=click.Path(dir_okay=False), help="CSV with columns U_m,load_N.")
 @click.option("--param", "params", multiple=True, required=True, metavar="KEY=LO:HI",
               help="A config key (specimen keys too) and its bounds, units accepted; repeatable.")
-@click.option("--seeds", default=1, show_default=True, type=int, help="Specimen seeds the curve is averaged over.")
+@click.option("--seeds", help="Specimen seeds the curve is averaged over: N from specimen.seed on, or a list 0,1,2 "
+              "(default: specimen.seeds, else 1).")
 @click.option("--budget", default=20, show_default=True, type=int, help="Largest number of evaluations.")
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/fits/<config name>).")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1), help="Runs in parallel (local processes).")

@@ -215,11 +215,14 @@ def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=p
                "load_max_N": loads.max(axis=0)}
     columns.update({f"load_seed_{s}_N": loads[k] for k, s in enumerate(seeds)})
     write_csv(out / "ensemble.csv", columns)
-    finals = [float(c[-1]) for c in loads]
+    from fiberpipe.studies.fit import load_curve
+
+    ends = [load_curve(d) for d in run_dirs]  # each run's load at its own largest U (not the common grid's)
+    finals = [float(F[-1]) for _, F in ends]
     summary = {
         "seeds": [int(s) for s in seeds],
         "v_f0": [members[f"seed-{s}"]["v_f0"] for s in seeds],
-        "final_U_m": float(grid[-1]),
+        "final_U_m": [float(U[-1]) for U, _ in ends],
         "final_load_N": finals,
         "final_load_mean_N": float(np.mean(finals)),
         "final_load_sd_N": float(np.std(finals, ddof=1)) if len(finals) > 1 else 0.0,
@@ -232,7 +235,7 @@ def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=p
     write_json_atomic(out / "summary.json", {"ensemble": summary})
     _plot(out / "ensemble.png", grid, loads, seeds)
     spread = f" ± {summary['final_load_sd_N']:.4g}" if len(seeds) > 1 else ""
-    echo(f"  {out}: F(U = {grid[-1] * 1e3:.4g} mm) = {summary['final_load_mean_N']:.4g}{spread} N over "
+    echo(f"  {out}: F(U = {max(summary['final_U_m']) * 1e3:.4g} mm) = {summary['final_load_mean_N']:.4g}{spread} N over "
          f"{len(seeds)} seed(s) (min {min(finals):.4g}, max {max(finals):.4g}); ensemble.csv, ensemble.json, ensemble.png")
     return summary
 
@@ -268,3 +271,49 @@ def final_load_statistics(loads: list[float]) -> dict:
     sd = float(np.std(loads, ddof=1)) if n > 1 else 0.0
     half = float(t.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else float("nan")
     return {"n": n, "mean_N": mean, "sd_N": sd, "mean_ci95_half_width_N": half}
+
+
+def study_ensemble_rows(spec, points: list[dict], reference: dict | None, out: Path, seeds: list[int], *,
+                        workers: int | None, scheduler: str | None, where: str, echo) -> tuple[list[dict], dict]:
+    """``fiberpipe study --seeds``: every point (and the reference run) as an ensemble in
+    ``out/points/<id>/`` (``out/reference/``), their specimens shared in ``out/specimens``; the
+    errors are the points' ensemble-mean curves against the reference's (measures curve and
+    final_load). Returns the study table's rows and the reference's ensemble.json."""
+    from fiberpipe.post.curves import curve_error
+
+    other = [m for m in spec.measures if m not in ("curve", "final_load")]
+    if other:
+        raise ConfigError(f"measures {other}: an ensemble study compares mean curves (measures curve, final_load)",
+                          where=where)
+    if reference is None:
+        raise ConfigError("an ensemble study needs a reference given by reference.overrides", where=where)
+    for point in [reference, *points]:
+        if not isinstance(point["raw"].get("specimen"), dict):
+            raise ConfigError("--seeds: the base config has no specimen section", where=where)
+    ensembles = {"reference": (reference["raw"], seeds, out / "reference")}
+    ensembles.update({p["id"]: (p["raw"], seeds, out / "points" / p["id"]) for p in points})
+    summaries = run_ensembles(ensembles, workers=workers, scheduler=scheduler, specimen_store=out / "specimens",
+                              where=where, echo=echo)
+    U_ref, loads_ref = _ensemble_table(out / "reference")
+    F_ref = loads_ref.mean(axis=0)
+    rows = []
+    for point in points:
+        U, loads = _ensemble_table(out / "points" / point["id"])
+        mean, summary = loads.mean(axis=0), summaries[point["id"]]
+        row = {k: str(v) for k, v in point["overrides"].items()}
+        if "curve" in spec.measures:
+            row["curve_error"] = curve_error(U_ref, F_ref, U, mean, scale=float(np.max(np.abs(F_ref))) or None)
+        if "final_load" in spec.measures:
+            row["final_load_error"] = float(abs(mean[-1] - F_ref[-1]) / max(abs(F_ref[-1]), 1e-300))
+        walls = [w for w in summary["solver_wall_time_s"] if w is not None]
+        row.update(final_load_mean_N=summary["final_load_mean_N"], final_load_sd_N=summary["final_load_sd_N"],
+                   seeds=len(seeds), wall_time_s=float(np.mean(walls)) if walls else float("nan"), id=point["id"])
+        rows.append(row)
+    return rows, summaries["reference"]
+
+
+def _ensemble_table(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An ensemble's ``ensemble.csv``: U and the seeds' loads (seed, U)."""
+    table = np.genfromtxt(folder / "ensemble.csv", delimiter=",", names=True)
+    columns = [c for c in table.dtype.names if c.startswith("load_seed_")]
+    return np.atleast_1d(table["U_m"]), np.array([np.atleast_1d(table[c]) for c in columns])

@@ -194,6 +194,8 @@ class _Evaluator:
 
     def raw_for(self, x, seed) -> dict:
         raw = copy.deepcopy(self.base)
+        if isinstance(raw.get("specimen"), dict):
+            raw["specimen"].pop("seeds", None)  # one run per seed: the evaluation is the ensemble
         for k, v in self.overrides(x).items():
             set_dotted(raw, k, v)
         if seed is not None:
@@ -243,7 +245,7 @@ class _Evaluator:
         return np.interp(self.U_t, U, F)
 
 
-def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds: int = 1, budget: int = 20,
+def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds: int | str | None = None, budget: int = 20,
             out: str | Path | None = None, workers: int = 1, scheduler: str | None = None, echo=print) -> dict:
     """Fit ``params`` (``KEY=LO:HI`` strings) of ``config`` to the ``target`` curve; writes
     ``out/fit.json``, ``out/history.csv`` and ``out/fit.png``; returns fit.json's dict."""
@@ -256,9 +258,9 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     keys = [p["key"] for p in fit_params]
     if len(set(keys)) != len(keys):
         raise ConfigError("--param: a key is given twice")
-    if seeds < 1 or budget < 1:
-        raise ConfigError("--seeds and --budget must be at least 1")
-    if seeds > 1 and base.get("specimen") is None:
+    if budget < 1:
+        raise ConfigError("--budget must be at least 1")
+    if seeds is not None and str(seeds).strip() not in ("", "1") and base.get("specimen") is None:
         raise ConfigError(f"--seeds {seeds}: the config has no specimen section, so there are no specimen seeds "
                           "to average over", where=where)
     probe = copy.deepcopy(base)
@@ -270,8 +272,11 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     if travel < U_t[-1] * (1 - 1e-6):
         raise ConfigError(f"scene.loading.displacement = {travel * 1e3:.4g} mm is short of the target's last U "
                           f"({U_t[-1] * 1e3:.4g} mm)", where=where)
-    seed0 = cfg.specimen.seed if cfg.specimen is not None else None
-    seed_list = [seed0 + k for k in range(seeds)] if seed0 is not None else [None]
+    from fiberpipe.studies.ensemble import ensemble_seeds
+
+    seed_list = ensemble_seeds(base, None if seeds is None else str(seeds), where) if cfg.specimen is not None else None
+    if seed_list is None:
+        seed_list = [cfg.specimen.seed] if cfg.specimen is not None else [None]
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
     out.mkdir(parents=True, exist_ok=True)
     # before this process or its workers start numba: the threads the config's runs ask for

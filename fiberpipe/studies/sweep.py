@@ -372,14 +372,28 @@ def digit_cost(rows: list[dict], err_col: str) -> Optional[dict]:
     return {"slope": float(b), "factor": float(10 ** (-1.0 / b)), "front": [rows[i]["id"] for i in front]}
 
 
-def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, scheduler: str | None = None, echo=print) -> Path:
-    """Run a study; write ``<out>/study.csv``, ``study.md`` and ``pareto.png``."""
+def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, scheduler: str | None = None, echo=print,
+              seeds: str | None = None) -> Path:
+    """Run a study; write ``<out>/study.csv``, ``study.md`` and ``pareto.png``. ``seeds`` (``--seeds``)
+    or the base's ``specimen.seeds``: every point an ensemble of specimens
+    (:func:`fiberpipe.studies.ensemble.study_ensemble_rows`)."""
+    from fiberpipe.studies.ensemble import ensemble_seeds, study_ensemble_rows
+
     path = Path(path)
     spec, ctx = load_study(path)
     base = ctx["base"]
     points = study_points(spec, base, str(path))
     use_ref_run = spec.reference.run is None and spec.reference.extrapolate is None
     ref = _point(base, spec.reference.overrides, str(path), "reference.overrides") if use_ref_run else None
+    seed_list = ensemble_seeds(base, seeds, str(path))
+    if seed_list is not None:
+        out = Path(out)
+        echo(f"study {spec.name}: {len(points)} points + reference, each {len(seed_list)} specimen seeds")
+        rows, ref_summary = study_ensemble_rows(spec, points, ref, out, seed_list, workers=workers or spec.workers,
+                                                scheduler=scheduler, where=str(path), echo=echo)
+        _write_outputs(out, spec, rows, {"solver_wall_time_s": float(np.mean(ref_summary["solver_wall_time_s"])),
+                                         "steps": f"{len(seed_list)} seeds"}, echo)
+        return out
     if spec.reference.extrapolate is not None:
         _extrapolation_points(spec, points, str(path))  # fail before running anything
     given_ref = None

@@ -57,18 +57,19 @@ def test_ensemble_reports_the_members_mean_and_band_and_reuses_finished_runs(ser
     assert summary["seeds"] == [0, 1, 2]
     table = list(csv.DictReader((out / "ensemble.csv").open()))
     grid = np.array([float(r["U_m"]) for r in table])
-    loads = []
+    loads, finals = [], []
     for seed in (0, 1, 2):
         U, F = _curve(out / f"seed-{seed}")  # each member's own curve, read here from its run folder
         loads.append(np.interp(grid, U, F))
+        finals.append(F[-1])
         info = json.loads((Path(summary["specimens"][seed]) / "specimen.json").read_text())
         assert summary["v_f0"][seed] == info["volume_fraction"]
         assert info["generator"]["seed"] == seed
     loads = np.array(loads)
     np.testing.assert_allclose([float(r["load_mean_N"]) for r in table], loads.mean(axis=0), rtol=1e-6, atol=1e-12)  # the CSV keeps 9 digits
     np.testing.assert_allclose([float(r["load_sd_N"]) for r in table], loads.std(axis=0, ddof=1), rtol=1e-6, atol=1e-12)
-    assert summary["final_load_N"] == pytest.approx(list(loads[:, -1]), rel=1e-9)
-    assert summary["final_load_mean_N"] == pytest.approx(float(loads[:, -1].mean()), rel=1e-9)
+    assert summary["final_load_N"] == pytest.approx(finals, rel=1e-9)
+    assert summary["final_load_mean_N"] == pytest.approx(float(np.mean(finals)), rel=1e-9)
     assert json.loads((out / "summary.json").read_text())["ensemble"] == json.loads((out / "ensemble.json").read_text())
     assert (out / "ensemble.png").stat().st_size > 0
     assert len({tuple(row) for row in loads}) == 3  # three specimens, three curves
@@ -195,3 +196,33 @@ def test_an_unreachable_scheduler_is_one_line_naming_its_address(tmp_path, monke
     assert result.exit_code == 2, result.output
     lines = [ln for ln in result.output.splitlines() if ln.strip() and not ln.startswith(("ensemble:", "  on "))]
     assert len(lines) == 1 and f"--scheduler {address}: no Dask scheduler answers there" in lines[0], result.output
+
+
+def test_study_with_seeds_compares_ensemble_means_on_shared_specimens(tmp_path, serial):
+    """``fiberpipe study --seeds 2``: each point an ensemble; the points differ only in their
+    compaction, so they share the reference's specimens; the error is the mean curves'."""
+    from fiberpipe.post.curves import curve_error
+
+    raw = yaml.safe_load(yaml.safe_dump(TINY))
+    raw["specimen"].pop("seeds")
+    raw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # a study validates its points: replaced
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(raw))
+    (tmp_path / "study.yaml").write_text("name: alpha\nbase: base.yaml\nsweep: {scene.damping.alpha: ['1e4 1/s']}\n"
+                                         "reference: {overrides: {scene.damping.alpha: '3e4 1/s'}}\n"
+                                         "measures: [curve, final_load]\n")
+    result = CliRunner().invoke(main, ["study", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "s"),
+                                       "--seeds", "2", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    (row,) = list(csv.DictReader((tmp_path / "s" / "study.csv").open()))
+    assert len(list((tmp_path / "s" / "specimens").iterdir())) == 2  # two seeds, built once for all runs
+    reference = json.loads((tmp_path / "s" / "reference" / "ensemble.json").read_text())
+    assert reference["final_load_N"] == pytest.approx(serial[1]["final_load_N"][:2], rel=1e-9, abs=1e-15)
+    point = json.loads((tmp_path / "s" / "points" / row["id"] / "ensemble.json").read_text())
+    assert float(row["final_load_mean_N"]) == pytest.approx(np.mean(point["final_load_N"]), rel=1e-6)
+    ref_table = list(csv.DictReader((tmp_path / "s" / "reference" / "ensemble.csv").open()))
+    pt_table = list(csv.DictReader((tmp_path / "s" / "points" / row["id"] / "ensemble.csv").open()))
+    U_ref, F_ref = (np.array([float(r[c]) for r in ref_table]) for c in ("U_m", "load_mean_N"))
+    U, F = (np.array([float(r[c]) for r in pt_table]) for c in ("U_m", "load_mean_N"))
+    assert float(row["curve_error"]) == pytest.approx(curve_error(U_ref, F_ref, U, F, scale=float(np.max(np.abs(F_ref)))),
+                                                      rel=1e-5)
+    assert float(row["curve_error"]) > 0  # α changes the curve
