@@ -745,6 +745,20 @@ class SpecimenSettleConfig(Section):
     frames: int = Field(9, ge=2)
 
 
+class SpecimenCloseConfig(Section):
+    """``upper_plate: close``: the cassette closed onto the settled pile in the solver."""
+
+    velocity: Velocity = Field(1000e-3 / 60, description="the upper plate's speed as it closes onto the pile "
+                               "(smooth ramp)")
+    relax_time: Time = Field(0.01, description="the plate held at the target height while the pile relaxes")
+    damping_alpha: Rate = Field(1e5, description="mass damping while closing and relaxing (the study's "
+                                "quasi-static α)")
+    mass_scaling: float = Field(1.0, ge=1, description="solver.mass_scaling while closing (a larger step)")
+    tolerance: Length = Field(5e-6, description="the closed pile's top may stand this far above the target height "
+                              "(into the plate's penalty onset); beyond it the target is refused as out of reach")
+    frames: int = Field(5, ge=2)
+
+
 class SpecimenConfig(Section):
     """A virtual specimen: ``n_fibers`` fibers of ``fiber.radius`` deposited in a cassette."""
 
@@ -757,9 +771,11 @@ class SpecimenConfig(Section):
     width: Length = 3e-3
     volume_fraction: float = Field(0.377, gt=0, lt=0.9069,
                                    description="target v_f0: sets the cassette height (the plate gap)")
-    upper_plate: Literal["target", "pile"] = Field(
+    upper_plate: Literal["target", "pile", "close"] = Field(
         "target", description="target: the upper plate at the height of the target v_f0 (the pile must fit "
-        "under it); pile: on the settled pile's top (v_f0 follows the pile)")
+        "under it); pile: on the settled pile's top (v_f0 follows the pile); close: the upper plate closes "
+        "from the settled pile's top down to the target v_f0's height in the solver and holds there while the "
+        "pile relaxes (specimen.close); its end state is the specimen")
     points_per_fiber: int = Field(61, ge=3)
     phi_mean: Angle = Field(math.radians(6.0), ge=0, description="mean angle between neighbouring fibers (the Φ "
                             "spread): tilts normal with σ = phi_mean/√π per component")
@@ -772,6 +788,7 @@ class SpecimenConfig(Section):
     bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
     waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
     settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)
+    close: SpecimenCloseConfig = Field(default_factory=SpecimenCloseConfig)
 
     @model_validator(mode="after")
     def _check(self):
