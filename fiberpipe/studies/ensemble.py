@@ -34,7 +34,7 @@ import yaml
 
 from fiberpipe.artifacts import write_json_atomic
 from fiberpipe.config import PATH_KEYS, check_seeds, set_dotted, validate_config
-from fiberpipe.errors import ConfigError
+from fiberpipe.errors import ConfigError, InputError
 
 # what the deposit and the settling do not read: the compaction's own settings
 # (fiberpipe.model.specimen_settle.settle_scene replaces or drops these)
@@ -135,7 +135,7 @@ def build_member_specimen(raw: dict, specimen_dir: Path, where: str) -> dict:
 def run_member(raw: dict, run_dir: str, where: str, specimen_store: str) -> dict:
     """One member of an ensemble (a worker's task): build (or find) its specimen, compact it into
     ``run_dir``; returns the run's figures and the specimen's v_f0."""
-    from fiberpipe.studies.sweep import _run_point, numba_threads
+    from fiberpipe.studies.runner import _run_point, numba_threads
 
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
     specimen_dir = Path(specimen_store) / f"seed-{int(raw['specimen'].get('seed', 0))}-{specimen_key(raw)}"
@@ -166,7 +166,7 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
     ``specimen_store``: where the specimens go (default: ``specimens/`` beside the first ensemble);
     ``member``: the members' task, ``member(raw, run_dir, where, specimen_store)``, :func:`run_member`
     unless given (a function the workers can import or unpickle)."""
-    from fiberpipe.studies.sweep import execute
+    from fiberpipe.studies.runner import execute
 
     names = list(ensembles)
     store = Path(specimen_store) if specimen_store is not None else Path(ensembles[names[0]][2]) / "specimens"
@@ -193,10 +193,25 @@ def run_ensemble(raw: dict, seeds: list[int], out: Path, **kwargs) -> dict:
     return run_ensembles({"ensemble": (raw, seeds, Path(out))}, **kwargs)["ensemble"]
 
 
+def load_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The loading branch of the run's ``post/force_displacement.csv`` (U_m, load_N): the samples
+    up to the largest U, repeated U averaged."""
+    path = Path(run_dir) / "post" / "force_displacement.csv"
+    if not path.is_file():
+        raise InputError("the run wrote no force-displacement curve (no plates?)", where=str(path))
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    U, F = np.atleast_1d(data["U_m"]), np.atleast_1d(data["load_N"])
+    ok = np.isfinite(U) & np.isfinite(F)
+    U, F = U[ok], F[ok]
+    end = int(np.argmax(U)) + 1
+    Uu, inv = np.unique(U[:end], return_inverse=True)
+    F = F[:end]
+    Fu = np.bincount(inv, weights=F) / np.bincount(inv)
+    return Uu, Fu
+
+
 def ensemble_curves(run_dirs: list[Path], samples: int = 201) -> tuple[np.ndarray, np.ndarray]:
     """The members' loading branches on one U grid (0 to the shortest run's largest U): (U, F[seed, U])."""
-    from fiberpipe.studies.fit import load_curve
-
     curves = [load_curve(d) for d in run_dirs]
     u_end = min(float(U[-1]) for U, _ in curves)
     grid = np.linspace(0.0, u_end, samples)
@@ -215,8 +230,6 @@ def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=p
                "load_max_N": loads.max(axis=0)}
     columns.update({f"load_seed_{s}_N": loads[k] for k, s in enumerate(seeds)})
     write_csv(out / "ensemble.csv", columns)
-    from fiberpipe.studies.fit import load_curve
-
     ends = [load_curve(d) for d in run_dirs]  # each run's load at its own largest U (not the common grid's)
     finals = [float(F[-1]) for _, F in ends]
     summary = {

@@ -14,7 +14,7 @@ are any numeric config keys, specimen keys included, with units accepted (``"10 
 # (:func:`scipy.optimize.minimize_scalar`, ``method="bounded"``), several by Nelder-Mead on the
 # box mapped to [0, 1]^d with bounds (:func:`scipy.optimize.minimize`), both stopped after
 # ``--budget`` evaluations. Each evaluation runs its seeds through the study runner
-# (:func:`fiberpipe.studies.sweep.execute`: in this process, on a local process pool with
+# (:func:`fiberpipe.studies.runner.execute`: in this process, on a local process pool with
 # ``--workers`` > 1, on a Dask cluster with ``--scheduler``) into ``DIR/evaluations/<id>/``, by
 # the ordinary cached pipeline, so a rerun reuses what it has. Outputs: ``DIR/fit.json``,
 # ``DIR/history.csv``, ``DIR/fit.png``.
@@ -36,6 +36,7 @@ import numpy as np
 from fiberpipe.artifacts import write_json_atomic
 from fiberpipe.config import load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError, InputError
+from fiberpipe.studies.ensemble import load_curve  # noqa: F401  (the fit's curves; re-exported)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -141,7 +142,7 @@ def _number_or_text(txt: str):
 def run_point(raw: dict, run_dir: str, where: str) -> dict:
     """One run of the fit: with a ``specimen`` section, build the specimen into
     ``run_dir/specimen`` and run its ready config into ``run_dir``; else run ``raw`` itself."""
-    from fiberpipe.studies.sweep import _run_point, numba_threads
+    from fiberpipe.studies.runner import _run_point, numba_threads
 
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
 
@@ -156,23 +157,6 @@ def run_point(raw: dict, run_dir: str, where: str) -> dict:
         tmp.replace(spec_dir)
     ready = load_raw(spec_dir / "config.yaml")
     return _run_point(ready, run_dir, where)
-
-
-def load_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The loading branch of the run's ``post/force_displacement.csv`` (U_m, load_N): the samples
-    up to the largest U, repeated U averaged."""
-    path = Path(run_dir) / "post" / "force_displacement.csv"
-    if not path.is_file():
-        raise InputError("the run wrote no force-displacement curve (no plates?)", where=str(path))
-    data = np.genfromtxt(path, delimiter=",", names=True)
-    U, F = np.atleast_1d(data["U_m"]), np.atleast_1d(data["load_N"])
-    ok = np.isfinite(U) & np.isfinite(F)
-    U, F = U[ok], F[ok]
-    end = int(np.argmax(U)) + 1
-    Uu, inv = np.unique(U[:end], return_inverse=True)
-    F = F[:end]
-    Fu = np.bincount(inv, weights=F) / np.bincount(inv)
-    return Uu, Fu
 
 
 # ---------------------------------------------------------------------------------------------
@@ -207,7 +191,7 @@ class _Evaluator:
         key = tuple(x)
         if key in self.cache:
             return self.cache[key]["objective_N"]
-        from fiberpipe.studies.sweep import execute
+        from fiberpipe.studies.runner import execute
 
         jobs = []
         for s in self.seeds:
@@ -280,7 +264,7 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
     out.mkdir(parents=True, exist_ok=True)
     # before this process or its workers start numba: the threads the config's runs ask for
-    from fiberpipe.studies.sweep import numba_threads
+    from fiberpipe.studies.runner import numba_threads
 
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([base]))
     cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None

@@ -183,9 +183,9 @@ def test_an_unreachable_scheduler_is_one_line_naming_its_address(tmp_path, monke
     pytest.importorskip("dask.distributed")
     import socket
 
-    from fiberpipe.studies import sweep
+    from fiberpipe.studies import runner
 
-    monkeypatch.setattr(sweep, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 1.0)
 
     with socket.socket() as s:  # a free port: nothing listens there
         s.bind(("127.0.0.1", 0))
