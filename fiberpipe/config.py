@@ -743,6 +743,9 @@ class SpecimenSettleConfig(Section):
     gravity_scale: float = Field(1.0, gt=0, description="gravity × this while settling (with mass_scaling: "
                                  "the same fall speed)")
     frames: int = Field(9, ge=2)
+    contact: Optional[dict] = Field(
+        None, description="the scene.contact section while settling and closing (e.g. {law: hertz_oriented}); "
+        "none: the compaction's. Given, specimens compacted with different contact laws are the same specimens")
 
 
 class SpecimenCloseConfig(Section):

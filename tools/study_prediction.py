@@ -112,9 +112,9 @@ def main(argv=None) -> int:
     raw = load_raw(args.config)
     seeds = list(raw["specimen"]["seeds"])[: args.seeds or None]
     out = Path(args.out)
-    ensembles = {"fast": (_with(raw, FAST), seeds, out / "fast")}
-    if not args.fast_only:
-        ensembles["study-settings"] = (raw, seeds[:2], out / "study-settings")
+    # the study-settings runs first (the longest), the fast ones after
+    ensembles = {} if args.fast_only else {"study-settings": (raw, seeds[:2], out / "study-settings")}
+    ensembles["fast"] = (_with(raw, FAST), seeds, out / "fast")
     results = run_ensembles(ensembles, workers=args.workers, specimen_store=out / "specimens", where=args.config)
     fast = results["fast"]
     summary = {**fast, "settings": "fast: " + ", ".join(f"{k} = {v}" for k, v in FAST.items()),

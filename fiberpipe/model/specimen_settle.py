@@ -17,18 +17,22 @@ from fiberpipe.polylines import Polylines
 
 
 def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float, lock: str | None,
-                 frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None) -> dict:
+                 frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None,
+                 contact: dict | None = None) -> dict:
     """The raw config of the settling run made from the compaction config ``raw``: its material,
     fiber, mesh, contact law and solver settings; the lower plate fixed at y = 0, no upper plate,
     walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), the mass scaling
     ``mass_scaling`` (not the compaction's), damping α =
-    ``alpha_per_s``, friction μ = ``mu`` and, with ``lock`` = "all" | "ends", the axial lock."""
+    ``alpha_per_s``, friction μ = ``mu``, with ``lock`` = "all" | "ends" the axial lock, and
+    ``contact`` (a scene.contact section) instead of the compaction's if given."""
     from fiberpipe.config import GravityConfig
     from fiberpipe.units import to_si
 
     raw = copy.deepcopy(raw)
     raw.pop("specimen", None)
     sc = raw.setdefault("scene", {})
+    if contact is not None:  # the settling's own contact section (specimen.settle.contact)
+        sc["contact"] = copy.deepcopy(contact)
     # the compaction scene's effects in its order (the force sums run in that order), the loads and
     # drives left out, what settling needs added, then the plates and the lock
     effects = [e for e in sc.get("effects", []) if e not in ("plates", "constraints", "clamps", "loads", "drives")]
@@ -59,7 +63,8 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
 
 def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float = 0.2,
                 lock: str | None = "all", frames: int = 9, mass_scaling: float | None = None,
-                gravity_scale: float | None = None, where: str = "settle", progress=None) -> tuple[Polylines, dict]:
+                gravity_scale: float | None = None, where: str = "settle", progress=None,
+                contact: dict | None = None) -> tuple[Polylines, dict]:
     """Settle ``fibers`` (a deposited pile) in the solver (:func:`settle_scene` of ``raw``); returns
     the settled Polylines (the node positions of the last frame, per fiber) and the settling
     figures (time step, steps, displacements, kinetic energy per frame, contacts, wall time).
@@ -72,7 +77,7 @@ def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: fl
     from fiberpipe.solver.build import build_simulation
 
     sraw = settle_scene(raw, width_m=width_m, alpha_per_s=alpha_per_s, time_s=time_s, mu=mu, lock=lock,
-                        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale)
+                        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale, contact=contact)
     sraw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
     cfg = validate_config(sraw, where=where)
     mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
@@ -152,7 +157,8 @@ def closing_scene(raw: dict, plan: ClosingPlan, close_cfg, settle_cfg) -> dict:
     end_time = travel / plan.velocity_m_s / (1 - ramp_fraction) + plan.relax_time_s
     lock = None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial
     closing = settle_scene(raw, width_m=plan.width_m, alpha_per_s=close_cfg.damping_alpha, time_s=end_time,
-                           mu=settle_cfg.mu, lock=lock, frames=close_cfg.frames, mass_scaling=close_cfg.mass_scaling)
+                           mu=settle_cfg.mu, lock=lock, frames=close_cfg.frames, mass_scaling=close_cfg.mass_scaling,
+                           contact=settle_cfg.contact)
     closing["scene"]["plates"] = {"axis": "y", "lower": "fixed", "upper": "moving", "lower_position": 0.0,
                                   "upper_position": float(plan.start_m)}
     closing["scene"]["loading"] = {"displacement": float(travel), "velocity": float(plan.velocity_m_s),

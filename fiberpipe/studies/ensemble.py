@@ -11,8 +11,9 @@ and ``summary.json``.
 # Strategy: the members run on Dask (a local cluster of ``workers`` processes by default, or the
 # scheduler at ``--scheduler ADDRESS``), each by the ordinary cached pipeline into
 # ``OUT/seed-<s>/``; the specimens are built into ``OUT/specimens/seed-<s>-<key>/``, the key a hash
-# of everything the deposit and the settling read (not the compaction's loading, plates, damping or
-# mass scaling), so variants that differ only in how they compact share their specimens. A worker
+# of everything the deposit and the settling read (not the compaction's loading, plates, damping,
+# mass scaling, nor its contact law when ``specimen.settle.contact`` gives the settling's own), so
+# variants that differ only in how they compact share their specimens. A worker
 # killed mid-run loses nothing: Dask runs its tasks again on another worker, and a task run again
 # finds the specimen and the pipeline stages its first attempt finished (content hashes) and redoes
 # only the rest. A rerun of the command does the same for the whole ensemble.
@@ -93,6 +94,9 @@ def specimen_key(raw: dict) -> str:
             for name in names:
                 holder.pop(name, None)
     scene = keep.get("scene")
+    settle = (keep.get("specimen") or {}).get("settle")
+    if isinstance(scene, dict) and isinstance(settle, dict) and settle.get("contact") is not None:
+        scene.pop("contact", None)  # the settling and closing use their own (specimen.settle.contact)
     if isinstance(scene, dict) and isinstance(scene.get("friction"), dict):
         scene["friction"] = {k: v for k, v in scene["friction"].items() if k != "mu"}  # the settling's own mu
     if isinstance(scene, dict) and isinstance(scene.get("effects"), list):

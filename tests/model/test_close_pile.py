@@ -85,3 +85,15 @@ def test_a_target_the_pile_cannot_reach_is_one_line_with_the_densest_reached(tmp
     densest = float(lines[0].split("densest it reached is v_f0 = ")[1].split(")")[0])
     assert 0.55 < densest < 0.85
     assert not (tmp_path / "o").exists()
+
+
+def test_the_settling_takes_its_own_contact_section_and_mass_scaling():
+    from fiberpipe.model.specimen_settle import settle_scene
+
+    raw = {"scene": {"contact": {"law": "scaled_stiffness", "preset": "table1_phi6"}}, "solver": {"mass_scaling": 100}}
+    scene = settle_scene(raw, width_m=3e-3, alpha_per_s=300.0, time_s=0.1, mu=0.2, lock="all", frames=3,
+                         contact={"law": "hertz_oriented"})
+    assert scene["scene"]["contact"] == {"law": "hertz_oriented"}
+    assert "mass_scaling" not in scene["solver"]  # the compaction's mass scaling is not the settling's
+    assert settle_scene(raw, width_m=3e-3, alpha_per_s=300.0, time_s=0.1, mu=0.2, lock="all",
+                        frames=3)["scene"]["contact"] == raw["scene"]["contact"]

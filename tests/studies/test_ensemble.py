@@ -93,6 +93,12 @@ def test_variants_that_differ_only_in_their_compaction_share_specimens():
         section, name = key.split(".")
         changed.setdefault(section, {})[name] = value
         assert specimen_key(changed) != specimen_key(TINY), key
+    # with the settling's own contact law, the compaction's is not the specimen's
+    own = yaml.safe_load(yaml.safe_dump(TINY))
+    own["specimen"]["settle"]["contact"] = {"law": "hertz_oriented"}
+    other_law = yaml.safe_load(yaml.safe_dump(own))
+    other_law["scene"]["contact"] = {"law": "linear", "stiffness": 1e6}
+    assert specimen_key(other_law) == specimen_key(own) != specimen_key(TINY)
 
 
 def _killed_once(raw, run_dir, where, specimen_store, marker):
