@@ -156,6 +156,11 @@ def run(ctx, config, out, from_stage, to_stage, force, scheduler=None, seeds=Non
     from fiberpipe.pipeline import run_pipeline
 
     if seeds is not None or _has_ensemble(config):
+        if from_stage or to_stage or force:
+            from fiberpipe.errors import ConfigError
+
+            raise ConfigError("--from, --to and --force apply to one run, not to an ensemble (specimen.seeds, --seeds): "
+                              "each of its runs is up to date or runs")
         return _run_ensemble(config, out, seeds, scheduler)
     cfg = _with_scheduler(_load(config), scheduler)
     out = Path(out) if out else _default_out(config)

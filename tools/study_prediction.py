@@ -66,6 +66,21 @@ def against_study(folder: Path) -> dict:
             "mean_at_0.55mm_N": float(np.interp(0.55e-3, U_t, mean))}
 
 
+def geometry_per_seed(ensemble: dict) -> list[dict]:
+    """Each run's ``post/geometry.csv`` at U = 0 and at its end: v_f (the study's definition) and the
+    Table 4 measure, the mean projected curvatures (the study: 0.241 / 0.248 at U = 0 and 0.228 /
+    0.221 at U = 1.15 mm, in its "m⁻¹")."""
+    rows = []
+    for seed, run in zip(ensemble["seeds"], ensemble["runs"]):
+        table = np.genfromtxt(Path(run) / "post" / "geometry.csv", delimiter=",", names=True)
+        pick = {"v_f": "volume_fraction", "curvature_xz_per_m": "curvature_xz_per_m",
+                "curvature_yz_per_m": "curvature_yz_per_m", "contacts_per_fiber": "contacts_per_fiber",
+                "max_penetration_m": "max_penetration_m"}
+        rows.append({"seed": seed, **{f"{k}_U0": float(table[c][0]) for k, c in pick.items()},
+                     **{f"{k}_end": float(table[c][-1]) for k, c in pick.items()}})
+    return rows
+
+
 def plot(folder: Path, figure: Path, summary: dict) -> None:
     import matplotlib
 
@@ -119,7 +134,7 @@ def main(argv=None) -> int:
     fast = results["fast"]
     summary = {**fast, "settings": "fast: " + ", ".join(f"{k} = {v}" for k, v in FAST.items()),
                "final_load_statistics": final_load_statistics(fast["final_load_N"]),
-               "against_study": against_study(out / "fast")}
+               "against_study": against_study(out / "fast"), "geometry": geometry_per_seed(fast)}
     if "study-settings" in results:
         summary["fast_settings_error"] = fast_settings_error(fast, results["study-settings"])
     write_json_atomic(out / "ensemble.json", summary)

@@ -93,13 +93,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     raw = _with(load_raw(args.config), FAST)
     seeds = list(raw["specimen"]["seeds"])[: args.seeds]
-    prediction = json.loads((Path(args.prediction) / "ensemble.json").read_text())
-    baseline = {k: [prediction[k][prediction["seeds"].index(s)] for s in seeds] for k in ("final_load_N", "v_f0")}
     out = Path(args.out)
     chosen = [v for v in VARIANTS if not args.only or v[0] in args.only]
     ensembles = {name: (_with(raw, overrides), seeds, out / name) for name, _, overrides in chosen}
     results = run_ensembles(ensembles, workers=args.workers, specimen_store=Path(args.prediction) / "specimens",
                             where=args.config)
+    prediction = json.loads((Path(args.prediction) / "ensemble.json").read_text())  # the baseline: its first seeds
+    baseline = {k: [prediction[k][prediction["seeds"].index(s)] for s in seeds] for k in ("final_load_N", "v_f0")}
     base_mean = float(np.mean(baseline["final_load_N"]))
     rows = [{"name": name, "label": label, "final_load_N": results[name]["final_load_N"], "v_f0": results[name]["v_f0"],
              "closing_residual_load_N": results[name]["closing_residual_load_N"],
