@@ -63,8 +63,7 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
 
 def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float = 0.2,
                 lock: str | None = "all", frames: int = 9, mass_scaling: float | None = None,
-                gravity_scale: float | None = None, where: str = "settle", progress=None,
-                contact: dict | None = None) -> tuple[Polylines, dict]:
+                gravity_scale: float | None = None, where: str = "settle", progress=None) -> tuple[Polylines, dict]:
     """Settle ``fibers`` (a deposited pile) in the solver (:func:`settle_scene` of ``raw``); returns
     the settled Polylines (the node positions of the last frame, per fiber) and the settling
     figures (time step, steps, displacements, kinetic energy per frame, contacts, wall time).
@@ -77,7 +76,7 @@ def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: fl
     from fiberpipe.solver.build import build_simulation
 
     sraw = settle_scene(raw, width_m=width_m, alpha_per_s=alpha_per_s, time_s=time_s, mu=mu, lock=lock,
-                        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale, contact=contact)
+                        frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale)
     sraw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
     cfg = validate_config(sraw, where=where)
     mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))

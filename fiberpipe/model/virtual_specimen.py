@@ -163,11 +163,12 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     if specimen.settle.enabled:
         settle_cfg = specimen.settle
         with progress_bar("settle", progress) as bar:
+            settle_raw = raw if settle_cfg.contact is None else \
+                {**raw, "scene": {**(raw.get("scene") or {}), "contact": settle_cfg.contact}}  # its own law
             fibers, settle = settle_pile(
-                fibers, raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
+                fibers, settle_raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
                 lock=None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial, frames=settle_cfg.frames,
-                mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale, where=where, progress=bar,
-                contact=settle_cfg.contact)
+                mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale, where=where, progress=bar)
     closing = close_cassette(fibers, raw, specimen, r, where=where, progress=progress) \
         if specimen.upper_plate == "close" else None
     fibers = closing[0] if closing else fibers
