@@ -82,15 +82,10 @@ def long_functions(pkg: Path = PKG) -> list[str]:
 # Functions of the solver, imaging and verification packages that other branches refactor to the
 # limits: this list only shrinks, and is empty once they have merged.
 PENDING_ELSEWHERE = {
-    "fiberpipe/imaging/fragments.py join_fragments", "fiberpipe/imaging/phantom.py make_phantom",
-    "fiberpipe/imaging/skeleton_trace.py trace_skeleton", "fiberpipe/imaging/trace.py trace_slices",
-    "fiberpipe/imaging/trace_chunked.py trace_chunked",
     "fiberpipe/solver/_kernels_beam.py _resultants_range", "fiberpipe/solver/_kernels_beam.py beam_resultants",
     "fiberpipe/solver/_kernels_beam.py beam_forces", "fiberpipe/solver/_kernels_boundary.py plane_contacts_listed",
     "fiberpipe/solver/_kernels_boundary.py _plane_pass", "fiberpipe/solver/_kernels_integrate.py update_range",
-    "fiberpipe/solver/_kernels_integrate.py _advance_template", "fiberpipe/solver/contact.py _line_half",
-    "fiberpipe/solver/contact.py contact_forces", "fiberpipe/solver/contact.py contact_forces_ex",
-    "fiberpipe/solver/contact_effect.py _step_forces", "fiberpipe/solver/contact_potential.py _line_part",
+    "fiberpipe/solver/_kernels_integrate.py _advance_template", "fiberpipe/solver/contact_effect.py _step_forces",
     "fiberpipe/solver/contact_potential.py _pairs_range", "fiberpipe/solver/contact_potential.py _pairs_pass",
     "fiberpipe/solver/contact_potential.py _contact_forces_pot", "fiberpipe/solver/friction.py _dissipated",
     "fiberpipe/solver/friction.py friction_forces", "fiberpipe/solver/friction.py _friction_range",

@@ -8,7 +8,7 @@ step on a :class:`fiberpipe.solver.contact_state.ContactData` (see ``docs/solver
    then the buffers are swapped. Buffers live in numba typed lists inside ``data``, so the kernel
    grows them itself when :func:`fiberpipe.solver.neighbours.build_pairs` reports an overflow
    (no Python round trip, no lost contacts).
-2. Normal contact forces (:func:`fiberpipe.solver.contact.contact_forces`) with the scene's law.
+2. Normal contact forces (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`) with the scene's law.
 3. Friction (if ``friction`` is in ``scene.effects``): fiber–fiber
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
@@ -40,7 +40,7 @@ from numba.typed import List
 
 from ..errors import FiberpipeError
 from ._kernels_boundary import path_delta, plane_candidates, plane_position
-from .contact import contact_forces_ex, contact_kernels_for, gauss_points
+from .contact_pairs import gauss_points
 from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .effects import ContactHook, register_effect
 from ._specialise import specialise
@@ -152,18 +152,9 @@ def _update_neighbours(x, v, dt, acc, data):
 
 @njit(inline="always", **_FLAGS)
 def _normal_forces(x, data, plist, rec, off, reach):
-    """The normal contact pass, formulation ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`):
-    forces into ``data.fc``, per-pair records into ``data.records[0]``; returns (energy, n_active)."""
-    prm, st, segs = data.params, data.stats, data.segs
-    return contact_forces_ex(x, segs.nodes, segs.radius, plist.pairs, st.n_pairs[0], prm.law_id,
-                             prm.law_params, prm.gauss_xi, prm.gauss_w, data.fc, rec, off, reach)
-
-
-@njit(inline="always", **_FLAGS)
-def _normal_forces_potential(x, data, plist, rec, off, reach):
-    """The normal contact pass, formulation ``potential``
-    (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every force minus the gradient of
-    the stored potential); same outputs as :func:`_normal_forces`."""
+    """The normal contact pass (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every
+    force minus the gradient of the stored potential): forces into ``data.fc``, per-pair records into
+    ``data.records[0]``; returns (energy, n_active)."""
     prm, st, segs = data.params, data.stats, data.segs
     return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], prm.law_id,
                               prm.law_params, prm.gauss_xi, prm.gauss_w, prm.onset_m, data.fc, rec, off, reach)
@@ -307,7 +298,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
         for p in range(P):
             pl.pos_cand[p] = pl.pos[p]
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
-    # (contact_forces_ex, records.gap): the path bound refreshes per pair, the displacement bound does not
+    # (contact_forces_pot, records.gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * st.path_m[0]
     if st.overlaps_done[0] == 0 or st.offset_max_m[0] > 0.0:
         return _first_steps_pass(x, v, acc, t, dt, data, calls, plane_fric, reach)
@@ -363,8 +354,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
 # take the whole ContactData, some fifty arrays). They allocate nothing and are called only from
 # jitted code (no Python wrapper, which would need the counts to unbox the typed lists). The
 # functions that allocate set ``_nrt=True`` (a function compiled from one without counts inherits
-# that unless it sets its own): _rebuild, _first_steps (the offsets), the legacy formulation's
-# _step_forces (its kernels allocate) and the potential pass.
+# that unless it sets its own): _rebuild, _first_steps (the offsets) and the contact pass.
 _step_forces_pass = njit(**_FLAGS, _nrt=True)(_step_forces)
 _first_steps_pass = njit(**_FLAGS, _nrt=True)(_first_steps)
 
@@ -452,15 +442,16 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
 
 _CUSTOM_KERNELS: dict = {}
 
-# the formulation's normal pass, bound into contact_step and _record_initial_overlaps by name
-FORMULATIONS = {"legacy": _normal_forces, "potential": _normal_forces_potential}
+# the normal contact formulations (``scene.contact.formulation``), bound into contact_step and
+# _record_initial_overlaps by name
+FORMULATIONS = {"potential": _normal_forces}
 
-# the built-in laws with the potential formulation: a second cached copy of the hook kernel
+# the built-in laws: the cached copy of the hook kernel, without reference counts in its forces part
 _record_initial_overlaps_potential = specialise(
-    _record_initial_overlaps, "_record_initial_overlaps_potential", {"_normal_forces": _normal_forces_potential},
+    _record_initial_overlaps, "_record_initial_overlaps_potential", {"_normal_forces": _normal_forces},
     cache=True, fastmath=True, error_model="numpy")
 _step_forces_potential = specialise(_step_forces, "_step_forces_potential",
-                                    {"_normal_forces": _normal_forces_potential}, cache=True, fastmath=True,
+                                    {"_normal_forces": _normal_forces}, cache=True, fastmath=True,
                                     error_model="numpy", **_NO_COUNTS)
 _first_steps_potential = specialise(
     _first_steps, "_first_steps_potential",
@@ -476,18 +467,17 @@ _SPEC = dict(fastmath=True, error_model="numpy")
 
 
 def _potential_pass(forces, tag: str):
-    """:func:`_normal_forces_potential` calling ``forces`` (a copy of ``contact_forces_pot``)."""
-    return specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": forces}, cache=False,
+    """:func:`_normal_forces` calling ``forces`` (a copy of ``contact_forces_pot``)."""
+    return specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_pot": forces}, cache=False,
                       inline="always", **_SPEC)
 
 
-def _step_with(normal_pass, tag: str, overlaps, counts: bool = False, friction_pass=_friction_pass):
+def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass):
     """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass, ``friction_pass`` as its
-    friction and ``overlaps`` recording the initial overlaps (not cached); ``counts``: its forces part
-    with reference counts (the legacy formulation)."""
+    friction and ``overlaps`` recording the initial overlaps (not cached)."""
     forces = specialise(_step_forces, f"_step_forces_{tag}",
                         {"_normal_forces": normal_pass, "_friction_pass": friction_pass}, cache=False,
-                        **(dict(_nrt=True) if counts else _NO_COUNTS), **_SPEC)
+                        **_NO_COUNTS, **_SPEC)
     first = specialise(_first_steps, f"_first_steps_{tag}",
                        {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, _nrt=True,
                        **_SPEC)
@@ -509,29 +499,21 @@ contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_t
 
 def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
     """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
-    (``legacy`` or ``potential``): the built-in kernels (cached on disk) for a law without
+    (``potential``, the one there is): the built-in kernels (cached on disk) for a law without
     ``kernels``; else copies of the contact kernels specialised on the law's own jitted
-    ``(line, point, weight_point)`` functions (compiled once per process, law class and formulation).
-    ``threads``: the variant for ``solver.threads`` > 1, whose potential normal pass evaluates its
-    pairs in parallel tasks (same result bit for bit; not cached); the legacy pass stays serial."""
+    ``(line, point, weight_point)`` functions (compiled once per process and law class).
+    ``threads``: the variant for ``solver.threads`` > 1, whose normal pass evaluates its pairs in
+    parallel tasks (same result bit for bit; not cached)."""
     if formulation not in FORMULATIONS:
         raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
-    threads = threads and formulation == "potential"
     if law.kernels is None:
         if threads:
             return contact_step_potential_threads, None
-        if formulation == "potential":
-            return contact_step_potential, "advance_contact_potential"
-        return contact_step, "advance_contact"
+        return contact_step_potential, "advance_contact_potential"
     key = (type(law), formulation, threads)
     if key not in _CUSTOM_KERNELS:
         tag = f"{type(law).__name__}_{formulation}"
-        if formulation == "potential":
-            nf = _potential_pass(potential_kernels_for(law), tag)
-        else:
-            cf, _ = contact_kernels_for(law)
-            nf = specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_ex": cf}, cache=False,
-                            inline="always", **_SPEC)
+        nf = _potential_pass(potential_kernels_for(law), tag)
         # the initial overlaps, recorded once, by the law's serial pass (also with threads)
         overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
                               cache=False, **_SPEC)
@@ -540,8 +522,7 @@ def contact_kernel_for(law, formulation: str = "potential", threads: bool = Fals
             tag += "_threads"
             nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
             friction = _friction_pass_threads
-        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, counts=formulation != "potential",
-                                          friction_pass=friction)
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, friction_pass=friction)
     return _CUSTOM_KERNELS[key], None
 
 
@@ -675,10 +656,9 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     n_gauss : Gauss points per segment in the line part. overlap_release_s : s, the initial overlap
     of each segment pair (its penetration at the first step) is subtracted from its penetration and
     released linearly to 0 over this time (0: no offset, the overlap acts at once). formulation :
-    the normal contact kernel, ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`) or
-    ``potential`` (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`, every force minus
-    the gradient of the stored potential). onset_m : m, formulation ``potential``: the penetration over
-    which force and stiffness rise from zero (0: the laws as they are).
+    the normal contact kernel, ``potential`` (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`,
+    every force minus the gradient of the stored potential). onset_m : m, the penetration over which
+    force and stiffness rise from zero (0: the laws as they are).
     """
     segs = _segments(model)
     E = model.n_elements

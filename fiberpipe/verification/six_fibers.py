@@ -66,7 +66,7 @@ def six_fibers(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
     return build_model(np.vstack(fibers), off, R, MATERIAL), pitch
 
 
-def six_fibers_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
+def six_fibers_run(law, q_n_per_m, *, t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
                    penalty_factor=DEFAULT_PENALTY_FACTOR, onset_fraction=DEFAULT_ONSET_FRACTION, steps=None):
     """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibers
     (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;
@@ -77,7 +77,7 @@ def six_fibers_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_
     def effects():
         return [Loads([LineLoad(4, (0, 0, -q_n_per_m)), LineLoad(5, (0, 0, -q_n_per_m))]),
                 Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, **planes),
-                Walls({"y": (0.0, 4 * pitch + GAP_M)}, **planes), contact_hook(m, law=law, formulation=formulation)]
+                Walls({"y": (0.0, 4 * pitch + GAP_M)}, **planes), contact_hook(m, law=law)]
 
     settings = SimulationSettings(end_time_s=t_end_s, output_frames=3, history_every=100, dt_safety=dt_safety)
     if steps is not None:

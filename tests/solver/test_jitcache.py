@@ -2,12 +2,12 @@
 
 import pytest
 
-from fiberpipe.solver import _jitcache, _kernels_integrate as K, contact, contact_effect
+from fiberpipe.solver import _jitcache, _kernels_integrate as K, contact_effect, contact_potential
 
 
 def test_solver_kernels_use_the_package_wide_cache_stamp():
     assert _jitcache.INSTALLED
-    for fn in (K.advance_plain, contact.contact_forces, contact_effect.contact_step):
+    for fn in (K.advance_plain, contact_potential.contact_forces_pot, contact_effect.contact_step):
         loc = fn._cache._impl._locator
         assert type(loc).__name__ == "SolverPackageLocator"
         assert loc.get_source_stamp()[1] == _jitcache.package_source_digest()
