@@ -244,3 +244,16 @@ reproduce-fit: study-fit
 	$(PY) tools/fit_prediction.py --config configs/specimens/paper-40-fitted.yaml --fit runs/fits/paper-40-spool \
 	    --seeds 0 1 2 --out runs/fits/paper-40-fitted --doc docs/results.md
 reproduce: reproduce-fit
+
+# the study's compaction predicted from its own statistics, nothing fitted (configs/specimens/study-prediction.yaml,
+# docs/results.md): SEEDS=N its first N seeds (default 8), FAST=1 without the study-settings runs of two seeds
+.PHONY: study-prediction study-sensitivity
+study-prediction: setup
+	$(PY) tools/study_prediction.py --out runs/study-prediction --figure docs/img/study_prediction.png \
+	    $(if $(SEEDS),--seeds $(SEEDS)) $(if $(FAST),--fast-only)
+
+# each unknown of the study in turn on two seeds of the prediction's specimens (SEEDS=N to change), the
+# tornado plot and the table of docs/results.md
+study-sensitivity: study-prediction
+	$(PY) tools/study_sensitivity.py --prediction runs/study-prediction --out runs/study-sensitivity \
+	    --seeds $(or $(SEEDS),2) --doc docs/results.md --figure docs/img/study_sensitivity.png

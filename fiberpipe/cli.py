@@ -146,16 +146,51 @@ def _default_out(config) -> Path:
 @click.option("--from", "from_stage", help="First stage to run.")
 @click.option("--to", "to_stage", help="Last stage to run.")
 @click.option("--force", is_flag=True, help="Rerun stages even when their inputs and settings are unchanged.")
-@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there (chunks.scheduler).")
+@click.option("--scheduler", help="Address of a Dask scheduler: the chunked imaging stages run their slabs there "
+              "(chunks.scheduler), an ensemble its runs.")
+@click.option("--seeds", help="An ensemble of specimens (replaces specimen.seeds): N seeds from specimen.seed on, "
+              "or a list 0,1,2; F(U) as their mean with a band.")
 @click.pass_context
-def run(ctx, config, out, from_stage, to_stage, force, scheduler=None):
+def run(ctx, config, out, from_stage, to_stage, force, scheduler=None, seeds=None):
     """Run the stages CONFIG asks for, skipping those that are up to date."""
     from fiberpipe.pipeline import run_pipeline
 
+    if seeds is not None or _has_ensemble(config):
+        if from_stage or to_stage or force:
+            from fiberpipe.errors import ConfigError
+
+            raise ConfigError("--from, --to and --force apply to one run, not to an ensemble (specimen.seeds, --seeds): "
+                              "each of its runs is up to date or runs")
+        return _run_ensemble(config, out, seeds, scheduler)
     cfg = _with_scheduler(_load(config), scheduler)
     out = Path(out) if out else _default_out(config)
     run_pipeline(cfg, out, from_stage=from_stage, to_stage=to_stage, force=force, echo=_echo, progress=_progress())
     _echo(f"run folder: {out}")
+
+
+def _has_ensemble(config) -> bool:
+    """CONFIG asks for an ensemble (specimen.seeds); a file that cannot be read says so in the run."""
+    from fiberpipe.config import load_raw
+
+    try:
+        specimen = load_raw(config).get("specimen")
+    except FiberpipeError:
+        return False
+    return isinstance(specimen, dict) and specimen.get("seeds") is not None
+
+
+def _run_ensemble(config, out, seeds, scheduler) -> None:
+    """``run`` of an ensemble: one specimen per seed, built and compacted (fiberpipe.studies.ensemble)."""
+    from fiberpipe.artifacts import ensure_output_dir
+    from fiberpipe.config import load_raw
+    from fiberpipe.studies.ensemble import ensemble_seeds, run_ensemble
+
+    raw = load_raw(config)
+    seed_list = ensemble_seeds(raw, seeds, str(config))
+    out = Path(out) if out else _default_out(config)
+    ensure_output_dir(out)
+    run_ensemble(raw, seed_list, out, scheduler=scheduler, where=str(config), echo=_echo)
+    _echo(f"ensemble folder: {out} (ensemble.csv, ensemble.json, ensemble.png)")
 
 
 def _stage_command(name: str, doc: str):
@@ -349,7 +384,9 @@ def inspect(artifact, check):
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Study folder (default: runs/studies/<name>).")
 @click.option("--workers", type=click.IntRange(min=1), help="Points run in parallel (local processes, or Dask workers).")
 @click.option("--scheduler", help="Address of an existing Dask scheduler (needs fiberpipe[dask]).")
-def study(study_file, out, workers, scheduler):
+@click.option("--seeds", help="Every point an ensemble of specimens (replaces the base's specimen.seeds): N seeds "
+              "from specimen.seed on, or a list 0,1,2.")
+def study(study_file, out, workers, scheduler, seeds):
     """Sweep config keys; table and Pareto plot of error against wall time (docs/accuracy-cost.md)."""
     from fiberpipe.studies.sweep import run_study
 
@@ -359,7 +396,7 @@ def study(study_file, out, workers, scheduler):
     created = not out.exists()
     ensure_output_dir(out)
     try:
-        run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo)
+        run_study(study_file, out, workers=workers, scheduler=scheduler, echo=_echo, seeds=seeds)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a bad study file leaves no empty folder behind
@@ -372,7 +409,8 @@ def study(study_file, out, workers, scheduler):
 @click.option("--target", required=True, type=click.Path(dir_okay=False), help="CSV with columns U_m,load_N.")
 @click.option("--param", "params", multiple=True, required=True, metavar="KEY=LO:HI",
               help="A config key (specimen keys too) and its bounds, units accepted; repeatable.")
-@click.option("--seeds", default=1, show_default=True, type=int, help="Specimen seeds the curve is averaged over.")
+@click.option("--seeds", help="Specimen seeds the curve is averaged over: N from specimen.seed on, or a list 0,1,2 "
+              "(default: specimen.seeds, else 1).")
 @click.option("--budget", default=20, show_default=True, type=int, help="Largest number of evaluations.")
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Folder (default: runs/fits/<config name>).")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1), help="Runs in parallel (local processes).")

@@ -790,6 +790,24 @@ class SpecimenSettleConfig(Section):
     gravity_scale: float = Field(1.0, gt=0, description="gravity × this while settling (with mass_scaling: "
                                  "the same fall speed)")
     frames: int = Field(9, ge=2)
+    contact: Optional[dict] = Field(
+        None, description="the scene.contact section while settling and closing (e.g. {law: hertz_oriented}); "
+        "none: the compaction's. Given, specimens compacted with different contact laws are the same specimens")
+
+
+class SpecimenCloseConfig(Section):
+    """``upper_plate: close``: the cassette closed onto the settled pile in the solver."""
+
+    velocity: Velocity = Field(1000e-3 / 60, description="the upper plate's speed as it closes onto the pile "
+                               "(smooth ramp)")
+    relax_time: Time = Field(0.01, description="the plate held at the target height while the pile relaxes")
+    damping_alpha: Rate = Field(1e5, description="mass damping while closing and relaxing (the study's "
+                                "quasi-static α)")
+    mass_scaling: float = Field(1.0, ge=1, description="solver.mass_scaling while closing (a larger step)")
+    tolerance: Length = Field(25e-6, description="the closed pile's top may stand this far above the target height "
+                              "(pressed into the plate's penalty by the closing load: 8 µm under 20 N for 40 fibers "
+                              "of 15 mm); beyond it the target is refused as out of reach")
+    frames: int = Field(5, ge=2)
 
 
 class SpecimenWaveConfig(Section):
@@ -814,14 +832,19 @@ class SpecimenConfig(Section):
         "directions, wavy_bundle: aligned sinusoidal fibers (specimen.wave), each placed at random without overlap in "
         "a cell of width × depth at the target v_f0 (docs/specimen.md)")
     seed: int = 0
+    seeds: Optional[list[int]] = Field(
+        None, description="an ensemble: one specimen per seed, each built and compacted (fiberpipe run, study "
+        "and fit report F(U) as the seeds' mean with a band); none: the one specimen of seed")
     n_fibers: int = Field(40, ge=1, le=100000)
     length: Length = 15e-3
     width: Length = 3e-3
     volume_fraction: float = Field(0.377, gt=0, lt=0.9069,
                                    description="target v_f0: sets the cassette height (the plate gap)")
-    upper_plate: Literal["target", "pile"] = Field(
+    upper_plate: Literal["target", "pile", "close"] = Field(
         "target", description="target: the upper plate at the height of the target v_f0 (the pile must fit "
-        "under it); pile: on the settled pile's top (v_f0 follows the pile)")
+        "under it); pile: on the settled pile's top (v_f0 follows the pile); close: the upper plate closes "
+        "from the settled pile's top down to the target v_f0's height in the solver and holds there while the "
+        "pile relaxes (specimen.close); its end state is the specimen")
     points_per_fiber: int = Field(61, ge=3)
     phi_mean: Angle = Field(math.radians(6.0), ge=0, description="mean angle between neighbouring fibers (the Φ "
                             "spread): tilts normal with σ = phi_mean/√π per component")
@@ -837,13 +860,27 @@ class SpecimenConfig(Section):
     bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
     waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
     settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)
+    close: SpecimenCloseConfig = Field(default_factory=SpecimenCloseConfig)
 
     @model_validator(mode="after")
     def _check(self):
         _positive("specimen.length", self.length)
         _positive("specimen.width", self.width)
         _positive("specimen.gap", self.gap)
+        if self.seeds is not None:
+            check_seeds(self.seeds, "specimen.seeds")
         return self
+
+
+def check_seeds(seeds: list[int], key: str) -> None:
+    """An ensemble's seeds: at least one, none twice, none negative (``key`` names them in the error)."""
+    if not seeds:
+        raise ValueError(f"{key} is empty: give at least one seed (e.g. [0, 1, 2, 3])")
+    twice = sorted({s for s in seeds if seeds.count(s) > 1})
+    if twice:
+        raise ValueError(f"{key} gives seed {twice[0]} more than once: each seed is one specimen")
+    if min(seeds) < 0:
+        raise ValueError(f"{key}: seeds must be >= 0, got {min(seeds)}")
 
 
 class Config(Section):

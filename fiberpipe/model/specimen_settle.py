@@ -9,6 +9,7 @@ the specimen's mid-lines (the rest shape of the compaction run).
 from __future__ import annotations
 
 import copy
+from typing import NamedTuple
 
 import numpy as np
 
@@ -16,17 +17,22 @@ from fiberpipe.polylines import Polylines
 
 
 def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float, mu: float, lock: str | None,
-                 frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None) -> dict:
+                 frames: int, mass_scaling: float | None = None, gravity_scale: float | None = None,
+                 contact: dict | None = None) -> dict:
     """The raw config of the settling run made from the compaction config ``raw``: its material,
     fiber, mesh, contact law and solver settings; the lower plate fixed at y = 0, no upper plate,
-    walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), damping α =
-    ``alpha_per_s``, friction μ = ``mu`` and, with ``lock`` = "all" | "ends", the axial lock."""
+    walls at x = ±``width_m``/2, gravity along −y (× ``gravity_scale``), the mass scaling
+    ``mass_scaling`` (not the compaction's), damping α =
+    ``alpha_per_s``, friction μ = ``mu``, with ``lock`` = "all" | "ends" the axial lock, and
+    ``contact`` (a scene.contact section) instead of the compaction's if given."""
     from fiberpipe.config import GravityConfig
     from fiberpipe.units import to_si
 
     raw = copy.deepcopy(raw)
     raw.pop("specimen", None)
     sc = raw.setdefault("scene", {})
+    if contact is not None:  # the settling's own contact section (specimen.settle.contact)
+        sc["contact"] = copy.deepcopy(contact)
     # the compaction scene's effects in its order (the force sums run in that order), the loads and
     # drives left out, what settling needs added, then the plates and the lock
     effects = [e for e in sc.get("effects", []) if e not in ("plates", "constraints", "clamps", "loads", "drives")]
@@ -45,7 +51,9 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
     given = (sc.get("gravity") or {}).get("acceleration")
     g = float(np.linalg.norm([to_si(a, "acceleration") for a in (given or GravityConfig().acceleration)]))
     sc["gravity"] = {"acceleration": [0.0, -g * float(gravity_scale or 1.0), 0.0]}
-    solver = {k: v for k, v in (raw.get("solver") or {}).items() if k not in ("checkpoint_every", "settle_time")}
+    # the compaction's mass scaling is a speed setting of the compaction: the settling has its own
+    solver = {k: v for k, v in (raw.get("solver") or {}).items()
+              if k not in ("checkpoint_every", "settle_time", "mass_scaling")}
     raw["solver"] = {**solver, "end_time": float(time_s), "output_frames": int(frames)}
     if mass_scaling is not None and mass_scaling != 1.0:
         raw["solver"]["mass_scaling"] = float(mass_scaling)
@@ -124,3 +132,88 @@ def fiber_contacts(x, off, r, tol_m=1e-7) -> int:
     d, _, _ = segment_distances(x[a], x[a + 1], x[b], x[b + 1])
     hit = d <= 2 * r + tol_m
     return len({(min(i, j), max(i, j)) for i, j in zip(fib[a[hit]], fib[b[hit]])})
+
+
+class ClosingPlan(NamedTuple):
+    """Where the cassette closes: the upper plate from ``start_m`` (the settled pile's top plus the
+    clearance) down to ``target_m`` (the target v_f0's height) at ``velocity_m_s``, then held
+    ``relax_time_s``; the cassette ``width_m`` wide."""
+
+    width_m: float
+    start_m: float
+    target_m: float
+    velocity_m_s: float
+    relax_time_s: float
+
+
+def closing_scene(raw: dict, plan: ClosingPlan, close_cfg, settle_cfg) -> dict:
+    """The raw config of the closing run: :func:`settle_scene`'s (gravity, friction μ and the axial
+    lock of the settling), with the closing's damping and mass scaling, the lower plate fixed at
+    y = 0 and the upper one moving down from ``plan.start_m`` to ``plan.target_m`` (a smooth ramp,
+    10 % of the travel time accelerating and 10 % decelerating), then held."""
+    travel = plan.start_m - plan.target_m
+    ramp_fraction = 0.1
+    end_time = travel / plan.velocity_m_s / (1 - ramp_fraction) + plan.relax_time_s
+    lock = None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial
+    closing = settle_scene(raw, width_m=plan.width_m, alpha_per_s=close_cfg.damping_alpha, time_s=end_time,
+                           mu=settle_cfg.mu, lock=lock, frames=close_cfg.frames, mass_scaling=close_cfg.mass_scaling,
+                           contact=settle_cfg.contact)
+    closing["scene"]["plates"] = {"axis": "y", "lower": "fixed", "upper": "moving", "lower_position": 0.0,
+                                  "upper_position": float(plan.start_m)}
+    closing["scene"]["loading"] = {"displacement": float(travel), "velocity": float(plan.velocity_m_s),
+                                   "ramp": "smooth", "ramp_fraction": ramp_fraction}
+    return closing
+
+
+def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settle_cfg, *, where: str = "close",
+               progress=None) -> tuple[Polylines, dict]:
+    """Close the cassette onto the settled pile ``fibers`` (:func:`closing_scene`) and let it relax;
+    returns the closed pile (the last frame) and the closing's figures: the residual load on the
+    upper plate at the end (the elastic load the closed pile still carries, which the compaction
+    run, whose rest shape is the closed pile, does not), the pile's top and its v_f. A pile whose
+    top stays above the target height by more than ``close_cfg.tolerance`` (fibers held in the
+    plate's penalty) cannot reach the target: a one-line error with the densest v_f it reached."""
+    import time as _time
+
+    from fiberpipe.config import validate_config
+    from fiberpipe.errors import ConfigError
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.solver import simulate
+    from fiberpipe.solver.build import build_simulation
+
+    scene = closing_scene(raw, plan, close_cfg, settle_cfg)
+    scene["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
+    cfg = validate_config(scene, where=where)
+    radius = float(cfg.fiber.radius)
+    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=radius)
+    model, effects, settings = build_simulation(mesh, cfg)
+    t0 = _time.perf_counter()
+    res = simulate(model, effects, settings, progress=progress)
+    wall = _time.perf_counter() - t0
+    X = np.asarray(res.frames_positions)
+    off = np.asarray(mesh.node_offsets)
+    tops = X[:, :, 1].max(axis=1) + radius
+    area = (len(off) - 1) * np.pi * radius**2
+    history = res.history
+    force = np.asarray(history["plate_force"])[:, 1]
+    out = {
+        "start_height_m": float(plan.start_m), "target_height_m": float(plan.target_m),
+        "velocity_m_s": float(plan.velocity_m_s), "relax_time_s": float(plan.relax_time_s),
+        "alpha_per_s": float(close_cfg.damping_alpha), "mass_scaling": float(close_cfg.mass_scaling),
+        "dt_s": float(res.dt_s), "steps": int(res.steps), "wall_time_s": wall,
+        "residual_load_N": float(force[-1]), "peak_load_N": float(force.max()),
+        "lower_load_N": float(np.asarray(history["plate_force"])[-1, 0]),
+        "wall_load_N": float(np.abs(np.asarray(history["wall_force"])[-1]).sum()),
+        "pile_top_m": float(tops[-1]), "volume_fraction_reached": float(area / (plan.width_m * tops[-1])),
+        "kinetic_energy_end_J": float(history["energy/kinetic"][-1]),
+        "strain_energy_end_J": float(history["energy/strain"][-1]),
+    }
+    if tops[-1] > plan.target_m + close_cfg.tolerance:
+        densest = float(area / (plan.width_m * tops.min()))
+        target_vf = float(area / (plan.width_m * plan.target_m))
+        raise ConfigError(f"specimen.volume_fraction = {target_vf:.4g}: closing the cassette does not reach it (the "
+                          f"pile's top stays {(tops[-1] - plan.target_m) * 1e6:.3g} um above the plate, more than "
+                          f"specimen.close.tolerance; the densest it reached is v_f0 = {densest:.4g}): lower the target",
+                          where=where)
+    closed = Polylines.from_list([X[-1][off[i]:off[i + 1]] for i in range(len(off) - 1)], radius)
+    return closed, out

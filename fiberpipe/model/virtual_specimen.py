@@ -90,6 +90,8 @@ def cassette_height_m(specimen, radius_m: float, top_m: float, pile: str, where:
     if specimen.upper_plate == "pile":
         return top_m + specimen.gap
     height = target_height_m(specimen, radius_m)
+    if specimen.upper_plate == "close":  # closed onto the target height (close_cassette checked the top)
+        return height
     if top_m > height:
         vmax = specimen.n_fibers * math.pi * radius_m**2 / (specimen.width * top_m)
         raise ConfigError(
@@ -98,6 +100,25 @@ def cassette_height_m(specimen, radius_m: float, top_m: float, pile: str, where:
             f"specimen.volume_fraction to at most {vmax:.4g}, raise specimen.candidates (a denser pile) or set "
             "specimen.upper_plate: pile", where=where)
     return height
+
+
+def close_cassette(fibers, raw: dict, specimen, radius_m: float, *, where: str, progress: bool = False):
+    """``upper_plate: close``: the settled pile ``fibers`` closed in the solver to the target v_f0's
+    height and relaxed (:func:`fiberpipe.model.specimen_settle.close_pile`); returns the closed
+    pile and the closing's figures (``{"needed": False}`` when the pile already fits under the target
+    height: nothing to close)."""
+    from fiberpipe.model.specimen_settle import ClosingPlan, close_pile
+    from fiberpipe.progress import progress_bar
+
+    top = float(np.max(fibers.points_m[:, 1] + radius_m))
+    height = target_height_m(specimen, radius_m)
+    if top + specimen.gap <= height:
+        return fibers, {"needed": False, "pile_top_m": top, "target_height_m": height, "residual_load_N": 0.0}
+    plan = ClosingPlan(width_m=specimen.width, start_m=top + specimen.gap, target_m=height,
+                       velocity_m_s=specimen.close.velocity, relax_time_s=specimen.close.relax_time)
+    with progress_bar("close", progress) as bar:
+        closed, figures = close_pile(fibers, raw, plan, specimen.close, specimen.settle, where=where, progress=bar)
+    return closed, {"needed": True, **figures}
 
 
 def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print,
@@ -146,10 +167,15 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     if specimen.settle.enabled:
         settle_cfg = specimen.settle
         with progress_bar("settle", progress) as bar:
+            settle_raw = raw if settle_cfg.contact is None else \
+                {**raw, "scene": {**(raw.get("scene") or {}), "contact": settle_cfg.contact}}  # its own law
             fibers, settle = settle_pile(
-                fibers, raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
+                fibers, settle_raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
                 lock=None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial, frames=settle_cfg.frames,
                 mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale, where=where, progress=bar)
+    closing = close_cassette(fibers, raw, specimen, r, where=where, progress=progress) \
+        if specimen.upper_plate == "close" else None
+    fibers = closing[0] if closing else fibers
     pts = fibers.points_m
     top = float(np.max(pts[:, 1] + r))
     lowest = float(np.min(pts[:, 1] - r))
@@ -163,7 +189,8 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     per_fiber_low = np.array([np.min(pts[off[i]:off[i + 1], 1]) - r for i in range(fibers.n_fibers)])
     per_fiber_top = np.array([np.max(pts[off[i]:off[i + 1], 1]) + r for i in range(fibers.n_fibers)])
     if settle:  # the settled pile's own figures (contacts within 0.1 µm: pressed by the weight)
-        settle.update(pile_top_before_m=float(deposit["pile_top_m"]), pile_top_m=top, top_clearance_m=float(height - top),
+        settled_top = closing[1]["start_height_m"] - specimen.gap if closing and closing[1]["needed"] else top
+        settle.update(pile_top_before_m=float(deposit["pile_top_m"]), pile_top_m=settled_top, top_clearance_m=float(height - top),
                       fiber_contacts=fiber_contacts(pts, off, r), lowest_surface_m=lowest,
                       fibers_on_lower_plate=int(np.sum(per_fiber_low <= 1e-7)))
     info = {
@@ -181,6 +208,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
         "phi_histogram_deg": {"edges": edges.tolist(), "counts": counts.astype(int).tolist()},
         "deposit": deposit,
         **({"settle": {k: v for k, v in settle.items() if k != "wall_time_s"}} if settle else {}),
+        **({"closing": closing[1]} if closing else {}),
         "generator": {"function": "fiberpipe.model.specimen.cassette_specimen",
                       **{k: (list(v) if isinstance(v, tuple) else v) for k, v in params.items()},
                       "spool_radius_m": specimen.bow.spool_radius, "spool_radius_range_m": specimen.bow.spool_radius_range,
@@ -275,4 +303,12 @@ def specimen_report(info: dict, out: Path) -> str:
         lines.append(f"  settled {s['time_s'] * 1e3:.3g} ms ({s['steps']} steps, "
                      f"{info.get('settle_wall_time_s', float('nan')):.0f} s wall): moved up to {s['max_displacement_m'] * 1e6:.1f} um, "
                      f"kinetic energy at the end {s['kinetic_energy_end_J']:.3g} J (max {s['kinetic_energy_max_J']:.3g} J)")
+    closing = info.get("closing")
+    if closing and closing["needed"]:
+        lines.append(f"  closed from {closing['start_height_m'] * 1e3:.5g} mm to {closing['target_height_m'] * 1e3:.5g} mm "
+                     f"({closing['steps']} steps, {closing['wall_time_s']:.0f} s wall): residual load {closing['residual_load_N']:.4g} N "
+                     f"on the upper plate (peak {closing['peak_load_N']:.4g} N), left out of the compaction (its rest shape "
+                     "is the closed pile)")
+    elif closing:
+        lines.append("  closing: the settled pile already fits under the target height (nothing to close)")
     return "\n".join(lines)

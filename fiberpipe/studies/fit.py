@@ -14,7 +14,7 @@ are any numeric config keys, specimen keys included, with units accepted (``"10 
 # (:func:`scipy.optimize.minimize_scalar`, ``method="bounded"``), several by Nelder-Mead on the
 # box mapped to [0, 1]^d with bounds (:func:`scipy.optimize.minimize`), both stopped after
 # ``--budget`` evaluations. Each evaluation runs its seeds through the study runner
-# (:func:`fiberpipe.studies.sweep.execute`: in this process, on a local process pool with
+# (:func:`fiberpipe.studies.runner.execute`: in this process, on a local process pool with
 # ``--workers`` > 1, on a Dask cluster with ``--scheduler``) into ``DIR/evaluations/<id>/``, by
 # the ordinary cached pipeline, so a rerun reuses what it has. Outputs: ``DIR/fit.json``,
 # ``DIR/history.csv``, ``DIR/fit.png``.
@@ -36,6 +36,7 @@ import numpy as np
 from fiberpipe.artifacts import write_json_atomic
 from fiberpipe.config import load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError, InputError
+from fiberpipe.studies.ensemble import load_curve  # noqa: F401  (the fit's curves; re-exported)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -141,7 +142,7 @@ def _number_or_text(txt: str):
 def run_point(raw: dict, run_dir: str, where: str) -> dict:
     """One run of the fit: with a ``specimen`` section, build the specimen into
     ``run_dir/specimen`` and run its ready config into ``run_dir``; else run ``raw`` itself."""
-    from fiberpipe.studies.sweep import _run_point, numba_threads
+    from fiberpipe.studies.runner import _run_point, numba_threads
 
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
 
@@ -156,23 +157,6 @@ def run_point(raw: dict, run_dir: str, where: str) -> dict:
         tmp.replace(spec_dir)
     ready = load_raw(spec_dir / "config.yaml")
     return _run_point(ready, run_dir, where)
-
-
-def load_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The loading branch of the run's ``post/force_displacement.csv`` (U_m, load_N): the samples
-    up to the largest U, repeated U averaged."""
-    path = Path(run_dir) / "post" / "force_displacement.csv"
-    if not path.is_file():
-        raise InputError("the run wrote no force-displacement curve (no plates?)", where=str(path))
-    data = np.genfromtxt(path, delimiter=",", names=True)
-    U, F = np.atleast_1d(data["U_m"]), np.atleast_1d(data["load_N"])
-    ok = np.isfinite(U) & np.isfinite(F)
-    U, F = U[ok], F[ok]
-    end = int(np.argmax(U)) + 1
-    Uu, inv = np.unique(U[:end], return_inverse=True)
-    F = F[:end]
-    Fu = np.bincount(inv, weights=F) / np.bincount(inv)
-    return Uu, Fu
 
 
 # ---------------------------------------------------------------------------------------------
@@ -194,6 +178,8 @@ class _Evaluator:
 
     def raw_for(self, x, seed) -> dict:
         raw = copy.deepcopy(self.base)
+        if isinstance(raw.get("specimen"), dict):
+            raw["specimen"].pop("seeds", None)  # one run per seed: the evaluation is the ensemble
         for k, v in self.overrides(x).items():
             set_dotted(raw, k, v)
         if seed is not None:
@@ -205,7 +191,7 @@ class _Evaluator:
         key = tuple(x)
         if key in self.cache:
             return self.cache[key]["objective_N"]
-        from fiberpipe.studies.sweep import execute
+        from fiberpipe.studies.runner import execute
 
         jobs = []
         for s in self.seeds:
@@ -243,7 +229,7 @@ class _Evaluator:
         return np.interp(self.U_t, U, F)
 
 
-def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds: int = 1, budget: int = 20,
+def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds: int | str | None = None, budget: int = 20,
             out: str | Path | None = None, workers: int = 1, scheduler: str | None = None, echo=print) -> dict:
     """Fit ``params`` (``KEY=LO:HI`` strings) of ``config`` to the ``target`` curve; writes
     ``out/fit.json``, ``out/history.csv`` and ``out/fit.png``; returns fit.json's dict."""
@@ -256,9 +242,9 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     keys = [p["key"] for p in fit_params]
     if len(set(keys)) != len(keys):
         raise ConfigError("--param: a key is given twice")
-    if seeds < 1 or budget < 1:
-        raise ConfigError("--seeds and --budget must be at least 1")
-    if seeds > 1 and base.get("specimen") is None:
+    if budget < 1:
+        raise ConfigError("--budget must be at least 1")
+    if seeds is not None and str(seeds).strip() not in ("", "1") and base.get("specimen") is None:
         raise ConfigError(f"--seeds {seeds}: the config has no specimen section, so there are no specimen seeds "
                           "to average over", where=where)
     probe = copy.deepcopy(base)
@@ -270,12 +256,15 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     if travel < U_t[-1] * (1 - 1e-6):
         raise ConfigError(f"scene.loading.displacement = {travel * 1e3:.4g} mm is short of the target's last U "
                           f"({U_t[-1] * 1e3:.4g} mm)", where=where)
-    seed0 = cfg.specimen.seed if cfg.specimen is not None else None
-    seed_list = [seed0 + k for k in range(seeds)] if seed0 is not None else [None]
+    from fiberpipe.studies.ensemble import ensemble_seeds
+
+    seed_list = ensemble_seeds(base, None if seeds is None else str(seeds), where) if cfg.specimen is not None else None
+    if seed_list is None:
+        seed_list = [cfg.specimen.seed] if cfg.specimen is not None else [None]
     out = Path(out) if out else Path("runs") / "fits" / Path(config).stem
     out.mkdir(parents=True, exist_ok=True)
     # before this process or its workers start numba: the threads the config's runs ask for
-    from fiberpipe.studies.sweep import numba_threads
+    from fiberpipe.studies.runner import numba_threads
 
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([base]))
     cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None

@@ -34,9 +34,6 @@ import copy
 import hashlib
 import itertools
 import json
-import os
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Literal, Optional, Union
 
@@ -47,6 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from fiberpipe.artifacts import write_text_atomic
 from fiberpipe.config import _DuplicateKey, _StrictLoader, load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError
+from fiberpipe.studies.runner import _execute, _run_point, _warm_up, execute, numba_threads  # noqa: F401  (re-exported)
 
 Measure = Literal["curve", "final_load", "positions", "tip", "rearrangement"]
 
@@ -137,67 +135,6 @@ def _point(base: dict, overrides: dict, where: str, label: str = "point") -> dic
     cfg = validate_config(copy.deepcopy(raw), where=f"{where} {label} {overrides}")
     pid = hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()[:10]
     return {"id": pid, "overrides": overrides, "raw": raw, "config_sha256": cfg.sha256()}
-
-
-_WARM: set = set()
-
-
-def _warm_up(raw: dict, cfg, where: str) -> None:
-    """Compile (or load from numba's cache) this scene's kernels once per process before a timed
-    run, so that the first point's wall time does not include JIT compilation: the same config
-    for a few dozen steps, into a throw-away folder."""
-    key = tuple(sorted(cfg.scene.effects)) + (str(getattr(cfg.scene.contact, "law", "")),)
-    if key in _WARM:
-        return
-    _WARM.add(key)
-    import tempfile
-
-    from fiberpipe.pipeline import run_pipeline
-
-    w = copy.deepcopy(raw)
-    w.setdefault("solver", {})
-    w["solver"]["end_time"] = 2e-6
-    w["solver"]["output_frames"] = 2
-    w["solver"].pop("checkpoint_every", None)
-    w.setdefault("post", {})
-    w["post"]["plots"] = False
-    try:
-        wcfg = validate_config(w, where=where)
-        with tempfile.TemporaryDirectory(prefix="fiberpipe-warm-") as d:
-            run_pipeline(wcfg, Path(d) / "run")
-    except Exception:  # a warm-up failure is not the point's failure: the real run reports it
-        pass
-
-
-def numba_threads(raws) -> str:
-    """``NUMBA_NUM_THREADS`` for processes that run the configs ``raws``: the largest
-    ``solver.threads`` they ask for (1 by default). numba reads it once, when it starts, and never
-    runs more threads than it allows, so a worker started with 1 would run a ``solver.threads: 2``
-    point on one thread."""
-    def threads(raw):
-        solver = raw.get("solver") if isinstance(raw, dict) else None
-        value = solver.get("threads", 1) if isinstance(solver, dict) else 1
-        return value if isinstance(value, int) and value > 0 else 1
-    return str(max((threads(r) for r in raws), default=1))
-
-
-def _run_point(raw: dict, run_dir: str, where: str) -> dict:
-    """Run one point in this process (also used by worker processes)."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
-    from fiberpipe.pipeline import run_pipeline
-
-    # the point's own config beside its results (its paths are absolute): what its summary, its run
-    # log and the resume command of an interrupted simulation name
-    point_config = Path(run_dir) / "config.yaml"
-    point_config.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(point_config, yaml.safe_dump(raw, sort_keys=False, allow_unicode=True))
-    cfg = validate_config(copy.deepcopy(raw), where=str(point_config))
-    _warm_up(raw, cfg, where)
-    t0 = time.perf_counter()
-    report = run_pipeline(cfg, Path(run_dir))
-    wall = time.perf_counter() - t0
-    sim = report.stages.get("simulate", {})
-    return {"wall_time_s": wall, "solver_wall_time_s": sim.get("solver_wall_time_s"), "steps": sim.get("steps"), "elements": sim.get("elements")}
 
 
 def _key_value(raw: dict, dotted: str, where: str) -> float:
@@ -372,14 +309,28 @@ def digit_cost(rows: list[dict], err_col: str) -> Optional[dict]:
     return {"slope": float(b), "factor": float(10 ** (-1.0 / b)), "front": [rows[i]["id"] for i in front]}
 
 
-def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, scheduler: str | None = None, echo=print) -> Path:
-    """Run a study; write ``<out>/study.csv``, ``study.md`` and ``pareto.png``."""
+def run_study(path: str | Path, out: str | Path, *, workers: int | None = None, scheduler: str | None = None, echo=print,
+              seeds: str | None = None) -> Path:
+    """Run a study; write ``<out>/study.csv``, ``study.md`` and ``pareto.png``. ``seeds`` (``--seeds``)
+    or the base's ``specimen.seeds``: every point an ensemble of specimens
+    (:func:`fiberpipe.studies.ensemble.study_ensemble_rows`)."""
+    from fiberpipe.studies.ensemble import ensemble_seeds, study_ensemble_rows
+
     path = Path(path)
     spec, ctx = load_study(path)
     base = ctx["base"]
     points = study_points(spec, base, str(path))
     use_ref_run = spec.reference.run is None and spec.reference.extrapolate is None
     ref = _point(base, spec.reference.overrides, str(path), "reference.overrides") if use_ref_run else None
+    seed_list = ensemble_seeds(base, seeds, str(path))
+    if seed_list is not None:
+        out = Path(out)
+        echo(f"study {spec.name}: {len(points)} points + reference, each {len(seed_list)} specimen seeds")
+        rows, ref_summary = study_ensemble_rows(spec, points, ref, out, seed_list, workers=workers or spec.workers,
+                                                scheduler=scheduler, where=str(path), echo=echo)
+        _write_outputs(out, spec, rows, {"solver_wall_time_s": float(np.mean(ref_summary["solver_wall_time_s"])),
+                                         "steps": f"{len(seed_list)} seeds"}, echo)
+        return out
     if spec.reference.extrapolate is not None:
         _extrapolation_points(spec, points, str(path))  # fail before running anything
     given_ref = None
@@ -433,53 +384,6 @@ def _reference_run_path(spec: StudySpec, path: Path) -> Path:
     if not ref_sim.is_file():
         raise ConfigError(f"reference.run {ref_sim}: reference run not found", where=str(path))
     return ref_sim
-
-
-def _execute(jobs, nworkers, scheduler, where, echo, fn=None) -> dict:
-    """Run ``jobs`` ``(id, raw, run_dir)``: on the Dask scheduler at ``scheduler``; else, with more
-    than one worker, on a local Dask cluster of ``nworkers`` processes (a local process pool without
-    Dask); else one after the other in this process. Returns ``{id: fn result}``; ``fn(raw, run_dir,
-    where)`` is :func:`_run_point` unless given (a module-level function, so workers can import it)."""
-    _run_point = fn or globals()["_run_point"]
-    # before this process or its workers start numba (the worker processes inherit it); a value the
-    # user set stays
-    os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw for _, raw, _ in jobs]))
-    env = {"NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]}
-    if scheduler or nworkers > 1:
-        try:
-            from dask.distributed import Client, LocalCluster  # optional extra: fiberpipe[dask]
-        except ImportError:
-            if scheduler:
-                raise ConfigError("--scheduler needs Dask: pip install 'fiberpipe[dask]'") from None
-            echo(f"  on a local process pool ({nworkers} processes; Dask not installed)")
-            with ProcessPoolExecutor(max_workers=nworkers) as pool:
-                return _collect({jid: pool.submit(_run_point, raw, d, where) for jid, raw, d in jobs}, echo)
-        if scheduler:
-            echo(f"  on the Dask scheduler {scheduler}")
-            with Client(scheduler) as client:
-                return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
-        echo(f"  on a local Dask cluster ({nworkers} worker processes)")
-        # the cluster in its own context: a Client given a cluster does not close it
-        with LocalCluster(n_workers=nworkers, threads_per_worker=1, processes=True, env=env) as cluster, \
-                Client(cluster) as client:
-            return _collect({jid: client.submit(_run_point, raw, d, where, pure=False) for jid, raw, d in jobs}, echo)
-    results = {}
-    for jid, raw, d in jobs:
-        results[jid] = _run_point(raw, d, where)
-        echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
-    return results
-
-
-execute = _execute
-
-
-def _collect(futures: dict, echo) -> dict:
-    """Wait for ``{id: future}`` (concurrent.futures or Dask), in submission order."""
-    results = {}
-    for jid, fut in futures.items():
-        results[jid] = fut.result()
-        echo(f"  {jid}: {results[jid]['wall_time_s']:.1f} s")
-    return results
 
 
 def _write_outputs(out: Path, spec: StudySpec, rows: list[dict], ref: dict, echo) -> None:

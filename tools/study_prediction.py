@@ -1,0 +1,149 @@
+"""The study's compaction predicted from its own statistics, nothing fitted (``make study-prediction``).
+
+    .venv/bin/python tools/study_prediction.py [--config configs/specimens/study-prediction.yaml]
+        [--seeds 8] [--fast-only] [--out runs/study-prediction] [--figure docs/img/study_prediction.png]
+
+Compacts one specimen per seed of ``--config`` (an ensemble, :mod:`fiberpipe.studies.ensemble`) at
+the fast settings (mass scaling 100 with α/100: docs/benchmarks.md, "Fast settings") and, unless
+``--fast-only``, its first two seeds again at the study's settings on the same specimens, which
+measures what the fast settings cost in accuracy here. Writes ``OUT/ensemble.json`` (per seed: v_f0,
+the final load, the closing's residual load; the mean with its 95 % interval; the fast settings'
+error; the RMS against the study's curve points) and the F(U) band against the study's curve as its
+text gives it (``data-samples/paper-40-fit/target.csv``) into ``--figure``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FAST = {"solver.mass_scaling": 100, "scene.damping.alpha": "1e3 1/s"}  # docs/benchmarks.md, "Fast settings"
+TARGET = ROOT / "data-samples" / "paper-40-fit" / "target.csv"
+
+
+def _with(raw: dict, overrides: dict) -> dict:
+    from fiberpipe.config import set_dotted
+
+    raw = copy.deepcopy(raw)
+    for key, value in overrides.items():
+        set_dotted(raw, key, value)
+    return raw
+
+
+def fast_settings_error(fast: dict, study: dict) -> dict:
+    """The fast settings against the study's on the same specimens: final loads and the RMS of the
+    curves' difference over the study-settings curve's RMS, per seed."""
+    from fiberpipe.studies.fit import load_curve
+
+    per_seed = []
+    for k, seed in enumerate(study["seeds"]):
+        U_s, F_s = load_curve(Path(study["runs"][k]))
+        U_f, F_f = load_curve(Path(fast["runs"][fast["seeds"].index(seed)]))
+        diff = np.interp(U_s, U_f, F_f) - F_s
+        per_seed.append({"seed": seed, "study_settings_N": float(F_s[-1]), "fast_N": float(F_f[-1]),
+                         "final_load_difference": float(F_f[-1] / F_s[-1] - 1) if F_s[-1] else float("nan"),
+                         "curve_rms_difference": float(np.sqrt(np.mean(diff**2)) / max(np.sqrt(np.mean(F_s**2)), 1e-300))})
+    return {"seeds": per_seed, "study_settings_solver_wall_time_s": study["solver_wall_time_s"],
+            "fast_solver_wall_time_s": [fast["solver_wall_time_s"][fast["seeds"].index(s)] for s in study["seeds"]]}
+
+
+def against_study(folder: Path) -> dict:
+    """The ensemble mean's RMS difference from the study's curve points (``target.csv``), over 12 N."""
+    from fiberpipe.studies.fit import read_target
+
+    U_t, F_t = read_target(TARGET)
+    table = np.genfromtxt(folder / "ensemble.csv", delimiter=",", names=True)
+    mean = np.interp(U_t, table["U_m"], table["load_mean_N"])
+    rms = float(np.sqrt(np.mean((mean - F_t) ** 2)))
+    return {"rms_N": rms, "rms_over_12N": rms / 12.0, "mean_at_1.15mm_N": float(mean[-1]),
+            "mean_at_0.55mm_N": float(np.interp(0.55e-3, U_t, mean))}
+
+
+def geometry_per_seed(ensemble: dict) -> list[dict]:
+    """Each run's ``post/geometry.csv`` at U = 0 and at its end: v_f (the study's definition) and the
+    Table 4 measure, the mean projected curvatures (the study: 0.241 / 0.248 at U = 0 and 0.228 /
+    0.221 at U = 1.15 mm, in its "m⁻¹")."""
+    rows = []
+    for seed, run in zip(ensemble["seeds"], ensemble["runs"]):
+        table = np.genfromtxt(Path(run) / "post" / "geometry.csv", delimiter=",", names=True)
+        pick = {"v_f": "volume_fraction", "curvature_xz_per_m": "curvature_xz_per_m",
+                "curvature_yz_per_m": "curvature_yz_per_m", "contacts_per_fiber": "contacts_per_fiber",
+                "max_penetration_m": "max_penetration_m"}
+        rows.append({"seed": seed, **{f"{k}_U0": float(table[c][0]) for k, c in pick.items()},
+                     **{f"{k}_end": float(table[c][-1]) for k, c in pick.items()}})
+    return rows
+
+
+def plot(folder: Path, figure: Path, summary: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fiberpipe.post.plots import _save
+    from fiberpipe.studies.fit import read_target
+
+    table = np.genfromtxt(folder / "ensemble.csv", delimiter=",", names=True)
+    U = table["U_m"] * 1e3
+    seeds = [c for c in table.dtype.names if c.startswith("load_seed_")]
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for k, c in enumerate(seeds):
+        ax.plot(U, table[c], color="0.65", lw=0.7, label="one specimen seed" if k == 0 else None)
+    mean, sd = table["load_mean_N"], table["load_sd_N"]
+    ax.fill_between(U, mean - sd, mean + sd, color="C0", alpha=0.3, label="ensemble mean ± 1 sd")
+    ax.plot(U, mean, "C0-", label=f"ensemble mean ({len(seeds)} seeds)")
+    U_t, F_t = read_target(TARGET)
+    ax.plot(U_t * 1e3, F_t, "k--", lw=1, label="the study's curve as its text gives it")
+    ax.plot([0.55, 1.12, 1.15], [0.24, 9.31, 12.0], "ko", ms=4, label="the study's stated points")
+    ax.set_xlabel("U [mm]")
+    ax.set_ylabel("load [N]")
+    ax.set_title(f"prediction from the study's statistics: {summary['final_load_mean_N']:.2f} N at 1.15 mm (study ≈ 12 N)",
+                 fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    _save(fig, figure)
+
+
+def main(argv=None) -> int:
+    from fiberpipe.artifacts import write_json_atomic
+    from fiberpipe.config import load_raw
+    from fiberpipe.studies.ensemble import final_load_statistics, run_ensembles
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=str(ROOT / "configs" / "specimens" / "study-prediction.yaml"))
+    ap.add_argument("--seeds", type=int, help="the first N seeds of specimen.seeds (default: all)")
+    ap.add_argument("--fast-only", action="store_true", help="skip the study-settings runs of the first two seeds")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "runs" / "study-prediction"))
+    ap.add_argument("--figure", help="the F(U) band against the study's points (default: OUT/prediction.png)")
+    args = ap.parse_args(argv)
+    raw = load_raw(args.config)
+    seeds = list(raw["specimen"]["seeds"])[: args.seeds or None]
+    out = Path(args.out)
+    # the study-settings runs first (the longest), the fast ones after
+    ensembles = {} if args.fast_only else {"study-settings": (raw, seeds[:2], out / "study-settings")}
+    ensembles["fast"] = (_with(raw, FAST), seeds, out / "fast")
+    results = run_ensembles(ensembles, workers=args.workers, specimen_store=out / "specimens", where=args.config)
+    fast = results["fast"]
+    summary = {**fast, "settings": "fast: " + ", ".join(f"{k} = {v}" for k, v in FAST.items()),
+               "final_load_statistics": final_load_statistics(fast["final_load_N"]),
+               "against_study": against_study(out / "fast"), "geometry": geometry_per_seed(fast)}
+    if "study-settings" in results:
+        summary["fast_settings_error"] = fast_settings_error(fast, results["study-settings"])
+    write_json_atomic(out / "ensemble.json", summary)
+    plot(out / "fast", Path(args.figure) if args.figure else out / "prediction.png", fast)
+    stats = summary["final_load_statistics"]
+    print(f"F(U = 1.15 mm) = {stats['mean_N']:.3g} ± {stats['mean_ci95_half_width_N']:.2g} N (95 % interval of the "
+          f"mean, {stats['n']} seeds, sd {stats['sd_N']:.3g} N); the study ≈ 12 N; {out}/ensemble.json")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
