@@ -40,23 +40,9 @@ from numba import njit
 
 from .geometry import apply_line_point, crossing_angle, line_closest_params, segment_distance2_s
 from ._specialise import specialise
+from .contact_pairs import ContactBuffers, gauss_points, record_pair  # noqa: F401  (shared with the potential formulation)
 from .contact_state import PairRecords
 from .laws import law_line, law_point, law_weight_point
-
-# Gauss–Legendre nodes on [0, 1] and weights (sum 1), orders 1…6
-_GL = {
-    n: ((np.polynomial.legendre.leggauss(n)[0] + 1.0) / 2.0, np.polynomial.legendre.leggauss(n)[1] / 2.0)
-    for n in range(1, 7)
-}
-
-
-def gauss_points(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss–Legendre nodes ξ ∈ (0, 1) and weights (summing to 1) of order ``n`` (1…6)."""
-    if n not in _GL:
-        raise ValueError(f"Gauss order must be 1…6, got {n}")
-    xi, w = _GL[n]
-    return xi.copy(), w.copy()
-
 
 JOINT_EPS = 1e-6
 
@@ -277,31 +263,6 @@ def _point_part(x, seg_nodes, law_params, f_out, rec, ints, scal, a0, b0, ta, tb
     return w * wst * ep
 
 
-@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
-def record_pair(out, k, rec, phi, n_active, use_list, use_share):
-    """The pair's records in ``out`` (:class:`~fiberpipe.solver.contact_state.PairRecords`) from its
-    accumulator ``rec`` (Σ|f|, Σf, Σ|f|·s, Σ|f|·t, max δ, share); returns the count of pairs in contact."""
-    fsum = rec[0]
-    if not fsum > 0.0:
-        return n_active
-    if use_list:
-        out.active[n_active] = k
-    fv = math.sqrt(rec[1] * rec[1] + rec[2] * rec[2] + rec[3] * rec[3])
-    out.fn[k] = fv
-    if fv > 0.0:
-        out.normal[k, 0] = rec[1] / fv
-        out.normal[k, 1] = rec[2] / fv
-        out.normal[k, 2] = rec[3] / fv
-    out.s[k] = rec[4] / fsum
-    out.t[k] = rec[5] / fsum
-    out.phi[k] = phi
-    out.delta[k] = rec[6]
-    if use_share:
-        out.share[k] = rec[7]
-        out.fsum[k] = fsum
-    return n_active + 1
-
-
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_forces_ex(x, seg_nodes, seg_radius, pairs, n_pairs, law_id, law_params, gxi, gw, f_out, out, c_off,
                       reach):
@@ -436,27 +397,6 @@ def contact_kernels_for(law):
         plain = specialise(contact_forces, f"contact_forces_{tag}", {"contact_forces_ex": cf}, cache=False, **flags)
         _LAW_KERNELS[key] = (cf, plain)
     return _LAW_KERNELS[key]
-
-
-class ContactBuffers:
-    """Per-pair output arrays for :func:`contact_forces`, grown with the neighbour list capacity."""
-
-    def __init__(self, capacity: int):
-        self.resize(capacity)
-
-    def resize(self, capacity: int):
-        capacity = max(int(capacity), 1)
-        self.capacity = capacity
-        self.fn = np.zeros(capacity)
-        self.n = np.zeros((capacity, 3))
-        self.s = np.zeros(capacity)
-        self.t = np.zeros(capacity)
-        self.phi = np.zeros(capacity)
-        self.delta = np.zeros(capacity)
-
-    def ensure(self, capacity: int):
-        if capacity > self.capacity:
-            self.resize(int(capacity * 1.5) + 16)
 
 
 def compute_contact(x, seg_nodes, seg_radius, pairs, n_pairs, law, f_out, buffers=None, n_gauss=4):

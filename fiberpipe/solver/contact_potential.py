@@ -43,7 +43,7 @@ from numba import njit, prange
 from .._prefetch import prefetch_row
 from .._tasks import task_count
 from ._specialise import specialise
-from .contact import record_pair
+from .contact_pairs import record_pair
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)

@@ -1,6 +1,6 @@
 """The contact hook's data as named structures (NamedTuples of arrays; a leaf module).
 
-:func:`fiberpipe.solver.contact_effect.contact_step` receives one :class:`ContactData`:
+:func:`fiberpipe.solver.terms.contact.contact_step` receives one :class:`ContactData`:
 
 - ``params`` (:class:`ContactParams`): the law and the friction settings, constant over a run;
 - ``stats`` (:class:`ContactStats`): counters and last-step figures, each a 1-element array so the

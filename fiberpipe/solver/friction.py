@@ -14,7 +14,7 @@ a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto 
 
 Dissipation, per contact and step: the energy the contact took from the fibers less what its
 spring stored (the step loop's ALLFD is the same sum taken on the nodes, over the contacts that left
-too: the node update books the friction forces' work, ``contact_effect._friction_pass`` the springs'), ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
+too: the node update books the friction forces' work, ``terms.contact._friction_pass`` the springs'), ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
 the relative displacement over the step at this step's contact point and ``Δu'`` at the point the
 previous force acted at (the contact point slides along the segments). The first term is the
 friction forces' work as the step loop books it (``½Δt f_n·(v_{n−½} + v_{n+½})``, summed by parts),

@@ -211,7 +211,7 @@ def clear_scene_planes(mesh, cfg: Config) -> float:
     it; the plane penalty would throw them off at the first step (paper-40: 65 nodes 0.28 µm inside
     the upper plate, 1.2e-5 J of kinetic energy, never lost at α = 0). Returns the largest initial
     penetration (m); nothing is moved when it is 0 or deeper than ``PLANE_CLEARANCE_MAX_FRACTION`` r
-    (then :func:`fiberpipe.solver.build.check_scene_geometry` names the plane that cuts the bundle).
+    (then :func:`fiberpipe.solver.terms.planes.check_scene_geometry` names the plane that cuts the bundle).
     """
     from fiberpipe.model.mesh import plane_penetration, resolve_overlaps
 
@@ -233,7 +233,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     bar (on a terminal only)."""
     from fiberpipe.solver.build import build_simulation
     from fiberpipe.solver.checkpoint import CHECKPOINT_NAME, SimulationInterrupted, write_checkpoint
-    from fiberpipe.solver.simulate import simulate
+    from fiberpipe.solver.integrator import simulate
 
     if resume not in ("auto", "require", "discard"):
         raise ValueError(f"resume must be auto, require or discard, got {resume!r}")
@@ -344,7 +344,7 @@ def settle_under_gravity(mesh, cfg: Config) -> dict:
     the wall time.
     """
     from fiberpipe.solver.build import build_simulation
-    from fiberpipe.solver.simulate import simulate
+    from fiberpipe.solver.integrator import simulate
 
     scfg = cfg.model_copy(deep=True)
     scfg.scene.effects = [e for e in scfg.scene.effects if e != "drives"]

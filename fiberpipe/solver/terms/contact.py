@@ -1,26 +1,30 @@
-"""The fiber–fiber contact/friction hook of the step loop: ``contact_effect(model, scene_cfg, material)``.
+"""The contact term: fiber–fiber normal contact and friction, and the friction of the fibers on the
+plates and walls (``scene.effects`` entries ``contact`` and ``friction``, blocks ``scene.contact`` and
+``scene.friction``).
 
-Builds a :class:`fiberpipe.solver.effects.ContactHook` whose kernel :func:`contact_step` runs once per
-step on a :class:`fiberpipe.solver.contact_state.ContactData` (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
+:class:`ContactEffect` builds a :class:`~fiberpipe.solver.terms.base.ContactHook` whose kernel
+:func:`contact_step` runs once per step on a :class:`fiberpipe.solver.contact_state.ContactData`
+(see ``docs/solver.md`` and ``docs/contact.md``):
 
 1. Verlet list: rebuilt when a node has moved more than skin/2 since the last build (or at the first
    call); the new list goes into the spare buffers, the friction history is remapped by pair key,
    then the buffers are swapped. Buffers live in numba typed lists inside ``data``, so the kernel
    grows them itself when :func:`fiberpipe.solver.neighbours.build_pairs` reports an overflow
    (no Python round trip, no lost contacts).
-2. Normal contact forces (:func:`fiberpipe.solver.contact.contact_forces`) with the scene's law.
+2. Normal contact forces (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`) with the
+   scene's law (one class each in ``laws.LAWS``).
 3. Friction (if ``friction`` is in ``scene.effects``): fiber–fiber
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
-   rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
-4. The normal contact forces stay in the hook's force array (``data.fc``, declared by the hook's
+   rule as ``_kernels_boundary.plane_contacts``, at the positions the plane pass wrote this step).
+4. The normal contact forces stay in the term's force array (``data.fc``, declared by its
    ``forces_of``), the friction forces in its friction array (``data.ff``, declared by its
    ``friction_of``): the step loop's update adds both to the nodes, books their work
    ``Δt f_n·v̄_n`` to ALLPW, and clears them, in the same pass over the nodes. The friction forces'
    work is also booked to the friction work (``energy/friction_work``, W_f) and, as a loss, to
    ALLFD, by halves over the displacement the friction springs' energy changes by:
    ``½Δt (f_{n−1} + f_n)·v_{n−½}`` at step n (``layout.ACC_WF_NEXT`` carries the second half). The
-   hook books the springs' energy change: ALLFD −= ΔE_springs and ALLPW −= ΔE_springs, so ALLFD =
+   term books the springs' energy change: ALLFD −= ΔE_springs and ALLPW −= ΔE_springs, so ALLFD =
    −W_f − ΔE_springs, and ALLPW = W_normal + W_f + ALLFD. With ETOTAL = KE + SE + VD + FD − WK − PW
    this keeps the balance (PW holds the elastic contact energy and the friction loss, as Abaqus'
    ALLPW includes penalty friction).
@@ -38,18 +42,18 @@ import numpy as np
 from numba import njit
 from numba.typed import List
 
-from ..errors import FiberpipeError
-from ._kernels_boundary import path_delta, plane_candidates, plane_position
-from .contact import contact_forces_ex, contact_kernels_for, gauss_points
-from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
-from .effects import ContactHook, register_effect
-from ._specialise import specialise
-from .contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
+from ...errors import FiberpipeError
+from .._kernels_boundary import path_delta, plane_candidates
+from ..contact_pairs import gauss_points
+from ..contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
+from .base import ContactHook, register_term
+from .._specialise import specialise
+from ..contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
-from .friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
-from .geometry import pair_gap
-from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
-from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2
+from ..friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
+from ..geometry import pair_gap
+from ..layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
+from ..neighbours import build_pairs, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -103,12 +107,11 @@ def _rebuild(x, data):
 
 @njit(inline="always", **_FLAGS)
 def _move_planes(planes, t, dt):
-    """The planes' positions and velocities at t_n (for their friction); returns how far any plane
-    moved since its candidate nodes were listed."""
+    """The planes' velocities at t_n (for their friction; their positions ``planes.pos`` are the plane
+    pass's, which ran before this term in the step); returns how far any plane moved since its
+    candidate nodes were listed."""
     moved = 0.0
     for p in range(planes.axis.shape[0]):
-        planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
-                                       planes.mode[p])
         vel = planes.sign[p] * path_delta(t, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p]) / dt
         planes.vel[p, 0] = 0.0
         planes.vel[p, 1] = 0.0
@@ -152,18 +155,9 @@ def _update_neighbours(x, v, dt, acc, data):
 
 @njit(inline="always", **_FLAGS)
 def _normal_forces(x, data, plist, rec, off, reach):
-    """The normal contact pass, formulation ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`):
-    forces into ``data.fc``, per-pair records into ``data.records[0]``; returns (energy, n_active)."""
-    prm, st, segs = data.params, data.stats, data.segs
-    return contact_forces_ex(x, segs.nodes, segs.radius, plist.pairs, st.n_pairs[0], prm.law_id,
-                             prm.law_params, prm.gauss_xi, prm.gauss_w, data.fc, rec, off, reach)
-
-
-@njit(inline="always", **_FLAGS)
-def _normal_forces_potential(x, data, plist, rec, off, reach):
-    """The normal contact pass, formulation ``potential``
-    (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every force minus the gradient of
-    the stored potential); same outputs as :func:`_normal_forces`."""
+    """The normal contact pass (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every
+    force minus the gradient of the stored potential): forces into ``data.fc``, per-pair records into
+    ``data.records[0]``; returns (energy, n_active)."""
     prm, st, segs = data.params, data.stats, data.segs
     return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], prm.law_id,
                               prm.law_params, prm.gauss_xi, prm.gauss_w, prm.onset_m, data.fc, rec, off, reach)
@@ -173,7 +167,7 @@ def _normal_forces_potential(x, data, plist, rec, off, reach):
 def _record_initial_overlaps(x, data, reach):
     """First call: each pair's penetration at t = 0 becomes its offset (released over
     ``params.release_s``), so overlapping input is pushed apart gradually."""
-    prm, st, segs = data.params, data.stats, data.segs
+    st, segs = data.stats, data.segs
     plist, rec = data.lists[0], data.records[0]
     n_pairs = st.n_pairs[0]
     _normal_forces(x, data, plist, rec, np.zeros(0), reach)
@@ -283,7 +277,7 @@ def contact_friction_of(data):
 
 @njit(**_FLAGS, **_NO_COUNTS)
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
-    """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring.
+    """The contact term's eval (the signature every term's has, ``terms.base``); see the module docstring.
 
     It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`)
     and ``data.ff`` (:func:`contact_friction_of`), which the step loop applies (a hook that wraps
@@ -357,15 +351,14 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     return n_active
 
 
-# contact_step and the potential formulation's normal pass, friction and statistics (_step_forces)
-# run without reference counts (``_nrt=False``; numba takes and releases a reference, an atomic count,
-# to every array of a structure it binds or hands to an inlined function, and the hook's functions
-# take the whole ContactData, some fifty arrays). They allocate nothing and are called only from
-# jitted code (no Python wrapper, which would need the counts to unbox the typed lists). The
-# functions that allocate set ``_nrt=True`` (a function compiled from one without counts inherits
-# that unless it sets its own): _rebuild, _first_steps (the offsets), the legacy formulation's
-# _step_forces (its kernels allocate) and the potential pass.
-_step_forces_pass = njit(**_FLAGS, _nrt=True)(_step_forces)
+# contact_step and its normal pass, friction and statistics (_step_forces) run without reference
+# counts (``_nrt=False``; numba takes and releases a reference, an atomic count, to every array of a
+# structure it binds or hands to an inlined function, and the term's functions take the whole
+# ContactData, some fifty arrays). They allocate nothing and are called only from jitted code (no
+# Python wrapper, which would need the counts to unbox the typed lists). The functions that allocate
+# set ``_nrt=True`` (a function compiled from one without counts inherits that unless it sets its
+# own): _rebuild, _first_steps (the offsets) and the potential pass.
+_step_forces_pass = njit(**_FLAGS, **_NO_COUNTS)(_step_forces)
 _first_steps_pass = njit(**_FLAGS, _nrt=True)(_first_steps)
 
 
@@ -435,7 +428,8 @@ def _segments(model) -> Segments:
 
 
 def _plane_friction_of(model, scene) -> PlaneFriction:
-    """The scene's planes as :class:`PlaneFriction` (their own copies of the ramp arrays)."""
+    """The scene's planes as :class:`PlaneFriction`: their own copies of the ramp arrays, and the positions
+    the step loop's plane pass writes (``scene.plane_positions()``, the same array)."""
     N = model.n_nodes
     P = scene.pl_axis.size
     k_pen = scene.k_pen() if P > 0 else np.zeros(0)
@@ -445,49 +439,30 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
         np.ascontiguousarray(model.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
         np.ascontiguousarray(onset),
         scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), pos0, scene.pl_move.astype(np.float64),
-        scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64), pos0.copy(),
+        scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64),
+        scene.plane_positions(),
         np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), np.zeros(N * P, np.int64),
         np.zeros(P + 1, np.int64), pos0.copy())
 
 
 _CUSTOM_KERNELS: dict = {}
 
-# the formulation's normal pass, bound into contact_step and _record_initial_overlaps by name
-FORMULATIONS = {"legacy": _normal_forces, "potential": _normal_forces_potential}
-
-# the built-in laws with the potential formulation: a second cached copy of the hook kernel
-_record_initial_overlaps_potential = specialise(
-    _record_initial_overlaps, "_record_initial_overlaps_potential", {"_normal_forces": _normal_forces_potential},
-    cache=True, fastmath=True, error_model="numpy")
-_step_forces_potential = specialise(_step_forces, "_step_forces_potential",
-                                    {"_normal_forces": _normal_forces_potential}, cache=True, fastmath=True,
-                                    error_model="numpy", **_NO_COUNTS)
-_first_steps_potential = specialise(
-    _first_steps, "_first_steps_potential",
-    {"_step_forces_pass": _step_forces_potential, "_record_initial_overlaps": _record_initial_overlaps_potential},
-    cache=True, fastmath=True, error_model="numpy", _nrt=True)
-contact_step_potential = specialise(
-    contact_step, "contact_step_potential",
-    {"_step_forces_pass": _step_forces_potential, "_first_steps_pass": _first_steps_potential},
-    cache=True, fastmath=True, error_model="numpy", **_NO_COUNTS)
-
 
 _SPEC = dict(fastmath=True, error_model="numpy")
 
 
 def _potential_pass(forces, tag: str):
-    """:func:`_normal_forces_potential` calling ``forces`` (a copy of ``contact_forces_pot``)."""
-    return specialise(_normal_forces_potential, f"_normal_forces_{tag}", {"contact_forces_pot": forces}, cache=False,
+    """:func:`_normal_forces` calling ``forces`` (a copy of ``contact_forces_pot``)."""
+    return specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_pot": forces}, cache=False,
                       inline="always", **_SPEC)
 
 
-def _step_with(normal_pass, tag: str, overlaps, counts: bool = False, friction_pass=_friction_pass):
+def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass):
     """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass, ``friction_pass`` as its
-    friction and ``overlaps`` recording the initial overlaps (not cached); ``counts``: its forces part
-    with reference counts (the legacy formulation)."""
+    friction and ``overlaps`` recording the initial overlaps (not cached)."""
     forces = specialise(_step_forces, f"_step_forces_{tag}",
                         {"_normal_forces": normal_pass, "_friction_pass": friction_pass}, cache=False,
-                        **(dict(_nrt=True) if counts else _NO_COUNTS), **_SPEC)
+                        **_NO_COUNTS, **_SPEC)
     first = specialise(_first_steps, f"_first_steps_{tag}",
                        {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, _nrt=True,
                        **_SPEC)
@@ -495,7 +470,7 @@ def _step_with(normal_pass, tag: str, overlaps, counts: bool = False, friction_p
                       cache=False, **_NO_COUNTS, **_SPEC)
 
 
-# solver.threads > 1 with the built-in laws and the potential formulation: the pairs in prange tasks
+# solver.threads > 1 with the built-in laws: the pairs in prange tasks
 # (a parfor kernel, not cached: see _kernels_beam.beam_pass_fibers); the initial overlaps, recorded
 # once, by the serial pass
 # the fiber–fiber friction's pairs in prange tasks too (friction.friction_forces_tasks: the same forces)
@@ -503,35 +478,22 @@ _friction_pass_threads = specialise(_friction_pass, "_friction_pass_threads",
                                     {"friction_forces_ex": friction_forces_tasks}, cache=False, inline="always",
                                     **_SPEC)
 contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_threads, "potential_threads"),
-                                            "potential_threads", _record_initial_overlaps_potential,
+                                            "potential_threads", _record_initial_overlaps,
                                             friction_pass=_friction_pass_threads)
 
 
-def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
-    """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
-    (``legacy`` or ``potential``): the built-in kernels (cached on disk) for a law without
-    ``kernels``; else copies of the contact kernels specialised on the law's own jitted
-    ``(line, point, weight_point)`` functions (compiled once per process, law class and formulation).
-    ``threads``: the variant for ``solver.threads`` > 1, whose potential normal pass evaluates its
-    pairs in parallel tasks (same result bit for bit; not cached); the legacy pass stays serial."""
-    if formulation not in FORMULATIONS:
-        raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
-    threads = threads and formulation == "potential"
+def contact_kernel_for(law, threads: bool = False):
+    """``(contact_step kernel, cache name)`` for ``law``: the built-in kernel (cached on disk) for a law
+    without ``kernels``; else copies of the contact kernels specialised on the law's own jitted
+    ``(line, point, weight_point)`` functions (compiled once per process and law class). ``threads``:
+    the variant for ``solver.threads`` > 1, whose normal pass evaluates its pairs in parallel tasks
+    (same result bit for bit; not cached)."""
     if law.kernels is None:
-        if threads:
-            return contact_step_potential_threads, None
-        if formulation == "potential":
-            return contact_step_potential, "advance_contact_potential"
-        return contact_step, "advance_contact"
-    key = (type(law), formulation, threads)
+        return (contact_step_potential_threads, None) if threads else (contact_step, "contact")
+    key = (type(law), threads)
     if key not in _CUSTOM_KERNELS:
-        tag = f"{type(law).__name__}_{formulation}"
-        if formulation == "potential":
-            nf = _potential_pass(potential_kernels_for(law), tag)
-        else:
-            cf, _ = contact_kernels_for(law)
-            nf = specialise(_normal_forces, f"_normal_forces_{tag}", {"contact_forces_ex": cf}, cache=False,
-                            inline="always", **_SPEC)
+        tag = f"{type(law).__name__}_potential"
+        nf = _potential_pass(potential_kernels_for(law), tag)
         # the initial overlaps, recorded once, by the law's serial pass (also with threads)
         overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
                               cache=False, **_SPEC)
@@ -540,8 +502,7 @@ def contact_kernel_for(law, formulation: str = "potential", threads: bool = Fals
             tag += "_threads"
             nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
             friction = _friction_pass_threads
-        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, counts=formulation != "potential",
-                                          friction_pass=friction)
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, friction_pass=friction)
     return _CUSTOM_KERNELS[key], None
 
 
@@ -558,7 +519,7 @@ def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *
     step checked it) and does not couple. ``rep``: the model's
     :func:`~fiberpipe.solver.timestep.stable_time_step` report, when the caller holds it.
     """
-    from .timestep import stable_time_step
+    from ..timestep import stable_time_step
 
     rep = stable_time_step(model) if rep is None else rep
     m_min = float(np.min(model.mass))
@@ -611,7 +572,7 @@ class ContactSlopeWatch:
     """
 
     def __init__(self, model, dt: float, law, stats, onset_m: float, dt_safety: float = 1.0):
-        from .timestep import stable_time_step
+        from ..timestep import stable_time_step
 
         self.model, self.dt, self.law, self.stats, self.onset_m = model, float(dt), law, stats, float(onset_m)
         self.dt_safety = min(float(dt_safety), 1.0)
@@ -665,7 +626,7 @@ class ContactSlopeWatch:
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
-                      plane_friction_on: bool = True, formulation: str = "potential", onset_m: float = 0.0):
+                      plane_friction_on: bool = True, onset_m: float = 0.0):
     """A :class:`ContactHook` for ``model`` (Python API; ``build.build_simulation`` maps a config onto it).
 
     law : ContactLaw. contact : fiber–fiber normal contact on. friction : Coulomb friction on
@@ -674,11 +635,10 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin (default 0.2 r_max).
     n_gauss : Gauss points per segment in the line part. overlap_release_s : s, the initial overlap
     of each segment pair (its penetration at the first step) is subtracted from its penetration and
-    released linearly to 0 over this time (0: no offset, the overlap acts at once). formulation :
-    the normal contact kernel, ``legacy`` (:func:`fiberpipe.solver.contact.contact_forces_ex`) or
-    ``potential`` (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`, every force minus
-    the gradient of the stored potential). onset_m : m, formulation ``potential``: the penetration over
-    which force and stiffness rise from zero (0: the laws as they are).
+    released linearly to 0 over this time (0: no offset, the overlap acts at once). onset_m : m, the
+    penetration over which force and stiffness rise from zero (0: the laws as they are). The normal
+    pass is :func:`fiberpipe.solver.contact_potential.contact_forces_pot` (every force minus the
+    gradient of the stored potential).
     """
     segs = _segments(model)
     E = model.n_elements
@@ -692,7 +652,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         raise FiberpipeError(f"contact.overlap_release must be >= 0, got {overlap_release_s}")
     if not (onset_m >= 0 and math.isfinite(onset_m)):
         raise FiberpipeError(f"contact.onset must be >= 0, got {onset_m}")
-    kernel, cache_name = contact_kernel_for(law, formulation)
+    kernel, cache_name = contact_kernel_for(law)
     info = ContactSetup(law, contact, friction, mu, k_t, skin, n_gauss)
 
     def prepare(model_, scene):
@@ -716,7 +676,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
 
     hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, friction_of=contact_friction_of,
                        cache_name=cache_name,
-                       kernel_threads=contact_kernel_for(law, formulation, threads=True)[0])
+                       kernel_threads=contact_kernel_for(law, threads=True)[0])
     hook.setup_info = info
     hook.make_watch = lambda model_, dt, dt_safety=1.0: ContactSlopeWatch.for_hook(model_, dt, hook, dt_safety)
     if not contact:
@@ -724,22 +684,21 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     return hook
 
 
-@register_effect("contact", "friction")
+@register_term("contact", "friction")
 class ContactEffect:
     """``scene.effects`` entries ``contact`` and ``friction``: one :class:`ContactHook` for both."""
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        """The hook of ``scene.contact`` (law, skin, overlap_release) and ``scene.friction`` (mu,
-        stiffness = k_t in N/m), for the material of ``cfg.material``."""
-        from .laws import law_from_config
+    def from_config(cls, scene_cfg, model, cfg):
+        """The term of ``scene.contact`` (law, skin, overlap_release, onset, gauss_points) and
+        ``scene.friction`` (mu, stiffness = k_t in N/m), for the material of ``cfg.material``."""
+        from ..laws import law_from_config
 
-        effects = list(sc.effects)
-        ccfg, fcfg = sc.contact, sc.friction
+        effects = list(scene_cfg.effects)
+        ccfg, fcfg = scene_cfg.contact, scene_cfg.friction
         return make_contact_hook(model, law=law_from_config(ccfg, cfg.material), contact="contact" in effects,
                                  friction="friction" in effects, mu=float(fcfg.mu),
                                  overlap_release_s=float(ccfg.overlap_release),
                                  k_t=None if fcfg.stiffness is None else float(fcfg.stiffness),
                                  skin_m=None if ccfg.skin is None else float(ccfg.skin),
-                                 n_gauss=int(ccfg.gauss_points), formulation=ccfg.formulation,
-                                 onset_m=float(ccfg.onset))
+                                 n_gauss=int(ccfg.gauss_points), onset_m=float(ccfg.onset))
