@@ -400,13 +400,13 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
 
 
 @njit(**_FLAGS)
-def check_row(model, state, row, ke, se, vmax2, ctl):
+def check_row(model, state, row, ke, se, vmax2, control):
     """The blow-up checks at a history row: ``(status, bad node or -1)``."""
     if not (ke == ke) or not (se == se) or vmax2 == np.inf:
         return STATUS_NAN, -1
-    if vmax2 > ctl.v_limit_m_s * ctl.v_limit_m_s:
+    if vmax2 > control.v_limit_m_s * control.v_limit_m_s:
         return STATUS_SPEED, -1
-    emax = ctl.e_ref_J
+    emax = control.e_ref_J
     if abs(row[H_WK]) > emax:
         emax = abs(row[H_WK])
     if abs(row[H_PW]) > emax:
@@ -414,7 +414,7 @@ def check_row(model, state, row, ke, se, vmax2, ctl):
     if ke > 1e3 * emax:
         return STATUS_ENERGY, -1
     x, x0 = state.x, model.x0
-    lim2 = ctl.x_limit_m * ctl.x_limit_m
+    lim2 = control.x_limit_m * control.x_limit_m
     for i in range(x.shape[0]):
         ddx = x[i, 0] - x0[i, 0]
         ddy = x[i, 1] - x0[i, 1]
@@ -433,8 +433,8 @@ def _node_array(a, n):
     return np.zeros((n, 3)), False
 
 
-def _advance_template(model, scene, state, work, ctl, terms, owner):
-    """Advance ``state`` by up to ``ctl.n_steps`` steps of ``ctl.dt_s`` (s).
+def _advance_template(model, scene, state, work, control, terms, owner):
+    """Advance ``state`` by up to ``control.n_steps`` steps of ``control.dt_s`` (s).
 
     ``terms``: the per-step terms' entries as a chain ``((data, history column), rest)`` ending in
     ``()`` (:func:`terms_chain`); ``owner``: the data of the term whose force arrays the update applies
@@ -442,8 +442,8 @@ def _advance_template(model, scene, state, work, ctl, terms, owner):
     ``layout.STATUS_*`` code (not OK: the state is the one at the check that failed).
     """
     x, q, v, w, acc = state
-    dt = ctl.dt_s
-    h_row = ctl.h_row
+    dt = control.dt_s
+    h_row = control.h_row
     hist = work.hist
     P = scene.planes.axis.shape[0]
     beta_over_dt = scene.beta_s / dt if scene.beta_s > 0.0 else 0.0
@@ -465,10 +465,10 @@ def _advance_template(model, scene, state, work, ctl, terms, owner):
     status = STATUS_OK
     bad = -1
     done = 0
-    for it in range(ctl.n_steps):
-        step = ctl.step_start + it
-        t = ctl.t_start_s + it * dt
-        record = ((step + 1) % ctl.history_every == 0) and h_row < hist.shape[0]
+    for it in range(control.n_steps):
+        step = control.step_start + it
+        t = control.t_start_s + it * dt
+        record = ((step + 1) % control.history_every == 0) and h_row < hist.shape[0]
         if record:
             for k in range(ACC_SIZE):
                 acc_before[k] = acc[k]
@@ -511,7 +511,7 @@ def _advance_template(model, scene, state, work, ctl, terms, owner):
             write_history(model, scene, state, work, h_row, acc_before, t, dt, (ke, ke_lf, se, shift), n_contacts)
             _terms_record(hist[h_row], terms)
             h_row += 1
-            status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, ctl)
+            status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, control)
             if bad_x >= 0:
                 bad = bad_x
             if status != STATUS_OK:

@@ -74,7 +74,7 @@ class Checkpoint:
     wall_time_s: float
     effects: list
     # integrator arrays
-    integ: dict
+    integrator_arrays: dict
     # output so far
     hist: np.ndarray  # (h_row, C)
     frames_time: np.ndarray
@@ -183,7 +183,7 @@ def write_checkpoint(path: str | Path, ck: Checkpoint, *, config_sha256: str = "
     }
     units = {"state/x": "m", "state/v": "m/s", "state/w": "rad/s", "state/acc": "J",
              "frames/time": "s", "frames/positions": "m"}
-    for k, a in ck.integ.items():
+    for k, a in ck.integrator_arrays.items():
         ds[f"integrator/{k}"] = a
     specs: dict = {}
     for name, data in ck.term_data.items():
@@ -227,7 +227,7 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
         eff = {}
         for ename, keys in json.loads(a.get("effect_arrays", "{}")).items():
             eff[ename] = {k: art[f"effects/{ename}/{k}"] for k in keys}
-        integ = {k[len("integrator/"):]: v for k, v in art.data.items() if k.startswith("integrator/")}
+        arrays = {k[len("integrator/"):]: v for k, v in art.data.items() if k.startswith("integrator/")}
         return Checkpoint(
             x=art["state/x"], q=art["state/q"], v=art["state/v"], w=art["state/w"], acc=art["state/acc"],
             t=float(a["t_s"]), step=int(a["step"]), origin_step=int(a["origin_step"]),
@@ -235,7 +235,7 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             chunk_steps=int(a["chunk_steps"]), checkpoint_every=int(a["checkpoint_every"]),
             e0_ke=float(a["e0_kinetic_J"]), e0_se=float(a["e0_strain_J"]), wall_time_s=float(a["wall_time_s"]),
             effects=json.loads(a["effects"]) if isinstance(a["effects"], str) else list(a["effects"]),
-            integ=integ, hist=art["history/rows"], frames_time=art["frames/time"],
+            integrator_arrays=arrays, hist=art["history/rows"], frames_time=art["frames/time"],
             frames_positions=art["frames/positions"], frames_rotations=art["frames/rotations"],
             term_data=terms, effect_arrays=eff,
         )

@@ -411,8 +411,8 @@ def advance(model: Model, state: State, n_steps: int, effects: Sequence[Term] = 
     """
     if dt is None:
         dt, _ = choose_time_step(model, effects, SimulationSettings())
-    integ = Integrator(model, effects, dt, history_every=max(1, n_steps))
-    status, done, bad = integ.advance(state, n_steps)
+    integrator = Integrator(model, effects, dt, history_every=max(1, n_steps))
+    status, done, bad = integrator.advance(state, n_steps)
     if status != STATUS_OK:
         raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None))
     return state
@@ -657,7 +657,7 @@ class _Run:
     def _restore(self, resume: Checkpoint) -> None:
         """Put a checkpoint's integrator arrays, history, term data, term arrays and frames back."""
         integrator = self.integrator
-        integrator.restore_arrays(resume.integ)
+        integrator.restore_arrays(resume.integrator_arrays)
         h = np.asarray(resume.hist)
         if h.shape[0] > self.plan.history_rows or h.shape[1] != integrator.hist.shape[1]:
             raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integrator.hist.shape}")
@@ -691,7 +691,7 @@ class _Run:
             t=state.t, step=state.step, origin_step=self.origin, total_steps=plan.total_steps, dt_s=plan.dt_s,
             history_every=plan.history_every, chunk_steps=plan.chunk_steps, checkpoint_every=plan.checkpoint_every,
             e0_ke=self.ke0, e0_se=self.se0, wall_time_s=self.wall_before + time.perf_counter() - self.t_wall,
-            effects=[term.name for term in self.effects], integ=integrator.snapshot_arrays(),
+            effects=[term.name for term in self.effects], integrator_arrays=integrator.snapshot_arrays(),
             hist=integrator.hist[:integrator.h_row].copy(), frames_time=times, frames_positions=positions,
             frames_rotations=rotations, term_data=integrator.snapshot_terms(),
             effect_arrays={term.name: dict(term.checkpoint_arrays()) for term in self.effects

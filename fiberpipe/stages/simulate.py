@@ -179,19 +179,19 @@ def scene_planes(cfg: Config) -> list[tuple[int, float, float]]:
     """The scene's rigid planes at t = 0 as ``(axis, position_m, sign)`` (sign +1: lower plane),
     for :func:`fiberpipe.model.mesh.resolve_overlaps`; plates without a set position are placed
     on the fibers by the solver, so they cannot overlap and are left out."""
-    sc = cfg.scene
-    effects = set(sc.effects or ())
+    scene_cfg = cfg.scene
+    effects = set(scene_cfg.effects or ())
     axes = {"x": 0, "y": 1, "z": 2}
     planes = []
-    if "plates" in effects and sc.plates is not None:
-        p = sc.plates
+    if "plates" in effects and scene_cfg.plates is not None:
+        p = scene_cfg.plates
         if p.lower != "none" and p.lower_position is not None:
             planes.append((axes[p.axis], float(p.lower_position), 1.0))
         if p.upper != "none" and p.upper_position is not None:
             planes.append((axes[p.axis], float(p.upper_position), -1.0))
-    if "walls" in effects and sc.walls is not None:
+    if "walls" in effects and scene_cfg.walls is not None:
         for name, ax in axes.items():
-            w = getattr(sc.walls, name)
+            w = getattr(scene_cfg.walls, name)
             if w is not None:
                 planes.append((ax, float(w[0]), 1.0))
                 planes.append((ax, float(w[1]), -1.0))

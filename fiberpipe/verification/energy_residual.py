@@ -21,7 +21,7 @@ RESIDUAL_TOLERANCE = 1e-3
 _open: list[list[float]] = []
 
 
-def simulate(*args, **kwargs):
+def recorded_simulate(*args, **kwargs):
     """:func:`fiberpipe.solver.integrator.simulate`; its run's largest |energy residual| goes to every open recorder."""
     res = _solver_simulate(*args, **kwargs)
     r = np.asarray(res.history.get("energy/residual", ()), dtype=float)

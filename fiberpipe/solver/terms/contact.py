@@ -69,10 +69,10 @@ _NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)  # see _step_forces_pass 
 def _rebuild(x, data):
     """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
     history and the initial-overlap offsets, swap."""
-    prm, st, segs = data.params, data.stats, data.segs
+    params, st, segs = data.params, data.stats, data.segs
     while True:
         spare = data.lists[1]
-        n = build_pairs(x, segs.nodes, segs.radius, segs.fiber, segs.arc, prm.skin_m, prm.exclusion_m,
+        n = build_pairs(x, segs.nodes, segs.radius, segs.fiber, segs.arc, params.skin_m, params.exclusion_m,
                         spare.pairs, spare.keys)
         if n >= 0:
             break
@@ -81,7 +81,7 @@ def _rebuild(x, data):
     if data.records[0].fn.shape[0] < n:
         data.records[0] = new_records(spare.pairs.shape[0])
     cur = data.lists[0]
-    if prm.friction_on:
+    if params.friction_on:
         remap_history(cur.keys, st.n_pairs[0], cur.friction, spare.keys, n, spare.friction)
     if st.offset_max_m[0] > 0.0:
         remap_history(cur.keys, st.n_pairs[0], cur.offset, spare.keys, n, spare.offset)
@@ -158,9 +158,9 @@ def _normal_forces(x, data, plist, rec, off, reach):
     """The normal contact pass (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every
     force minus the gradient of the stored potential): forces into ``data.fc``, per-pair records into
     ``data.records[0]``; returns (energy, n_active)."""
-    prm, st, segs = data.params, data.stats, data.segs
-    return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], prm.law_id,
-                              prm.law_params, prm.gauss_xi, prm.gauss_w, prm.onset_m, data.fc, rec, off, reach)
+    params, st, segs = data.params, data.stats, data.segs
+    return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], params.law_id,
+                              params.law_params, params.gauss_xi, params.gauss_w, params.onset_m, data.fc, rec, off, reach)
 
 
 @njit(**_FLAGS)
@@ -219,15 +219,15 @@ def _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls):
     plane's candidates) leaves none of its work unbooked. ALLFD is then ``−W_f − ΔE_springs``. The
     contacts' own sums (the kernels' first return, module ``friction``) are not used for it; their
     negative parts are summed apart (``friction_returned_J``)."""
-    prm, st, ff = data.params, data.stats, data.ff
+    params, st, ff = data.params, data.stats, data.ff
     e_springs = 0.0
-    if prm.friction_on:
-        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
-                                          prm.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
+    if params.friction_on:
+        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, params.mu,
+                                          params.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
         e_springs += esp
         st.friction_returned_J[0] += back
     if plane_fric:
-        _, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, ff, calls, True)
+        _, espl, back = plane_friction(x, v, data.planes, params.mu, params.kt_n_per_m, dt, ff, calls, True)
         e_springs += espl
         st.friction_returned_J[0] += back
     diss = -(e_springs - st.e_spring_J[0])
@@ -283,18 +283,18 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     and ``data.ff`` (:func:`contact_friction_of`), which the step loop applies (a hook that wraps
     this one must add those arrays to ``f`` itself).
     """
-    prm, st = data.params, data.stats
+    params, st = data.params, data.stats
     calls = st.calls[0]
     st.calls[0] = calls + 1
     P = data.planes.axis.shape[0]
-    plane_fric = prm.plane_friction_on and P > 0
+    plane_fric = params.plane_friction_on and P > 0
     plane_moved = _move_planes(data.planes, t, dt) if plane_fric else 0.0
     rebuild = _update_neighbours(x, v, dt, acc, data)
     # the nodes near each plane, for its friction: a node touching now was within 1.5 skin of the
     # plane when the list was made (it moved < skin since: ≤ skin/2 since the neighbour-list build
     # before it and ≤ skin/2 after; the plane moved ≤ skin/2), so the list is remade with every
     # neighbour-list build and whenever a plane has moved skin/2 since
-    half_skin = 0.5 * prm.skin_m
+    half_skin = 0.5 * params.skin_m
     if plane_fric and (rebuild or plane_moved > half_skin):
         pl = data.planes
         plane_candidates(x, pl.radius_node, pl.axis, pl.sign, pl.pos, 3.0 * half_skin, pl.cand_idx, pl.cand_off)
@@ -327,7 +327,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     """Steps 3–5 of :func:`contact_step` (module docstring): the normal pass, the friction, the energies
     and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; returns the number
     of pairs in contact."""
-    prm, st = data.params, data.stats
+    params, st = data.params, data.stats
     # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
     energy, n_active = _normal_forces(x, data, plist, rec, off, reach)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
@@ -340,7 +340,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
         acc[ACC_WK] += wrel * (rel_prev - rel)
     st.e_contact_J[0] = energy
     diss = 0.0
-    if prm.friction_on or plane_fric:
+    if params.friction_on or plane_fric:
         diss = _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls)
     # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
     acc[ACC_STORED] += energy + st.e_spring_J[0]

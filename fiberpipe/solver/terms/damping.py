@@ -38,8 +38,8 @@ class Damping(Term):
             setattr(self, k, val)
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        return cls(float(sc.damping.alpha), float(sc.damping.beta))
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls(float(scene_cfg.damping.alpha), float(scene_cfg.damping.beta))
 
     def setup(self, model, scene):
         scene.alpha = self.alpha_per_s

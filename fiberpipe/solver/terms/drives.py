@@ -53,8 +53,8 @@ class Drives(Term):
         return T / (1.0 - d.ramp_fraction) if d.ramp == "smooth" else T
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        return cls([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in sc.drives])
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls([Drive(d.fiber, list(d.displacement), float(d.velocity)) for d in scene_cfg.drives])
 
     def setup(self, model, scene):
         m = scene.mask()

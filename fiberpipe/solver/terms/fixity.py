@@ -43,8 +43,8 @@ class Clamps(Term):
         self.clamps = out
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        return cls([Clamp(c.fiber, c.at) for c in sc.clamps])
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls([Clamp(c.fiber, c.at) for c in scene_cfg.clamps])
 
     def setup(self, model, scene):
         m = scene.mask()
@@ -75,8 +75,8 @@ class AxialLock(Term):
             raise FiberpipeError(f"constraints lock_axial must be all or ends, got {self.nodes!r}")
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        return cls(axis=sc.constraints.axis, nodes=sc.constraints.lock_axial)
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls(axis=scene_cfg.constraints.axis, nodes=scene_cfg.constraints.lock_axial)
 
     def setup(self, model, scene):
         m = scene.mask()

@@ -25,8 +25,8 @@ class Gravity(Term):
         self.acceleration_m_s2 = _vec3(self.acceleration_m_s2, "gravity.acceleration")
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        return cls(list(sc.gravity.acceleration))
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls(list(scene_cfg.gravity.acceleration))
 
     def setup(self, model, scene):
         scene.ext()[:] += (model.mass / model.mass_scale)[:, None] * self.acceleration_m_s2[None, :]

@@ -56,9 +56,9 @@ class Loads(Term):
         self.loads = out
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
+    def from_config(cls, scene_cfg, model, cfg):
         return cls([LineLoad(ld.fiber, list(ld.line_force)) if ld.line_force is not None
-                    else PointLoad(ld.fiber, list(ld.force), ld.at) for ld in sc.loads])
+                    else PointLoad(ld.fiber, list(ld.force), ld.at) for ld in scene_cfg.loads])
 
     def setup(self, model, scene):
         f = scene.ext()

@@ -209,8 +209,8 @@ class Plates(Term):
         return total
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        p, ld = sc.plates, sc.loading
+    def from_config(cls, scene_cfg, model, cfg):
+        p, ld = scene_cfg.plates, scene_cfg.loading
         return cls(axis=p.axis, lower=p.lower, upper=p.upper, displacement_m=float(ld.displacement),
                    velocity_m_s=float(ld.velocity), ramp=ld.ramp, ramp_fraction=float(ld.ramp_fraction),
                    lower_position_m=p.lower_position, upper_position_m=p.upper_position,
@@ -300,8 +300,8 @@ class Walls(Term):
         self.planes = out
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        w = sc.walls
+    def from_config(cls, scene_cfg, model, cfg):
+        w = scene_cfg.walls
         return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None},
                    penalty_factor=float(w.penalty_factor), onset_fraction=float(w.onset_fraction))
 
