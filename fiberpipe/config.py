@@ -553,7 +553,10 @@ class DriveConfig(Section):
 
 
 class SceneConfig(Section):
-    effects: list[str] = Field(default_factory=list)
+    effects: list[str] = Field(
+        default_factory=list, description="the terms the scene runs: gravity, damping, contact, friction, plates, "
+        "walls, clamps, loads, drives, constraints, or the name of a term a program registered "
+        "(fiberpipe.solver.register_term; its block is scene.<name>)")
     gravity: Optional[GravityConfig] = None
     damping: Optional[DampingConfig] = None
     contact: Optional[ContactConfig] = None
@@ -567,7 +570,9 @@ class SceneConfig(Section):
     constraints: Optional[ConstraintsConfig] = None
     # the blocks of registered terms outside this schema (``scene.<name>``), validated by the term's
     # own ``config_block``; read them with :meth:`block`
-    term_blocks: dict[str, Any] = Field(default_factory=dict)
+    term_blocks: dict[str, Any] = Field(
+        default_factory=dict, description="the blocks of registered terms, each validated by its term's own "
+        "section; written as scene.<name> (they are collected here)")
 
     @model_validator(mode="before")
     @classmethod

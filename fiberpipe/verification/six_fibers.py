@@ -72,13 +72,15 @@ def six_fibers_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_
     """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibers
     (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;
     ``steps``: run that many steps instead of ``t_end_s``)."""
+    if formulation != "potential":
+        raise ValueError(f"formulation must be 'potential' (the only one), got {formulation!r}")
     m, pitch = six_fibers(lift_m=lift_m)
     planes = dict(penalty_factor=penalty_factor, onset_fraction=onset_fraction)
 
     def effects():
         return [Loads([LineLoad(4, (0, 0, -q_n_per_m)), LineLoad(5, (0, 0, -q_n_per_m))]),
                 Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, **planes),
-                Walls({"y": (0.0, 4 * pitch + GAP_M)}, **planes), contact_hook(m, law=law, formulation=formulation)]
+                Walls({"y": (0.0, 4 * pitch + GAP_M)}, **planes), contact_hook(m, law=law)]
 
     settings = SimulationSettings(end_time_s=t_end_s, output_frames=3, history_every=100, dt_safety=dt_safety)
     if steps is not None:

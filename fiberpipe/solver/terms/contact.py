@@ -308,7 +308,7 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     # no offsets: an empty array (a view, not an allocation), as _overlap_offsets returns then; the
     # list in use and the records read without a reference (borrowed_item): the lists hold them
     return _step_forces_pass(x, v, acc, dt, data, borrowed_item(data.lists, 0), borrowed_item(data.records, 0),
-                             st.path_m[:0], 0.0, 0.0, reach, calls, plane_fric)
+                             (st.path_m[:0], 0.0, 0.0), reach, calls, plane_fric)
 
 
 def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
@@ -319,15 +319,17 @@ def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
         st.overlaps_done[0] = 1
         _record_initial_overlaps(x, data, reach)
     off, rel, rel_prev = _overlap_offsets(data, t, dt)
-    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], off, rel, rel_prev, reach, calls,
+    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], (off, rel, rel_prev), reach, calls,
                              plane_fric)
 
 
-def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, calls, plane_fric):
+def _step_forces(x, v, acc, dt, data, plist, rec, release, reach, calls, plane_fric):
     """Steps 3–5 of :func:`contact_step` (module docstring): the normal pass, the friction, the energies
-    and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; returns the number
-    of pairs in contact."""
+    and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; ``release``: the
+    initial overlaps' offsets and release factors ``(off, rel, rel_prev)`` (:func:`_overlap_offsets`);
+    returns the number of pairs in contact."""
     params, st = data.params, data.stats
+    off, rel, rel_prev = release
     # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
     energy, n_active = _normal_forces(x, data, plist, rec, off, reach)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
