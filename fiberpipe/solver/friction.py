@@ -445,5 +445,4 @@ def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce
                          np.asarray(sign, float), np.asarray(pos, float).copy(), z, np.ones(P), z.copy(),
                          np.zeros(P, np.int64), np.asarray(pos, float), np.asarray(vel, float), hist, tforce,
                          np.zeros(0, np.int64) if cand_idx is None else np.asarray(cand_idx, np.int64),
-                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64),
-                         np.asarray(pos, float).copy())
+                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64))

@@ -148,6 +148,7 @@ class SceneArrays:
         self.plate_axis = None
         self.end_time_hint = 0.0
         self._plane_pos = None
+        self._plane_candidates = None
         self._n = n
 
     # helpers used by the effects
@@ -182,6 +183,15 @@ class SceneArrays:
         if self._plane_pos is None or self._plane_pos.size != self.pl_axis.size:
             self._plane_pos = self.pl_pos0.astype(np.float64)
         return self._plane_pos
+
+    def plane_candidates(self) -> tuple[np.ndarray, np.ndarray]:
+        """The nodes listed near each plane, ``(cand_idx (N·P,), cand_off (P + 1,))``: one pair of arrays,
+        which the step loop's plane pass keeps (``_kernels_boundary.plane_candidates``) and the contact
+        term's plane friction visits (made once, after every plane is added)."""
+        n, P = self.model.n_nodes, self.pl_axis.size
+        if self._plane_candidates is None or self._plane_candidates[1].size != P + 1:
+            self._plane_candidates = (np.zeros(n * P, np.int64), np.zeros(P + 1, np.int64))
+        return self._plane_candidates
 
     def penalty_dt(self) -> float:
         """The step [s] the step-scaled penalties are chosen against

@@ -43,7 +43,7 @@ from numba import njit
 from numba.typed import List
 
 from ...errors import FiberpipeError
-from .._kernels_boundary import path_delta, plane_candidates
+from .._kernels_boundary import path_delta
 from ..contact_pairs import gauss_points
 from ..contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
 from .base import ContactHook, register_term
@@ -107,18 +107,15 @@ def _rebuild(x, data):
 
 @njit(inline="always", **_FLAGS)
 def _move_planes(planes, t, dt):
-    """The planes' velocities at t_n (for their friction; their positions ``planes.pos`` are the plane
-    pass's, which ran before this term in the step); returns how far any plane moved since its
-    candidate nodes were listed."""
-    moved = 0.0
+    """The planes' velocities at t_n, for their friction (their positions ``planes.pos`` and the nodes
+    listed near them, ``planes.cand_idx``, are the plane pass's, which ran before this term in the
+    step)."""
     for p in range(planes.axis.shape[0]):
         vel = planes.sign[p] * path_delta(t, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p]) / dt
         planes.vel[p, 0] = 0.0
         planes.vel[p, 1] = 0.0
         planes.vel[p, 2] = 0.0
         planes.vel[p, planes.axis[p]] = vel
-        moved = max(moved, abs(planes.pos[p] - planes.pos_cand[p]))
-    return moved
 
 
 @njit(inline="always", **_FLAGS)
@@ -288,18 +285,9 @@ def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     st.calls[0] = calls + 1
     P = data.planes.axis.shape[0]
     plane_fric = params.plane_friction_on and P > 0
-    plane_moved = _move_planes(data.planes, t, dt) if plane_fric else 0.0
-    rebuild = _update_neighbours(x, v, dt, acc, data)
-    # the nodes near each plane, for its friction: a node touching now was within 1.5 skin of the
-    # plane when the list was made (it moved < skin since: ≤ skin/2 since the neighbour-list build
-    # before it and ≤ skin/2 after; the plane moved ≤ skin/2), so the list is remade with every
-    # neighbour-list build and whenever a plane has moved skin/2 since
-    half_skin = 0.5 * params.skin_m
-    if plane_fric and (rebuild or plane_moved > half_skin):
-        pl = data.planes
-        plane_candidates(x, pl.radius_node, pl.axis, pl.sign, pl.pos, 3.0 * half_skin, pl.cand_idx, pl.cand_off)
-        for p in range(P):
-            pl.pos_cand[p] = pl.pos[p]
+    if plane_fric:
+        _move_planes(data.planes, t, dt)
+    _update_neighbours(x, v, dt, acc, data)
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
     # (contact_forces_ex, records.gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * st.path_m[0]
@@ -431,7 +419,8 @@ def _segments(model) -> Segments:
 
 def _plane_friction_of(model, scene) -> PlaneFriction:
     """The scene's planes as :class:`PlaneFriction`: their own copies of the ramp arrays, and the positions
-    the step loop's plane pass writes (``scene.plane_positions()``, the same array)."""
+    and candidate nodes the step loop's plane pass writes (``scene.plane_positions()``,
+    ``scene.plane_candidates()``: the same arrays)."""
     N = model.n_nodes
     P = scene.pl_axis.size
     k_pen = scene.k_pen() if P > 0 else np.zeros(0)
@@ -442,9 +431,8 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
         np.ascontiguousarray(onset),
         scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), pos0, scene.pl_move.astype(np.float64),
         scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64),
-        scene.plane_positions(),
-        np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), np.zeros(N * P, np.int64),
-        np.zeros(P + 1, np.int64), pos0.copy())
+        scene.plane_positions(), np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)),
+        *scene.plane_candidates())
 
 
 _CUSTOM_KERNELS: dict = {}

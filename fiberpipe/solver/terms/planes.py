@@ -5,8 +5,8 @@ reactions, energy and checks.
 planes to the scene (``SceneArrays.add_plane``); the step loop then runs one plane pass over all of
 them (:func:`eval_planes`: positions at t_n, the candidate list, the penalty forces, the stored
 energy and the works; :func:`finish_planes` after the update; :func:`record_planes` at a history
-row). The contact term's plane friction reads the positions this pass writes (``PlaneArrays.pos``,
-shared). The penalty kernels and the loading ramps are in :mod:`fiberpipe.solver._kernels_boundary`.
+row). The contact term's plane friction reads the positions this pass writes and visits the nodes
+this pass lists near each plane (``PlaneArrays.pos``, ``cand_idx``, ``cand_off``: the same arrays). The penalty kernels and the loading ramps are in :mod:`fiberpipe.solver._kernels_boundary`.
 """
 
 from __future__ import annotations
@@ -329,8 +329,8 @@ def plane_arrays(scene: SceneArrays) -> PlaneArrays:
     r_max = float(np.max(model.radius_node)) if n else 0.0
     return PlaneArrays(scene.pl_axis, scene.pl_sign, scene.pl_pos0, scene.pl_move, scene.pl_T, scene.pl_ta,
                        scene.pl_mode, scene.pl_hist_col, scene.k_pen(), scene.pen_onset(), scene.plane_positions(),
-                       np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P), np.zeros(n * P, np.int64),
-                       np.zeros(P + 1, np.int64), np.zeros(P), np.array([-1.0, PLANE_LIST_MARGIN * r_max]))
+                       np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P), *scene.plane_candidates(), np.zeros(P),
+                       np.array([-1.0, PLANE_LIST_MARGIN * r_max]))
 
 
 def plane_energy(scene: SceneArrays, x: np.ndarray) -> float:
