@@ -16,6 +16,7 @@ help:
 	@echo "make test     run the default test suite"
 	@echo "make verify   print the verification table (docs/verification.md)"
 	@echo "make bench    benchmarks (docs/benchmarks.md)"
+	@echo "make test-benchmarks  the checks of the developer scripts in benchmarks/"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
 	@echo "make fast-ensemble  paper-40's fastest settings within 2 %, ensemble against ensemble, and the modal step's (≈ 14 min)"
 	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min with the specimen, two cores)"
@@ -85,59 +86,64 @@ bench-pyelastica: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(PY) -m fiberpipe.benchmarks.bench_pyelastica
 
-# every benchmark in one run (solver, contact, PyElastica, paper-40, imaging) into
+# the headline benchmarks in one run (solver, contact, PyElastica, paper-40, imaging, threads) into
 # docs/benchmarks.md; ~10 min on an idle machine
 bench: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
 	$(FP) bench
 
-# paper-40's solver profile, against a reference checkout (REFERENCE=path with its own .venv), the
-# largest stable step and the threads (docs/benchmarks.md); minutes each, behind these targets only
-.PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy three-beam-energy
+# developer measurements, scripts of benchmarks/ (outside the package): paper-40's solver profile,
+# against a reference checkout (REFERENCE=path with its own .venv), the largest stable step; the
+# threads (docs/benchmarks.md); minutes each, behind these targets only
+.PHONY: profile-paper40 bench-reference stable-step bench-threads step-energy three-beam-energy test-benchmarks
 REFERENCE ?= ../wt-base
 profile-paper40: setup
-	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
-	$(PY) -m fiberpipe.benchmarks.bench_profile runs/bench/p40_138728.npz runs/bench/p40_708000.npz
+	$(PY) benchmarks/paper40_states.py runs/bench/p40.npz 138728 708000
+	$(PY) benchmarks/bench_profile.py runs/bench/p40_138728.npz runs/bench/p40_708000.npz
 
 # the same states sampled per thread and per compiled function with Linux perf (docs/benchmarks.md,
 # "The step per thread, sampled"; needs perf and kernel.perf_event_paranoid <= 2)
 .PHONY: perf-profile
 perf-profile: setup
-	test -f runs/bench/p40_708000.npz || $(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
-	$(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 1 --steps 6000
-	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_708000.npz --threads 2 --steps 6000
-	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.perf_profile --state runs/bench/p40_138728.npz --threads 2 --steps 6000
+	test -f runs/bench/p40_708000.npz || $(PY) benchmarks/paper40_states.py runs/bench/p40.npz 138728 708000
+	$(PY) benchmarks/perf_profile.py --state runs/bench/p40_708000.npz --threads 1 --steps 6000
+	NUMBA_NUM_THREADS=2 $(PY) benchmarks/perf_profile.py --state runs/bench/p40_708000.npz --threads 2 --steps 6000
+	NUMBA_NUM_THREADS=2 $(PY) benchmarks/perf_profile.py --state runs/bench/p40_138728.npz --threads 2 --steps 6000
 
 # this code against $(REFERENCE) in one process, blocks of steps alternated from paper-40's
 # compacted state (docs/benchmarks.md, "A change against the code before it, in one process")
 .PHONY: bench-inprocess
 bench-inprocess: setup
-	test -f runs/bench/p40_708000.npz || $(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 138728 708000
-	$(PY) -m fiberpipe.benchmarks.bench_inprocess --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 1 --steps 500
-	$(PY) -m fiberpipe.benchmarks.bench_inprocess --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 2 --steps 500
+	test -f runs/bench/p40_708000.npz || $(PY) benchmarks/paper40_states.py runs/bench/p40.npz 138728 708000
+	$(PY) benchmarks/bench_inprocess.py --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 1 --steps 500
+	$(PY) benchmarks/bench_inprocess.py --reference $(REFERENCE) --state runs/bench/p40_708000.npz --threads 2 --steps 500
 
 bench-reference: setup
-	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --until 12ms --spans 10
-	$(PY) -m fiberpipe.benchmarks.bench_ab --reference $(REFERENCE) --spans 10
+	$(PY) benchmarks/bench_ab.py --reference $(REFERENCE) --until 12ms --spans 10
+	$(PY) benchmarks/bench_ab.py --reference $(REFERENCE) --spans 10
 
 stable-step: setup
-	$(PY) -m fiberpipe.benchmarks.paper40_states runs/bench/p40.npz 0 708000
-	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_0.npz --span 2e-3
-	$(PY) -m fiberpipe.benchmarks.bench_stable_step runs/bench/p40_708000.npz --span 0.5e-3 --fixed-penalties --factors 0.8 0.85 0.9 0.95 1.0
+	$(PY) benchmarks/paper40_states.py runs/bench/p40.npz 0 708000
+	$(PY) benchmarks/bench_stable_step.py runs/bench/p40_0.npz --span 2e-3
+	$(PY) benchmarks/bench_stable_step.py runs/bench/p40_708000.npz --span 0.5e-3 --fixed-penalties --factors 0.8 0.85 0.9 0.95 1.0
 
 # energy the time step creates in the six-fiber scene at 1000 N/m, against dt_safety (docs/contact.md)
 step-energy: setup
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --load 3 30 300 1000 --seeds 4
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_oriented --load 1000 --onset-fraction 0.004 0.012 --seeds 4
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law hertz_parallel --dt-safety 0.9 0.8 0.7 0.6 0.45 --seeds 4
-	$(PY) -m fiberpipe.benchmarks.bench_step_energy --law linear --dt-safety 0.9 0.8 0.7 0.6 0.45 --penalty-factor 0.1 0.05 --seeds 4
+	$(PY) benchmarks/bench_step_energy.py --load 3 30 300 1000 --seeds 4
+	$(PY) benchmarks/bench_step_energy.py --law hertz_oriented --load 1000 --onset-fraction 0.004 0.012 --seeds 4
+	$(PY) benchmarks/bench_step_energy.py --law hertz_parallel --dt-safety 0.9 0.8 0.7 0.6 0.45 --seeds 4
+	$(PY) benchmarks/bench_step_energy.py --law linear --dt-safety 0.9 0.8 0.7 0.6 0.45 --penalty-factor 0.1 0.05 --seeds 4
 
 # where the undamped 3-beam case's energy goes, against dt_safety and the law (docs/verification.md)
 three-beam-energy: setup
-	$(PY) -m fiberpipe.benchmarks.bench_three_beam_energy --dt-safety 0.9 0.45 0.225
+	$(PY) benchmarks/bench_three_beam_energy.py --dt-safety 0.9 0.45 0.225
 
 bench-threads: setup
 	NUMBA_NUM_THREADS=2 $(PY) -m fiberpipe.benchmarks.bench_threads --fibers 160 640
+
+# the scripts' own checks (seconds; not part of make test)
+test-benchmarks: setup
+	$(PY) -m pytest -q benchmarks
 
 # The study's cases in batch (make -j2 reproduce runs them in parallel), then one comparison.
 REPRO_CONFIGS := paper-40 paper-40/parallel paper-40/oblique-6 paper-40/alpha-0 paper-40/alpha-1e4 \
@@ -166,7 +172,7 @@ fast-settings: setup
 # their wall times (docs/benchmarks.md, "Fast settings"; ≈ 14 min on one core)
 .PHONY: fast-ensemble
 fast-ensemble: setup
-	$(PY) -m fiberpipe.benchmarks.bench_fast_ensemble --out runs/bench/fast-ensemble --runs 2 \
+	$(PY) benchmarks/bench_fast_ensemble.py --out runs/bench/fast-ensemble --runs 2 \
 		--setting "study:" \
 		--setting "modes:solver.stable_step=modes,solver.dt_safety=0.85" \
 		--setting "ms100-modes:solver.mass_scaling=100,scene.damping.alpha=1e3 1/s,solver.stable_step=modes,solver.dt_safety=0.85" \
@@ -192,10 +198,10 @@ specimen-400: setup
 
 .PHONY: bench-400
 bench-400: specimen-400
-	NUMBA_NUM_THREADS=1 $(PY) -m fiberpipe.benchmarks.bench_bundle_cost runs/specimens/bundle-400/config.yaml
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_bundle_cost.py runs/specimens/bundle-400/config.yaml
 
 # the 400-fiber specimen compacted at the study's settings and with mass scaling 100 (alpha / 100),
-# two threads each (docs/benchmarks.md, "Virtual specimens"; ≈ 30 min on two cores)
+# two threads each (docs/benchmarks.md, "Headline figures"; ≈ 30 min on two cores)
 .PHONY: fast-400
 fast-400: specimen-400
 	$(FP) study configs/studies/bundle-400/fast-settings.yaml --out runs/studies/bundle400-fast-settings

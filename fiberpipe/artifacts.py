@@ -130,7 +130,7 @@ def input_sha256(path: str | Path) -> str | None:
     if not path.exists():
         return None
     files = _input_files(path)
-    sig = (str(path.resolve()), tuple((name, st.st_size, st.st_mtime_ns) for name, st in ((n, f.stat()) for n, f in files)))
+    sig = (str(path.resolve()), tuple((name, file_stat.st_size, file_stat.st_mtime_ns) for name, file_stat in ((n, f.stat()) for n, f in files)))
     if sig not in _INPUT_HASHES:
         if path.is_file() and len(files) == 1:
             digest = file_sha256(path)  # a single file: its plain sha256, as ``sha256sum`` prints it

@@ -14,18 +14,14 @@ Parts (each can be skipped with ``--skip``):
   settings of ``FAST_OVERRIDES``): wall time, U reached, final load;
 * ``imaging`` — the imaging stages' wall time and peak memory on a 200×400×1000 volume
   (:mod:`fiberpipe.benchmarks.bench_imaging`, part b; ``--quick``: a quarter of the length);
-* ``reference`` — paper-40 against a checkout of the reference commit (``--reference``, or the
-  environment variable ``FIBERPIPE_BENCH_REFERENCE``), alternating spans in one run
-  (:mod:`fiberpipe.benchmarks.bench_ab`): the first 12 ms, and the whole loading with
-  ``solver.stable_step: modes`` (time to solution);
-* ``profile`` — where a paper-40 step spends its time, early (12 ms) and compacted (U ≈ 1 mm)
-  (:mod:`fiberpipe.benchmarks.bench_profile`);
 * ``threads`` — ``solver.threads: 2`` against one thread at 160 and 640 fibers, alternating in one
   process (:mod:`fiberpipe.benchmarks.bench_threads`).
 
 Everything it runs is in the package: outside a source checkout the paper-40 scene is the copy in
 ``fiberpipe/benchmarks/data/`` and the page defaults to ``./benchmarks.md``. Measure on an idle
-machine: the load average is recorded with every part.
+machine: the load average is recorded with every part. The developer's measurements (A/B against a
+reference checkout, profiles, the largest stable step, one-off studies) are scripts of the source
+checkout's ``benchmarks/`` folder, run by the Makefile's targets (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -42,13 +38,11 @@ CHECKOUT = (ROOT / "pyproject.toml").exists() and (ROOT / "configs" / "paper-40.
 PACKAGED_PAPER40 = Path(__file__).resolve().parent / "benchmarks" / "data" / "paper-40.yaml"
 BEGIN = "<!-- fiberpipe bench: begin (generated, replaced by every run) -->"
 END = "<!-- fiberpipe bench: end -->"
-PARTS = ("solver", "contact", "pyelastica", "paper40", "bundle400", "imaging", "reference", "profile", "threads")
+PARTS = ("solver", "contact", "pyelastica", "paper40", "imaging", "threads")
 # the time step of the paper-40 row "stable step per active mode" (docs/benchmarks.md), with the
 # margin documented there: 0.85 of the beams' modal limit keeps the compacted bundle below its
 # contact-inclusive limit (0.95 of it, the study settings' margin, does not)
 MODES_OVERRIDES = {"solver.stable_step": "modes", "solver.dt_safety": 0.85}
-# paper-40's first 12 ms in steps of the study settings (dt = 8.646e-8 s) and U ≈ 1 mm
-PROFILE_STEPS = (138728, 708000)
 # the fastest setting of docs/benchmarks.md, "Fast settings", within 2 %: mass scaling 100 with
 # α/100 and the modal step; its load-cell curve is 1.44 % from the study settings' (0.23 mm window
 # means; one run stands for its ensemble with the default contact)
@@ -191,77 +185,6 @@ def window_means(U, F, edges):
     return out
 
 
-def _reference_part(reference: Path | None, quick: bool, echo) -> list[str]:
-    """Paper-40 against the reference checkout, alternating spans of simulated time in one run."""
-    ba = _load("bench_ab")
-    if reference is None:
-        return ["## Against the reference commit", "",
-                "not run: no reference checkout (`fiberpipe bench --reference PATH`, a checkout of the reference "
-                "commit with its own `.venv`)", ""]
-    reference = Path(reference).resolve()
-    cfg = default_paper40_config().resolve()
-    ref_cfg = reference / "configs" / "paper-40.yaml"
-    for need in (reference / ".venv" / "bin" / "python", ref_cfg):
-        if not need.exists():
-            raise FileNotFoundError(f"--reference {reference}: no {need.relative_to(reference)} (a checkout of the "
-                                    "reference commit after `make setup` there)")
-    modes = [f"{k}={v}" for k, v in MODES_OVERRIDES.items()]
-    cases = [("12 ms", 12e-3, 4 if quick else 10, [], 1)]
-    if not quick:
-        # the last case on two threads against the reference's one: compare its wall times
-        cases += [("U = 1.15 mm", None, 10, [], 1), ("U = 1.15 mm", None, 10, modes, 1),
-                  ("U = 1.15 mm", None, 10, modes + ["solver.threads=2"], 2)]
-    rows = []
-    for name, until, spans, new, threads in cases:
-        echo(f"bench: against {reference}: paper-40 to {name} {' '.join(new)} ...")
-        rows.append(ba.measure(reference, cfg, ref_cfg, until, spans, new, new_threads=threads))
-    cmd = f"python -m fiberpipe.benchmarks.bench_ab --reference {reference}"
-    return (["## Against the reference commit", "",
-             f"`{cmd} --until 12ms --spans 10` and `{cmd} --spans 10 [--new solver.stable_step=modes "
-             "--new solver.dt_safety=0.85 [--new solver.threads=2 --threads 2]]`: "
-             f"the reference checkout `{reference}` and this code advance paper-40 alternately by equal spans "
-             "of simulated time; CPU seconds of each worker (both see the same load), and their wall times "
-             "(the ratio to compare for two threads, on an idle machine).", ""]
-            + ba.HEADER + [l for r in rows for l in ba.lines(r, str(reference))] + [""])
-
-
-def _profile_part(quick: bool, echo) -> list[str]:
-    ps, bp = _load("paper40_states"), _load("bench_profile")
-    steps = PROFILE_STEPS[:1] if quick else PROFILE_STEPS
-    with tempfile.TemporaryDirectory() as td:
-        base = Path(td) / "p40.npz"
-        echo(f"bench: paper-40 states at steps {steps} ...")
-        ps.main([str(base), *map(str, steps)])
-        lines = bp.main([str(base.with_name(f"p40_{k}.npz")) for k in steps] + (["--steps", "1000"] if quick else []))
-    return ["## Profile of a paper-40 step", "",
-            "`python -m fiberpipe.benchmarks.paper40_states OUT.npz 138728 708000` then "
-            "`python -m fiberpipe.benchmarks.bench_profile OUT_138728.npz OUT_708000.npz` (CPU time, best of 3 "
-            "rotations of 3000 steps).", ""] + lines + [""]
-
-
-def _bundle_part(quick: bool, echo) -> list[str]:
-    """The 400-fiber specimen's cost per element-step against paper-40 (``make bench-400``): the
-    specimen of ``configs/specimens/bundle-400.yaml`` is built once into ``runs/specimens/bundle-400``
-    of the working folder (≈ 10 min) and reused."""
-    import subprocess
-    import sys
-
-    head = ["## 400 fibers against paper-40", ""]
-    specimen_cfg = default_paper40_config().parent / "specimens" / "bundle-400.yaml"
-    if quick or not specimen_cfg.exists():
-        why = "--quick" if quick else f"no {specimen_cfg} (a source checkout has it)"
-        return head + [f"not run: {why} (`make bench-400`)", ""]
-    run = Path("runs") / "specimens" / "bundle-400"
-    if not (run / "config.yaml").exists():
-        echo(f"bench: building the 400-fiber specimen into {run} (≈ 10 min) ...")
-        subprocess.run([sys.executable, "-m", "fiberpipe.cli", "specimen", str(specimen_cfg), "--out", str(run)], check=True)
-    echo("bench: 400 fibers against paper-40 ...")
-    bb = _load("bench_bundle_cost")
-    r = bb.measure(run / "config.yaml")
-    return head + [f"`fiberpipe specimen {specimen_cfg.name} --out {run}` then `python -m fiberpipe.benchmarks.bench_bundle_cost "
-                   f"{run}/config.yaml` (both scenes from rest, alternating, CPU time; {load()}).", ""] + bb.table(r) + [""]
-
-
 def _threads_part(quick: bool, echo) -> list[str]:
     import subprocess
     import sys
@@ -277,111 +200,96 @@ def _threads_part(quick: bool, echo) -> list[str]:
             body.append(f"failed{' ' + extra[0] if extra else ''}: {out.stderr.strip()[-300:]}")
         else:
             body += rows[2:] if any(b.startswith("|") for b in body) else rows  # one header
-    return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 {' '.join(args[1:])} [--no-contact]` (wall time, alternating rounds in one "
+    return ["## Threads", "", f"`NUMBA_NUM_THREADS=2 python {' '.join(args[1:])} [--no-contact]` (wall time, alternating rounds in one "
             "process; the ratio holds only on an idle machine).", ""] + body + [""]
 
 
-def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: int | None = None,
-              echo=print, reference: Path | None = None) -> str:
-    out = Path(out) if out else default_page()
-    started = _dt.datetime.now(_dt.timezone.utc)
-    cmd = "fiberpipe bench" + (" --quick" if quick else "") + "".join(f" --skip {s}" for s in skip)
-    sec: list[str] = []
-    loads: dict = {}
+def _solver_part(quick: bool, steps: int | None, echo) -> list[str]:
+    echo("bench: solver throughput ...")
+    solver_bench = _load("bench_solver")
+    n = steps or (200 if quick else 1000)
+    rows = [solver_bench.measure(f, n, 3, c) for c in (False, True) for f in (40, 160, 640)]
+    return ["## Solver throughput", "",
+            f"`python -m fiberpipe.benchmarks.bench_solver` (one thread, best of 3 calls of {n} steps; {load()}). "
+            "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r, clamps, damping, "
+            "gravity; contact = hertz_oriented with friction.", ""] + solver_bench.table(rows) + [""]
 
-    if "solver" not in skip:
-        echo("bench: solver throughput ...")
-        bs = _load("bench_solver")
-        n = steps or (200 if quick else 1000)
-        rows = [bs.measure(f, n, 3, c) for c in (False, True) for f in (40, 160, 640)]
-        loads["solver"] = load()
-        sec += ["## Solver throughput", "",
-                f"`python -m fiberpipe.benchmarks.bench_solver` (one thread, best of 3 calls of {n} steps; {loads['solver']}). "
-                "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r, clamps, damping, "
-                "gravity; contact = hertz_oriented with friction.", ""] + bs.table(rows) + [""]
-    if "contact" not in skip:
-        echo("bench: contact pass ...")
-        bc = _load("bench_contact")
-        rows = bc.main(["--repeats", "20" if quick else "100"])
-        loads["contact"] = load()
-        sec += ["## Contact pass", "",
-                f"`python -m fiberpipe.benchmarks.bench_contact` (40 fibers × 50 elements, hex bundle, 2 Gauss points; {loads['contact']}).", "",
-                *bc.table_lines(rows)]
-        sec.append("")
-    if "pyelastica" not in skip:
-        echo("bench: PyElastica ...")
-        bp = _load("bench_pyelastica")
-        try:
-            r = bp.measure(steps=20 if quick else 100, repeats=1 if quick else 3)
-        except ImportError as exc:
-            sec += ["## PyElastica", "", f"not run: {exc} (install the bench extra: `pip install -e '.[bench]'`)", ""]
-        else:
-            loads["pyelastica"] = load()
-            fp, pe = r["fiberpipe"], r["pyelastica"]
-            sec += ["## Against PyElastica (same 40-rod bundle, contact on, same steps)", "",
-                    f"`python -m fiberpipe.benchmarks.bench_pyelastica` ({loads['pyelastica']}).", "",
-                    "| code | elements | steps | dt (s) | wall (s) | k element-steps/s |", "|---|---|---|---|---|---|"]
-            for d in (fp, pe):
-                sec.append(f"| {d['code']} | {d['elements']} | {d['steps']} | {d['dt']:.3g} | {d['seconds']:.3f} | "
-                           f"{d['elem_steps_per_s'] / 1e3:.0f} |")
-            sec += ["", f"fiberpipe / PyElastica per element-step: **{r['ratio']:.0f}×** (target ≥ 100×).", ""]
-    if "paper40" not in skip:
-        fast_name = ", ".join(f"{k} = {v}" for k, v in FAST_OVERRIDES.items())
-        diverged: list[str] = []
-        if quick:  # the fast settings only (~10 s); the study settings take ~2 min
-            echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} (--quick: not the study settings) ...")
-            rows = [(fast_name, paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2}), None)]
-        else:
-            echo("bench: paper-40 time-to-solution (study settings) ...")
-            ref = paper40_run({"solver.output_frames": 2})
-            rows = [("study settings", ref, None)]
-            echo(f"bench: paper-40 {MODES_OVERRIDES} ...")
-            modes = paper40_run({**MODES_OVERRIDES, "solver.output_frames": 2})
-            rows.append(("solver.stable_step = modes", modes,
-                         curve_error_binned(load_curve(ref), load_curve(modes), FAST_WINDOW_M)))
-            echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} ...")
-            try:
-                fast = paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2})
-            except Exception as exc:  # a diverging fast setting must not lose the study-settings figure
-                echo(f"bench: fast settings failed: {exc}")
-                diverged.append(f"{fast_name}: {type(exc).__name__}: {str(exc)[:300]}")
-            else:
-                rows.append((fast_name, fast, curve_error_binned(load_curve(ref), load_curve(fast), FAST_WINDOW_M)))
-        loads["paper40"] = load()
-        sec += ["## Time to solution: configs/paper-40.yaml", "",
-                f"Mesh + simulate in one process, one thread ({loads['paper40']}). Load = load cell (upper plate).", "",
-                "| settings | steps | element-steps | dt (s) | wall (s) | without first-chunk compile/load (s) | M element-steps/s | U reached (mm) | final load (N) | max load (N) | curve vs study settings (0.23 mm window means) |",
-                "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for name, r, err in rows:
-            sec.append(f"| {name} | {r['steps']} | {r['elem_steps']:.3g} | {r['dt_s']:.3g} | {r['wall_s']:.1f} | {r['wall_steady_s']:.1f} | "
-                       f"{r['Mes_per_s']:.2f} | {r['U_mm']:.4f} | {r['F_cell_final_N']:.4g} | {r['F_cell_max_N']:.4g} | "
-                       f"{'—' if err is None else f'{100 * err:.2f} %'} |")
-        sec += [""] + [f"Not completed: {d}" for d in diverged] + ([""] if diverged else [])
-    if "bundle400" not in skip:
-        sec += _bundle_part(quick, echo)
-    if "imaging" not in skip:
-        echo("bench: imaging stages ...")
-        bi = _load("bench_imaging")
-        shape = (250, 200, 400) if quick else (1000, 200, 400)
-        with tempfile.TemporaryDirectory() as td:
-            head, tab, acc = bi.perf_part(shape, 12.0, [], Path(td))
-        loads["imaging"] = load()
-        sec += [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
-                f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({loads['imaging']}). {head}", "", tab, "", acc, ""]
-    if "reference" not in skip:
-        reference = reference or os.environ.get("FIBERPIPE_BENCH_REFERENCE") or None
-        sec += _reference_part(Path(reference) if reference else None, quick, echo)
-        loads["reference"] = load()
-    if "profile" not in skip:
-        sec += _profile_part(quick, echo)
-    if "threads" not in skip:
-        sec += _threads_part(quick, echo)
-    text = "\n".join([
-        BEGIN, "", "## Latest `fiberpipe bench` run", "",
-        f"- date: {started.strftime('%Y-%m-%d %H:%M UTC')}",
-        f"- machine: {machine()}",
-        f"- command: `{cmd}`",
-        "", *[l.replace("## ", "### ", 1) if l.startswith("## ") else l for l in sec], END]) + "\n"
+
+def _contact_part(quick: bool, echo) -> list[str]:
+    echo("bench: contact pass ...")
+    contact_bench = _load("bench_contact")
+    rows = contact_bench.main(["--repeats", "20" if quick else "100"])
+    return ["## Contact pass", "",
+            f"`python -m fiberpipe.benchmarks.bench_contact` (40 fibers × 50 elements, hex bundle, 2 Gauss points; "
+            f"{load()}).", "", *contact_bench.table_lines(rows), ""]
+
+
+def _pyelastica_part(quick: bool, echo) -> list[str]:
+    echo("bench: PyElastica ...")
+    pyelastica_bench = _load("bench_pyelastica")
+    try:
+        result = pyelastica_bench.measure(steps=20 if quick else 100, repeats=1 if quick else 3)
+    except ImportError as exc:
+        return ["## PyElastica", "", f"not run: {exc} (install the bench extra: `pip install -e '.[bench]'`)", ""]
+    lines = ["## Against PyElastica (same 40-rod bundle, contact on, same steps)", "",
+             f"`python -m fiberpipe.benchmarks.bench_pyelastica` ({load()}).", "",
+             "| code | elements | steps | dt (s) | wall (s) | k element-steps/s |", "|---|---|---|---|---|---|"]
+    for d in (result["fiberpipe"], result["pyelastica"]):
+        lines.append(f"| {d['code']} | {d['elements']} | {d['steps']} | {d['dt']:.3g} | {d['seconds']:.3f} | "
+                     f"{d['elem_steps_per_s'] / 1e3:.0f} |")
+    return lines + ["", f"fiberpipe / PyElastica per element-step: **{result['ratio']:.0f}×** (target ≥ 100×).", ""]
+
+
+def _paper40_rows(quick: bool, echo) -> tuple[list, list[str]]:
+    """``([(settings name, paper40_run result, curve error or None)], [runs that did not complete])``:
+    the fast settings only with ``quick``, else the study settings, the modal step and the fast settings."""
+    fast_name = ", ".join(f"{k} = {v}" for k, v in FAST_OVERRIDES.items())
+    if quick:  # the fast settings only (~10 s); the study settings take ~2 min
+        echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} (--quick: not the study settings) ...")
+        return [(fast_name, paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2}), None)], []
+    echo("bench: paper-40 time-to-solution (study settings) ...")
+    study = paper40_run({"solver.output_frames": 2})
+    rows = [("study settings", study, None)]
+    echo(f"bench: paper-40 {MODES_OVERRIDES} ...")
+    modes = paper40_run({**MODES_OVERRIDES, "solver.output_frames": 2})
+    rows.append(("solver.stable_step = modes", modes,
+                 curve_error_binned(load_curve(study), load_curve(modes), FAST_WINDOW_M)))
+    echo(f"bench: paper-40 fast settings {FAST_OVERRIDES} ...")
+    try:
+        fast = paper40_run({**FAST_OVERRIDES, "solver.output_frames": 2})
+    except Exception as exc:  # a diverging fast setting must not lose the study-settings figure
+        echo(f"bench: fast settings failed: {exc}")
+        return rows, [f"{fast_name}: {type(exc).__name__}: {str(exc)[:300]}"]
+    rows.append((fast_name, fast, curve_error_binned(load_curve(study), load_curve(fast), FAST_WINDOW_M)))
+    return rows, []
+
+
+def _paper40_part(quick: bool, echo) -> list[str]:
+    rows, diverged = _paper40_rows(quick, echo)
+    lines = ["## Time to solution: configs/paper-40.yaml", "",
+             f"Mesh + simulate in one process, one thread ({load()}). Load = load cell (upper plate).", "",
+             "| settings | steps | element-steps | dt (s) | wall (s) | without first-chunk compile/load (s) | M element-steps/s | U reached (mm) | final load (N) | max load (N) | curve vs study settings (0.23 mm window means) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, r, err in rows:
+        lines.append(f"| {name} | {r['steps']} | {r['elem_steps']:.3g} | {r['dt_s']:.3g} | {r['wall_s']:.1f} | "
+                     f"{r['wall_steady_s']:.1f} | {r['Mes_per_s']:.2f} | {r['U_mm']:.4f} | {r['F_cell_final_N']:.4g} | "
+                     f"{r['F_cell_max_N']:.4g} | {'—' if err is None else f'{100 * err:.2f} %'} |")
+    return lines + [""] + [f"Not completed: {d}" for d in diverged] + ([""] if diverged else [])
+
+
+def _imaging_part(quick: bool, echo) -> list[str]:
+    echo("bench: imaging stages ...")
+    imaging_bench = _load("bench_imaging")
+    shape = (250, 200, 400) if quick else (1000, 200, 400)
+    with tempfile.TemporaryDirectory() as td:
+        head, stage_table, acc = imaging_bench.perf_part(shape, 12.0, [], Path(td))
+    return [f"## Imaging stages, {shape[0]}×{shape[1]}×{shape[2]} voxels", "",
+            f"`python -m fiberpipe.benchmarks.bench_imaging` part (b) ({load()}). {head}", "", stage_table, "", acc, ""]
+
+
+def _write_between_markers(out: Path, text: str) -> None:
+    """``text`` replaces the page's generated block (between :data:`BEGIN` and :data:`END`), or
+    ends the page when it has none."""
     out.parent.mkdir(parents=True, exist_ok=True)
     old = out.read_text() if out.exists() else "# fiberpipe benchmarks\n\n"
     if BEGIN in old and END in old:
@@ -389,4 +297,24 @@ def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: i
     else:
         new = old.rstrip("\n") + "\n\n" + text
     out.write_text(new)
+
+
+def run_bench(out: Path | None = None, *, quick: bool = False, skip=(), steps: int | None = None,
+              echo=print) -> str:
+    """The parts of :data:`PARTS` not in ``skip``, written between the markers of ``out`` (default
+    :func:`default_page`) with the date, the machine and the command; returns the block."""
+    out = Path(out) if out else default_page()
+    started = _dt.datetime.now(_dt.timezone.utc)
+    cmd = "fiberpipe bench" + (" --quick" if quick else "") + "".join(f" --skip {s}" for s in skip)
+    parts = {"solver": lambda: _solver_part(quick, steps, echo), "contact": lambda: _contact_part(quick, echo),
+             "pyelastica": lambda: _pyelastica_part(quick, echo), "paper40": lambda: _paper40_part(quick, echo),
+             "imaging": lambda: _imaging_part(quick, echo), "threads": lambda: _threads_part(quick, echo)}
+    sections = [line for name in PARTS if name not in skip for line in parts[name]()]
+    text = "\n".join([
+        BEGIN, "", "## Latest `fiberpipe bench` run", "",
+        f"- date: {started.strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- machine: {machine()}",
+        f"- command: `{cmd}`",
+        "", *[l.replace("## ", "### ", 1) if l.startswith("## ") else l for l in sections], END]) + "\n"
+    _write_between_markers(out, text)
     return text

@@ -435,21 +435,19 @@ def yaml_value(text: str):
 @main.command()
 @click.option("--quick", is_flag=True, help="Small sizes and short runs only (minutes, not the headline figures).")
 @click.option("--skip", multiple=True, type=click.Choice(["solver", "contact", "pyelastica", "paper40", "imaging",
-                                                         "reference", "profile", "threads"]),
+                                                         "threads"]),
               help="Leave out a part (repeatable).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Page to write (default docs/benchmarks.md of a source checkout, else ./benchmarks.md).")
-@click.option("--reference", type=click.Path(file_okay=False, exists=True), default=None,
-              help="Checkout of the reference commit with its own .venv (default: $FIBERPIPE_BENCH_REFERENCE).")
-def bench(quick, skip, out, reference):
+def bench(quick, skip, out):
     """Performance benchmarks into docs/benchmarks.md: solver element-steps/s
     (40/160/640 fibers, contact off/on), contact cost per pair, PyElastica ratio, paper-40
-    time-to-solution, the 400-fiber specimen's cost against paper-40, imaging throughput and memory,
-    the reference commit, the profile and the threads. Run it on an idle machine."""
+    time-to-solution, imaging throughput and memory, and two threads against one. Run it on an idle
+    machine."""
     from fiberpipe.bench import run_bench
 
     try:
-        text = run_bench(out, quick=quick, skip=tuple(skip), echo=click.echo, reference=reference)
+        text = run_bench(out, quick=quick, skip=tuple(skip), echo=click.echo)
     except FileNotFoundError as exc:
         raise FiberpipeError(str(exc)) from None
     click.echo(text)

@@ -963,9 +963,9 @@ def _resolve_paths(data: dict, folder: Path) -> None:
             if not p.is_absolute():
                 sec[key] = str((folder / p).resolve())
     stages = data.get("post", {}).get("reference_stages") if isinstance(data.get("post"), dict) else None
-    for st in stages if isinstance(stages, list) else []:  # post.reference_stages[*].fibers
-        if isinstance(st, dict) and isinstance(st.get("fibers"), str) and not Path(st["fibers"]).expanduser().is_absolute():
-            st["fibers"] = str((folder / Path(st["fibers"]).expanduser()).resolve())
+    for stage in stages if isinstance(stages, list) else []:  # post.reference_stages[*].fibers
+        if isinstance(stage, dict) and isinstance(stage.get("fibers"), str) and not Path(stage["fibers"]).expanduser().is_absolute():
+            stage["fibers"] = str((folder / Path(stage["fibers"]).expanduser()).resolve())
 
 
 def _deep_merge(base: dict, over: dict) -> dict:

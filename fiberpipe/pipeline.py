@@ -439,25 +439,13 @@ def run_pipeline(
                 echo(msg)
                 break
             inputs = stage.inputs(cfg, run_dir)
-            for iname, p in inputs.items():
-                if not Path(p).exists():
-                    maker = _maker(cfg, run_dir, Path(p))
-                    conf = cfg.source_path or "CONFIG"
-                    todo = f"run `fiberpipe run {conf} --out {run_dir} --to {maker}` first" if maker else "run the earlier stages first"
-                    raise FiberpipeError(f"stage {name} needs {iname} at {p}, which does not exist; {todo}")
+            _require_inputs(cfg, run_dir, name, inputs)
             key = stage_key(stage, cfg, inputs)
             outputs = stage.outputs(cfg, run_dir)
             entry = lock.get(name) if isinstance(lock.get(name), dict) else {}
-            if (not force and entry.get("key") == key and all(Path(o).exists() for o in outputs)
-                    and not _checkpoint_to_resume(name, run_dir, key, resume)):
-                problem = outputs_problem(stage, outputs)
-                if problem is None:
-                    log.info("%s: up to date, skipped", name)
-                    echo(f"{name:12s} up to date (skipped)")
-                    report.stages[name] = {"skipped": True, **summary["stages"].get(name, {})}
-                    continue
-                log.info("%s: %s; rerunning the stage", name, problem)
-                echo(f"{name:12s} {problem}; rerunning")
+            if not force and _is_up_to_date(stage, run_dir, key, entry, outputs, resume, echo):
+                report.stages[name] = {"skipped": True, **summary["stages"].get(name, {})}
+                continue
             t0 = time.perf_counter()
             log.info("%s: started", name)
             # the stage's old key goes before it rewrites anything: a stage interrupted or failed
@@ -494,22 +482,49 @@ def run_pipeline(
     return report
 
 
+def _require_inputs(cfg: Config, run_dir: Path, name: str, inputs: dict) -> None:
+    """A one-line error naming the first missing input of stage ``name`` and the run that makes it."""
+    for iname, p in inputs.items():
+        if not Path(p).exists():
+            maker = _maker(cfg, run_dir, Path(p))
+            conf = cfg.source_path or "CONFIG"
+            todo = f"run `fiberpipe run {conf} --out {run_dir} --to {maker}` first" if maker else "run the earlier stages first"
+            raise FiberpipeError(f"stage {name} needs {iname} at {p}, which does not exist; {todo}")
+
+
+def _is_up_to_date(stage, run_dir: Path, key: str, entry: dict, outputs, resume: str | None, echo) -> bool:
+    """Whether the stage may be skipped: its lock entry has this cache key, its outputs exist and
+    read back, and no checkpoint of this key is left to resume; says why when it reruns."""
+    name = stage.name
+    if not (entry.get("key") == key and all(Path(o).exists() for o in outputs)
+            and not _checkpoint_to_resume(name, run_dir, key, resume)):
+        return False
+    problem = outputs_problem(stage, outputs)
+    if problem is None:
+        log.info("%s: up to date, skipped", name)
+        echo(f"{name:12s} up to date (skipped)")
+        return True
+    log.info("%s: %s; rerunning the stage", name, problem)
+    echo(f"{name:12s} {problem}; rerunning")
+    return False
+
+
 def _outputs_state(outputs) -> list:
     """Size and modification time of each output (None when absent), and of the files a frames
     folder holds: what tells whether a stage has written anything."""
     state = []
     for o in map(Path, outputs):
         try:
-            st = o.stat()
-            state.append((str(o), st.st_size, st.st_mtime_ns))
+            file_stat = o.stat()
+            state.append((str(o), file_stat.st_size, file_stat.st_mtime_ns))
         except OSError:
             state.append((str(o), None))
     frames = [Path(o).parent / "frames" for o in outputs if Path(o).suffix == ".pvd"]
     for d in frames:
         if d.is_dir():
             for f in sorted(d.iterdir()):
-                st = f.stat()
-                state.append((f.name, st.st_size, st.st_mtime_ns))
+                file_stat = f.stat()
+                state.append((f.name, file_stat.st_size, file_stat.st_mtime_ns))
     return state
 
 

@@ -197,6 +197,7 @@ NARRATION = [
 REFERENCE_TEXT = sorted(
     [ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "configs").rglob("*.yaml"),
      *(ROOT / "data-samples").glob("*/README.md"), *(ROOT / "fiberpipe" / "benchmarks").glob("*.py"),
+     *(ROOT / "benchmarks").glob("*.py"),
      *(ROOT / "fiberpipe" / "io").glob("*.py"), ROOT / "fiberpipe" / "bench.py", *(ROOT / "tools").glob("*.py"),
      ROOT / "fiberpipe" / "cli.py", ROOT / "fiberpipe" / "config.py", ROOT / "fiberpipe" / "pipeline.py",
      ROOT / "Makefile"])

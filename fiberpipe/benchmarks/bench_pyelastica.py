@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, Material, State, build_model
-from fiberpipe.verification.case_config import contact_hook
+from fiberpipe.benchmarks.scenes import default_contact
 from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step
 
 R = 0.25e-3
@@ -48,21 +48,21 @@ def fiberpipe_setup(n_fibers=40, n_el=50):
     xs = [np.column_stack([np.full_like(s, cx), np.full_like(s, cy), s]) for cx, cy in grid(n_fibers)]
     off = np.arange(n_fibers + 1) * (n_el + 1)
     m = build_model(np.vstack(xs), off, R, Material(E_PA, RHO, NU))
-    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(ALPHA), Gravity([0, -9.81, 0]),
-           contact_hook(m, friction=True)]
-    dt, _ = choose_time_step(m, eff, SimulationSettings())
-    return m, eff, dt
+    effects = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(ALPHA), Gravity([0, -9.81, 0]),
+           default_contact(m, friction=True)]
+    dt, _ = choose_time_step(m, effects, SimulationSettings())
+    return m, effects, dt
 
 
 def time_fiberpipe(steps, repeats, n_fibers=40, n_el=50):
-    m, eff, dt = fiberpipe_setup(n_fibers, n_el)
-    integ = Integrator(m, eff, dt, history_rows=steps * (repeats + 1) + 16, history_every=max(1, steps // 4))
-    st = State.at_rest(m)
-    integ.advance(st, 2)
+    m, effects, dt = fiberpipe_setup(n_fibers, n_el)
+    integrator = Integrator(m, effects, dt, history_rows=steps * (repeats + 1) + 16, history_every=max(1, steps // 4))
+    state = State.at_rest(m)
+    integrator.advance(state, 2)
     best = np.inf
     for _ in range(repeats):
         t = time.perf_counter()
-        integ.advance(st, steps)
+        integrator.advance(state, steps)
         best = min(best, time.perf_counter() - t)
     return {"code": "fiberpipe", "elements": m.n_elements, "steps": steps, "dt": dt, "seconds": best,
             "elem_steps_per_s": m.n_elements * steps / best}

@@ -43,24 +43,24 @@ def bundle(n_fibers: int, n_el: int = 50, L: float = 15e-3, seed: int = 0, wave:
 
 def measure(n_fibers: int, steps: int, repeats: int = 3, contact: bool = False) -> dict:
     m = bundle(n_fibers)
-    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
+    effects = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
     if contact:
-        from fiberpipe.verification.case_config import contact_hook
-        eff.append(contact_hook(m, friction=True))
-    dt, _ = choose_time_step(m, eff, SimulationSettings())
-    integ = Integrator(m, eff, dt, history_rows=steps * (repeats + 1) // 100 + 2, history_every=100)
-    st = State.at_rest(m)
-    integ.advance(st, 10)  # compile / load cache
+        from fiberpipe.benchmarks.scenes import default_contact
+        effects.append(default_contact(m, friction=True))
+    dt, _ = choose_time_step(m, effects, SimulationSettings())
+    integrator = Integrator(m, effects, dt, history_rows=steps * (repeats + 1) // 100 + 2, history_every=100)
+    state = State.at_rest(m)
+    integrator.advance(state, 10)  # compile / load cache
     best = np.inf
     for _ in range(repeats):
         t = time.perf_counter()
-        integ.advance(st, steps)
+        integrator.advance(state, steps)
         best = min(best, time.perf_counter() - t)
     es = m.n_elements * steps / best
     row = {"fibers": n_fibers, "elements": m.n_elements, "contact": contact, "steps": steps, "seconds": best,
            "us_per_step": 1e6 * best / steps, "ns_per_element_step": 1e9 / es, "Melem_steps_per_s": es / 1e6}
     if contact:
-        info = eff[-1].setup_info
+        info = effects[-1].setup_info
         row["pairs"] = info.n_pairs
         row["active"] = info.n_active
     return row
@@ -73,7 +73,6 @@ def table(rows) -> list[str]:
         lines.append(f"| {r['fibers']} | {r['elements']} | {'on' if r['contact'] else 'off'} | {r['steps']} | "
                      f"{r['us_per_step']:.1f} | {r['ns_per_element_step']:.1f} | {r['Melem_steps_per_s']:.2f} | "
                      f"{r.get('pairs', '')} | {r.get('active', '')} |")
-    base = {r["fibers"]: r for r in rows}
     for c in (False, True):
         rs = [r for r in rows if r["contact"] == c]
         r40 = next((r for r in rs if r["fibers"] == 40), None)

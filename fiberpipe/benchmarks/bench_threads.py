@@ -9,8 +9,8 @@ means something only on an idle machine (each thread needs a core).
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads [--fibers 160 640]
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --state runs/bench/p40_708000.npz
 
-``--state``: paper-40 at the study's settings from states saved by
-:mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40``) instead of the bench bundle.
+``--state``: paper-40 at the study's settings from states saved by ``benchmarks/paper40_states.py``
+of a source checkout (``make profile-paper40``) instead of the bench bundle.
 ``--config``: the scene of a run config (mesh built in memory) from rest, after 300 steps, e.g. the
 400-fiber specimen's (``make bench-400-threads``):
 
@@ -25,7 +25,7 @@ import os
 import statistics
 import time
 
-from fiberpipe.benchmarks.paper40_states import scene_and_state
+from fiberpipe.benchmarks.scenes import scene_and_state
 
 
 def _bench_scene(n_fibers: int, contact: bool):
@@ -35,12 +35,12 @@ def _bench_scene(n_fibers: int, contact: bool):
     from fiberpipe.solver.integrator import SimulationSettings, choose_time_step
 
     m = bundle(n_fibers)
-    eff = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
+    effects = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
     if contact:
-        from fiberpipe.verification.case_config import contact_hook
-        eff.append(contact_hook(m, friction=True))
-    dt, _ = choose_time_step(m, eff, SimulationSettings())
-    return m, eff, dt, State.at_rest(m)
+        from fiberpipe.benchmarks.scenes import default_contact
+        effects.append(default_contact(m, friction=True))
+    dt, _ = choose_time_step(m, effects, SimulationSettings())
+    return m, effects, dt, State.at_rest(m)
 
 
 def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True,
@@ -50,12 +50,12 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
     runs = {}
     for th in (1, threads):
         if config or state:  # a saved state, a config's scene, or both (scene_and_state)
-            m, eff, dt, st = scene_and_state(state, config)
+            m, effects, dt, saved_state = scene_and_state(state, config)
         else:
-            m, eff, dt, st = _bench_scene(n_fibers, contact)
-        integ = Integrator(m, eff, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
-        integ.advance(st, 300 if config else 10)  # compile (from rest: past the first contacts)
-        runs[th] = (integ, st, m.n_elements)
+            m, effects, dt, saved_state = _bench_scene(n_fibers, contact)
+        integrator = Integrator(m, effects, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
+        integrator.advance(saved_state, 300 if config else 10)  # compile (from rest: past the first contacts)
+        runs[th] = (integrator, saved_state, m.n_elements)
     # the row's label: the bench bundle's fiber count, or the scene and where it starts
     if config:
         label = f"{m.n_fibers} ({os.path.basename(os.path.dirname(os.path.abspath(config)))} from rest)"
@@ -67,15 +67,15 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
     load = [os.getloadavg()[0]]
     for r in range(rounds):
         for th in ((1, threads) if r % 2 == 0 else (threads, 1)):
-            integ, st, _ = runs[th]
+            integrator, saved_state, _ = runs[th]
             t0 = time.perf_counter()
-            integ.advance(st, steps)
+            integrator.advance(saved_state, steps)
             t[th].append(time.perf_counter() - t0)
         load.append(os.getloadavg()[0])
     per = [a / b for a, b in zip(t[1], t[threads])]
     return {"fibers": label,
             "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
-            "s_1": min(t[1]), f"s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
+            "s_1": min(t[1]), "s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
             "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -219,18 +220,18 @@ def _johnson_line_load(e_star: float, r: float):
 
 def _step_time_s(cfg) -> float:
     """The solver's time period: ``solver.end_time``, else the longest prescribed motion."""
-    sc, s = cfg.scene, cfg.solver
-    if s.end_time is not None:
-        return float(s.end_time)
+    scene, solver = cfg.scene, cfg.solver
+    if solver.end_time is not None:
+        return float(solver.end_time)
     t = 0.0
-    if "plates" in sc.effects and "moving" in (sc.plates.lower, sc.plates.upper):
-        ld = sc.loading
-        T = float(ld.displacement) / float(ld.velocity)
-        t = max(t, T / (1 - float(ld.ramp_fraction)) if ld.ramp == "smooth" else T)
-        if ld.path is not None:  # a loading path: its moves and holds
-            t = max(t, _path_plates(ld).loading_time_s)
-    if "drives" in sc.effects:
-        for d in sc.drives:
+    if "plates" in scene.effects and "moving" in (scene.plates.lower, scene.plates.upper):
+        loading = scene.loading
+        T = float(loading.displacement) / float(loading.velocity)
+        t = max(t, T / (1 - float(loading.ramp_fraction)) if loading.ramp == "smooth" else T)
+        if loading.path is not None:  # a loading path: its moves and holds
+            t = max(t, _path_plates(loading).loading_time_s)
+    if "drives" in scene.effects:
+        for d in scene.drives:
             t = max(t, float(np.linalg.norm(d.displacement)) / float(d.velocity) / (1 - 0.1))  # smooth, 10 % ramps
     if t <= 0:
         raise ConfigError("the scene has no moving plate or drive to set the step's time period: give "
@@ -301,11 +302,11 @@ def _plane_surface(name: str, ax: int, pos: float, sign: float, centre: np.ndarr
 
 def _planes(cfg, mesh) -> list[dict]:
     """Plates and walls: name, axis, position, facing sign, moving travel, history column."""
-    sc = cfg.scene
+    scene = cfg.scene
     out = []
     r_node = np.repeat(mesh.radius_m, np.diff(mesh.node_offsets))
-    if "plates" in sc.effects:
-        p = sc.plates
+    if "plates" in scene.effects:
+        p = scene.plates
         ax = AXES.index(p.axis)
         c = mesh.nodes_m[:, ax]
         lo = float(np.min(c - r_node)) if p.lower_position is None else float(p.lower_position)
@@ -313,11 +314,11 @@ def _planes(cfg, mesh) -> list[dict]:
         for kind, sign, pos in (("lower", 1.0, lo), ("upper", -1.0, hi)):
             state = getattr(p, kind)
             if state != "none":
-                travel = float(sc.loading.displacement) if state == "moving" else 0.0
+                travel = float(scene.loading.displacement) if state == "moving" else 0.0
                 out.append({"name": f"PLATE_{kind.upper()}", "ax": ax, "pos": pos, "sign": sign, "travel": travel})
-    if "walls" in sc.effects:
+    if "walls" in scene.effects:
         for axis in AXES:
-            pair = getattr(sc.walls, axis)
+            pair = getattr(scene.walls, axis)
             if pair is not None:
                 ax = AXES.index(axis)
                 for tag, sign, pos in (("LO", 1.0, float(pair[0])), ("HI", -1.0, float(pair[1]))):
@@ -327,17 +328,44 @@ def _planes(cfg, mesh) -> list[dict]:
 
 def abaqus_deck(cfg, mesh) -> tuple[str, dict]:
     """The scene of ``cfg`` on ``mesh`` as an Abaqus/Explicit input deck, and its key figures."""
-    sc, s, m = cfg.scene, cfg.solver, cfg.material
-    eff = set(sc.effects)
+    scene = cfg.scene
     T = _step_time_s(cfg)
     figures: dict = {"time_period_s": T}
     lines = ["*HEADING",
              f"fiberpipe {cfg.name}: {mesh.n_fibers} fibers, {mesh.n_elements} B31 elements, "
-             f"effects {', '.join(sc.effects) or 'none'} (SI units: m, N, Pa, kg/m^3, s)",
+             f"effects {', '.join(scene.effects) or 'none'} (SI units: m, N, Pa, kg/m^3, s)",
              "** written by fiberpipe (docs/abaqus.md says what matches fiberpipe exactly and what approximately)",
              "*PREPRINT, ECHO=NO, MODEL=NO, HISTORY=NO, CONTACT=NO",
              "**", "** PARTS", "**"]
     planes = _planes(cfg, mesh)
+    assembly, held = _assembly_lines(scene, mesh, planes)
+    lines += assembly
+    lines += _amplitude_lines(scene, planes, T, figures)
+    lines += _material_and_interaction_lines(cfg, mesh, planes, figures)
+    lines += ["**", "** STEP", "**", "*STEP, NAME=LOADING, NLGEOM=YES",
+              f"*DYNAMIC, EXPLICIT, SCALE FACTOR={float(cfg.solver.dt_safety):g}", f", {_f(T)}"]
+    if float(cfg.solver.mass_scaling) != 1.0:
+        lines += [f"*FIXED MASS SCALING, FACTOR={float(cfg.solver.mass_scaling):g}"]
+    lines += _boundary_lines(scene, planes, held)
+    lines += _load_lines(scene, mesh)
+    lines += _contact_lines(scene, planes)
+    lines += _output_lines(cfg, planes, T)
+    figures["planes"] = [pl["name"] for pl in planes]
+    return "\n".join(lines), figures
+
+
+class _Held(NamedTuple):
+    """The assembly's node sets the step holds: the constrained set (None: no constraint) and the
+    clamped nodes."""
+
+    lock: str | None
+    clamp_nodes: list
+
+
+def _assembly_lines(scene, mesh, planes: list[dict]) -> tuple[list[str], _Held]:
+    """The part (fibers and the planes' reference points), the assembly with its rigid planes, and
+    the node sets of the constraints and clamps."""
+    effects = set(scene.effects)
     lo_box, hi_box = mesh.nodes_m.min(axis=0), mesh.nodes_m.max(axis=0)
     centre = 0.5 * (lo_box + hi_box)
     half = float(np.max(hi_box - lo_box)) + 10 * float(np.max(mesh.radius_m))  # larger than the bundle
@@ -347,79 +375,93 @@ def abaqus_deck(cfg, mesh) -> tuple[str, dict]:
         rp[pl["ax"]] = pl["pos"]
         pl["rp"] = f"FIBERS-1.RP_{pl['name']}"
         refs.append((f"RP_{pl['name']}", rp))
-    lines += ["*PART, NAME=FIBERS", *_part_lines(mesh, refs),
-              "*SURFACE, TYPE=ELEMENT, NAME=FIBERS_SURF", "FIBERS,", "*END PART"]
+    lines = ["*PART, NAME=FIBERS", *_part_lines(mesh, refs),
+             "*SURFACE, TYPE=ELEMENT, NAME=FIBERS_SURF", "FIBERS,", "*END PART"]
     lines += ["**", "** ASSEMBLY", "**", "*ASSEMBLY, NAME=ASSEMBLY", "*INSTANCE, NAME=FIBERS-1, PART=FIBERS",
               "*END INSTANCE"]
     for pl in planes:
         lines += [*_plane_surface(pl["name"], pl["ax"], pl["pos"], pl["sign"], centre, half),
                   f"*RIGID BODY, REF NODE={pl['rp']}, ANALYTICAL SURFACE={pl['name']}"]
     lock = None
-    if "constraints" in eff:
+    if "constraints" in effects:
         lock = "FIBERS-1.ALL_NODES"
-        if sc.constraints.lock_axial == "ends":
+        if scene.constraints.lock_axial == "ends":
             ends = [str(int(mesh.node_offsets[f]) + 1) for f in range(mesh.n_fibers)]
             ends += [str(int(mesh.node_offsets[f + 1])) for f in range(mesh.n_fibers)]
             lines += ["*NSET, NSET=LOCK_ENDS, INSTANCE=FIBERS-1"] + [", ".join(ends[k:k + 16]) for k in range(0, len(ends), 16)]
             lock = "LOCK_ENDS"
-    clamp_nodes = sorted({_node(mesh, c.fiber, c.at) for c in sc.clamps}) if "clamps" in eff else []
+    clamp_nodes = sorted({_node(mesh, c.fiber, c.at) for c in scene.clamps}) if "clamps" in effects else []
     if clamp_nodes:
         lines += ["*NSET, NSET=CLAMPS, INSTANCE=FIBERS-1", ", ".join(map(str, clamp_nodes))]
     lines.append("*END ASSEMBLY")
+    return lines, _Held(lock, clamp_nodes)
 
-    # model data: amplitudes, material, interactions
-    loading_moves = any(pl["travel"] > 0 for pl in planes)
-    drives = list(sc.drives) if "drives" in eff else []
-    if loading_moves:
-        ld = sc.loading
-        Tl = float(ld.displacement) / float(ld.velocity)
-        if ld.ramp == "smooth":  # velocity: smooth rise over f T, plateau, smooth fall (the same travel)
-            Tl /= 1 - float(ld.ramp_fraction)
-            ta = float(ld.ramp_fraction) * Tl
+
+def _drives(scene) -> list:
+    return list(scene.drives) if "drives" in scene.effects else []
+
+
+def _amplitude_lines(scene, planes: list[dict], T: float, figures: dict) -> list[str]:
+    """The velocity amplitudes of the moving plate (its ramp or path) and of each drive."""
+    lines = []
+    if any(pl["travel"] > 0 for pl in planes):
+        loading = scene.loading
+        Tl = float(loading.displacement) / float(loading.velocity)
+        if loading.ramp == "smooth":  # velocity: smooth rise over f T, plateau, smooth fall (the same travel)
+            Tl /= 1 - float(loading.ramp_fraction)
+            ta = float(loading.ramp_fraction) * Tl
             pts = [(0.0, 0.0), (ta, 1.0), (Tl - ta, 1.0), (Tl, 0.0)]
         else:  # constant velocity from t = 0; stopped (within 1e-6 of Tl) once the travel is done
             pts = [(0.0, 1.0), (Tl, 1.0)] + ([(Tl * (1 + 1e-6), 0.0)] if T > Tl * (1 + 1e-6) else [])
-        if ld.path is not None:
-            pts = _path_velocity_points(ld)
+        if loading.path is not None:
+            pts = _path_velocity_points(loading)
         if T > pts[-1][0]:
             pts.append((T, 0.0))
         lines += ["*AMPLITUDE, NAME=PLATE_VELOCITY, DEFINITION=SMOOTH STEP", *_pairs(pts)]
-        figures["plate_velocity_m_s"] = float(ld.velocity)
-    for k, d in enumerate(drives):
+        figures["plate_velocity_m_s"] = float(loading.velocity)
+    for k, d in enumerate(_drives(scene)):
         Td = float(np.linalg.norm(d.displacement)) / float(d.velocity) / 0.9
         ta = 0.1 * Td
         lines += [f"*AMPLITUDE, NAME=DRIVE{k}_VELOCITY, DEFINITION=SMOOTH STEP",
                   *_pairs([(0.0, 0.0), (ta, 1.0), (Td - ta, 1.0), (Td, 0.0)])]
-    damped = "damping" in eff
-    lines += ["**", "** MATERIAL", "**",
-              *_material_lines(m.youngs_modulus, m.poisson_ratio_value, m.density,
-                               float(sc.damping.alpha) if damped else 0.0, float(sc.damping.beta) if damped else 0.0,
-                               damping=damped)]
-    mu = float(sc.friction.mu) if "friction" in eff else 0.0
-    if "contact" in eff:
-        tab = pressure_overclosure(cfg, mesh)
-        figures.update(contact_fit_error_full_scale=tab.fit_error_full_scale,
-                       contact_fit_error_relative=tab.fit_error_relative)
+    return lines
+
+
+def _material_and_interaction_lines(cfg, mesh, planes: list[dict], figures: dict) -> list[str]:
+    """The material with its Rayleigh damping, the fiber–fiber pressure-overclosure table and
+    friction, and the fiber–plane interaction."""
+    scene, material = cfg.scene, cfg.material
+    effects = set(scene.effects)
+    damped = "damping" in effects
+    lines = ["**", "** MATERIAL", "**",
+             *_material_lines(material.youngs_modulus, material.poisson_ratio_value, material.density,
+                              float(scene.damping.alpha) if damped else 0.0,
+                              float(scene.damping.beta) if damped else 0.0, damping=damped)]
+    mu = float(scene.friction.mu) if "friction" in effects else 0.0
+    if "contact" in effects:
+        table = pressure_overclosure(cfg, mesh)
+        figures.update(contact_fit_error_full_scale=table.fit_error_full_scale,
+                       contact_fit_error_relative=table.fit_error_relative)
         lines += ["**", "** INTERACTIONS", "**",
-                  f"** fiber-fiber normal law: {tab.law}",
-                  f"** pressure = {tab.force_to_pressure}",
-                  f"** table fit error over 0-{_f(tab.range_m)} m: {100 * tab.fit_error_full_scale:.3g} % of full scale, "
-                  f"{100 * tab.fit_error_relative:.3g} % relative above 5 % of the range",
+                  f"** fiber-fiber normal law: {table.law}",
+                  f"** pressure = {table.force_to_pressure}",
+                  f"** table fit error over 0-{_f(table.range_m)} m: {100 * table.fit_error_full_scale:.3g} % of full scale, "
+                  f"{100 * table.fit_error_relative:.3g} % relative above 5 % of the range",
                   "*SURFACE INTERACTION, NAME=FIBER_FIBER"]
         if mu > 0:
             lines += ["*FRICTION", f"{mu:g}"]
         lines += ["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=TABULAR"]
-        lines += [f"{_f(p)}, {_f(h)}" for p, h in tab.rows]
+        lines += [f"{_f(p)}, {_f(h)}" for p, h in table.rows]
     if planes:
         lines += ["*SURFACE INTERACTION, NAME=FIBER_PLANE"]
         if mu > 0:
             lines += ["*FRICTION", f"{mu:g}"]
+    return lines
 
-    # the step
-    lines += ["**", "** STEP", "**", "*STEP, NAME=LOADING, NLGEOM=YES",
-              f"*DYNAMIC, EXPLICIT, SCALE FACTOR={float(s.dt_safety):g}", f", {_f(T)}"]
-    if float(s.mass_scaling) != 1.0:
-        lines += [f"*FIXED MASS SCALING, FACTOR={float(s.mass_scaling):g}"]
+
+def _boundary_lines(scene, planes: list[dict], held: _Held) -> list[str]:
+    """The step's boundary conditions: planes, constraints, clamps, drives, and the velocities of the
+    moving plate and the drives."""
     bnd = []
     for pl in planes:  # a fixed plane: every DOF; a moving plate: all but its travel (set by velocity below)
         ax = pl["ax"] + 1
@@ -427,58 +469,74 @@ def abaqus_deck(cfg, mesh) -> tuple[str, dict]:
             bnd.append(f"{pl['rp']}, ENCASTRE")
         else:
             bnd += [f"{pl['rp']}, {lo}, {hi}" for lo, hi in ((1, ax - 1), (ax + 1, 6)) if lo <= hi]
-    if lock:
-        axd = AXES.index(sc.constraints.axis) + 1
-        bnd += [f"{lock}, {axd}, {axd}"]
-    if clamp_nodes:
+    if held.lock:
+        axd = AXES.index(scene.constraints.axis) + 1
+        bnd += [f"{held.lock}, {axd}, {axd}"]
+    if held.clamp_nodes:
         bnd += ["CLAMPS, ENCASTRE"]
-    for k, d in enumerate(drives):
+    drives = _drives(scene)
+    for d in drives:
         bnd += [f"FIBERS-1.FIBER{d.fiber}_NODES, {dof}, {dof}" for dof in (4, 5, 6)]
-    if bnd:
-        lines += ["*BOUNDARY", *bnd]
+    lines = ["*BOUNDARY", *bnd] if bnd else []
     for pl in planes:
         if pl["travel"] > 0:
             ax = pl["ax"] + 1
             lines += ["*BOUNDARY, TYPE=VELOCITY, AMPLITUDE=PLATE_VELOCITY",
-                      f"{pl['rp']}, {ax}, {ax}, {_f(pl['sign'] * float(sc.loading.velocity))}"]
+                      f"{pl['rp']}, {ax}, {ax}, {_f(pl['sign'] * float(scene.loading.velocity))}"]
     for k, d in enumerate(drives):
         v = np.asarray(d.displacement, float) / np.linalg.norm(d.displacement) * float(d.velocity)
         lines += [f"*BOUNDARY, TYPE=VELOCITY, AMPLITUDE=DRIVE{k}_VELOCITY"]
         lines += [f"FIBERS-1.FIBER{d.fiber}_NODES, {j + 1}, {j + 1}, {_f(v[j])}" for j in range(3)]
-    if "gravity" in eff:
-        g = np.asarray(sc.gravity.acceleration, float)
+    return lines
+
+
+def _load_lines(scene, mesh) -> list[str]:
+    """Gravity, line loads and point loads."""
+    effects = set(scene.effects)
+    lines = []
+    if "gravity" in effects:
+        g = np.asarray(scene.gravity.acceleration, float)
         gn = float(np.linalg.norm(g))
         if gn > 0:
             lines += ["*DLOAD", f"FIBERS-1.FIBERS, GRAV, {_f(gn)}, {_f(g[0] / gn)}, {_f(g[1] / gn)}, {_f(g[2] / gn)}"]
-    if "loads" in eff:
-        for ld in sc.loads:
-            if ld.line_force is not None:
-                lines += ["*DLOAD"] + [f"FIBERS-1.FIBER{ld.fiber}, P{'XYZ'[j]}, {_f(ld.line_force[j])}"
-                                       for j in range(3) if ld.line_force[j] != 0]
+    if "loads" in effects:
+        for load in scene.loads:
+            if load.line_force is not None:
+                lines += ["*DLOAD"] + [f"FIBERS-1.FIBER{load.fiber}, P{'XYZ'[j]}, {_f(load.line_force[j])}"
+                                       for j in range(3) if load.line_force[j] != 0]
             else:
-                node = _node(mesh, ld.fiber, ld.at)
-                lines += ["*CLOAD"] + [f"FIBERS-1.{node}, {j + 1}, {_f(ld.force[j])}" for j in range(3) if ld.force[j] != 0]
-    if "contact" in eff or planes:
-        lines += ["*CONTACT"]
-        if "contact" in eff:
-            lines += ["*CONTACT INCLUSIONS, ALL EXTERIOR"]
-        if planes:
-            lines += ["*CONTACT INCLUSIONS"] + [f"FIBERS-1.FIBERS_SURF, {pl['name']}" for pl in planes]
-        lines += ["*CONTACT PROPERTY ASSIGNMENT"]
-        if "contact" in eff:
-            lines += [" , , FIBER_FIBER"]
-        lines += [f"FIBERS-1.FIBERS_SURF, {pl['name']}, FIBER_PLANE" for pl in planes]
-    n_frames = max(int(s.output_frames) - 1, 1)
-    lines += ["*OUTPUT, FIELD, NUMBER INTERVAL=" + str(n_frames), "*NODE OUTPUT", "U, V, RF",
-              f"*OUTPUT, HISTORY, TIME INTERVAL={_f(T / 1000)}", "*ENERGY OUTPUT",
-              "ALLKE, ALLSE, ALLPW, ALLFD, ALLVD, ALLWK, ALLIE, ETOTAL"]
+                node = _node(mesh, load.fiber, load.at)
+                lines += ["*CLOAD"] + [f"FIBERS-1.{node}, {j + 1}, {_f(load.force[j])}" for j in range(3) if load.force[j] != 0]
+    return lines
+
+
+def _contact_lines(scene, planes: list[dict]) -> list[str]:
+    """General contact: the fibers' exterior with itself and with each plane, and the properties."""
+    contact = "contact" in scene.effects
+    if not (contact or planes):
+        return []
+    lines = ["*CONTACT"]
+    if contact:
+        lines += ["*CONTACT INCLUSIONS, ALL EXTERIOR"]
+    if planes:
+        lines += ["*CONTACT INCLUSIONS"] + [f"FIBERS-1.FIBERS_SURF, {pl['name']}" for pl in planes]
+    lines += ["*CONTACT PROPERTY ASSIGNMENT"]
+    if contact:
+        lines += [" , , FIBER_FIBER"]
+    return lines + [f"FIBERS-1.FIBERS_SURF, {pl['name']}, FIBER_PLANE" for pl in planes]
+
+
+def _output_lines(cfg, planes: list[dict], T: float) -> list[str]:
+    """Field output at the run's frames, the energies, the plates' reaction and travel; the step's end."""
+    n_frames = max(int(cfg.solver.output_frames) - 1, 1)
+    lines = ["*OUTPUT, FIELD, NUMBER INTERVAL=" + str(n_frames), "*NODE OUTPUT", "U, V, RF",
+             f"*OUTPUT, HISTORY, TIME INTERVAL={_f(T / 1000)}", "*ENERGY OUTPUT",
+             "ALLKE, ALLSE, ALLPW, ALLFD, ALLVD, ALLWK, ALLIE, ETOTAL"]
     for pl in planes:
         if pl["name"].startswith("PLATE"):
             ax = pl["ax"] + 1
             lines += [f"*NODE OUTPUT, NSET={pl['rp']}", f"RF{ax}, U{ax}"]
-    lines += ["*END STEP", ""]
-    figures["planes"] = [pl["name"] for pl in planes]
-    return "\n".join(lines), figures
+    return lines + ["*END STEP", ""]
 
 
 def write_abaqus_deck(path, cfg, mesh) -> dict:

@@ -9,6 +9,7 @@ below 40 % area fraction for wavy fibers of this aspect, so fibers start from a 
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -16,36 +17,40 @@ from numba import njit
 from fiberpipe.polylines import Polylines
 
 
-def cassette_specimen(
-    *,
-    n_fibers: int = 40,
-    width_m: float = 3e-3,
-    volume_fraction: float = 0.377,
-    length_m: float = 15e-3,
-    radius_m: float = 0.25e-3,
-    columns: int = 5,
-    jitter: float = 0.6,
-    tilt_rad: float | tuple[float, float] = 0.03,
-    waviness_m: float = 5e-6,
-    points_per_fiber: int = 61,
-    seed: int = 0,
-    placement: str = "push",
-    curvature_per_m: float = 0.0,
-    gap_m: float = 1e-6,
-    max_iterations: int = 5000,
-    y_tilt_scale: float = 1.0,
-    top: str = "plate",
-    settle: str = "slide",
-    slide_cost: float = 1e-3,
-    candidates: int = 1,
-    wave_curvature_per_m: float = 0.0,
-    wave_lengths_m: tuple[float, float] = (1.8e-3, 2.5e-3),
-    wave_modes: int = 2,
-    bow_plane: str = "random",
-    curvatures_per_m=None,
-    progress=None,
-) -> tuple[Polylines, dict]:
-    """Quasi-parallel fibers along z in a box of ``width_m`` (x) × height (y) × ``length_m`` (z).
+class CassetteLayout(NamedTuple):
+    """What :func:`cassette_specimen` builds: the cassette, the fibers and how they are placed (every
+    field with its default; the docstring of :func:`cassette_specimen` says what each does)."""
+
+    n_fibers: int = 40
+    width_m: float = 3e-3
+    volume_fraction: float = 0.377
+    length_m: float = 15e-3
+    radius_m: float = 0.25e-3
+    columns: int = 5
+    jitter: float = 0.6
+    tilt_rad: float | tuple[float, float] = 0.03
+    waviness_m: float = 5e-6
+    points_per_fiber: int = 61
+    seed: int = 0
+    placement: str = "push"
+    curvature_per_m: float = 0.0
+    gap_m: float = 1e-6
+    max_iterations: int = 5000
+    y_tilt_scale: float = 1.0
+    top: str = "plate"
+    settle: str = "slide"
+    slide_cost: float = 1e-3
+    candidates: int = 1
+    wave_curvature_per_m: float = 0.0
+    wave_lengths_m: tuple[float, float] = (1.8e-3, 2.5e-3)
+    wave_modes: int = 2
+    bow_plane: str = "random"
+
+
+def cassette_specimen(layout: CassetteLayout | None = None, *, curvatures_per_m=None, progress=None,
+                      **fields) -> tuple[Polylines, dict]:
+    """Quasi-parallel fibers along z in a box of ``width_m`` (x) × height (y) × ``length_m`` (z):
+    the specimen of ``layout`` (:class:`CassetteLayout`; keywords replace its fields).
 
     # Strategy: the height follows from the volume fraction (v_f = N π r² L / (w h L)); fibers
     # sit on a ``columns`` × ceil(N/columns) lattice whose free space (pitch − 2r) is shared out
@@ -91,43 +96,45 @@ def cassette_specimen(
     Polylines, and a dict with ``height_m``, ``width_m``, ``volume_fraction`` and the box bounds
     (with ``placement="rigid"`` also ``relaxation``: sweeps, closest centre lines, largest move).
     """
-    if placement not in ("push", "rigid", "deposit"):
-        raise ValueError(f"placement must be 'push', 'rigid' or 'deposit', got {placement!r}")
-    if top not in ("plate", "pile"):
-        raise ValueError(f"top must be 'plate' or 'pile', got {top!r}")
-    rng = np.random.default_rng(seed)
-    area = n_fibers * np.pi * radius_m**2
-    height = area / (volume_fraction * width_m)
-    if placement == "deposit":
-        return _deposit_specimen(
-            rng, n=n_fibers, width_m=width_m, height_m=height, length_m=length_m, radius_m=radius_m,
-            tilt_rad=tilt_rad, curvature_per_m=curvature_per_m,
-            z=np.linspace(0.0, length_m, points_per_fiber), gap_m=gap_m, y_tilt_scale=y_tilt_scale, top=top,
-            settle=settle, slide_cost=slide_cost, candidates=candidates,
-            wave=(wave_curvature_per_m, wave_lengths_m, wave_modes), bow_plane=bow_plane,
-            curvatures_per_m=curvatures_per_m, progress=progress,
-        )
-    rows = int(np.ceil(n_fibers / columns))
-    px, py = width_m / columns, height / rows
-    z = np.linspace(0.0, length_m, points_per_fiber)
+    layout = (layout or CassetteLayout())._replace(**fields)
+    if layout.placement not in ("push", "rigid", "deposit"):
+        raise ValueError(f"placement must be 'push', 'rigid' or 'deposit', got {layout.placement!r}")
+    if layout.top not in ("plate", "pile"):
+        raise ValueError(f"top must be 'plate' or 'pile', got {layout.top!r}")
+    rng = np.random.default_rng(layout.seed)
+    area = layout.n_fibers * np.pi * layout.radius_m**2
+    height = area / (layout.volume_fraction * layout.width_m)
+    z = np.linspace(0.0, layout.length_m, layout.points_per_fiber)
+    if layout.placement == "deposit":
+        return _deposit_specimen(rng, layout, height, z, curvatures_per_m=curvatures_per_m, progress=progress)
+    rows = int(np.ceil(layout.n_fibers / layout.columns))
+    px, py = layout.width_m / layout.columns, height / rows
     centres = []
-    for k in range(n_fibers):
-        i, j = k % columns, k // columns
-        cx = -width_m / 2 + (i + 0.5) * px + jitter * (px / 2 - radius_m) * rng.uniform(-1, 1)
-        cy = (j + 0.5) * py + jitter * (py / 2 - radius_m) * rng.uniform(-1, 1)
+    for k in range(layout.n_fibers):
+        i, j = k % layout.columns, k // layout.columns
+        cx = -layout.width_m / 2 + (i + 0.5) * px + layout.jitter * (px / 2 - layout.radius_m) * rng.uniform(-1, 1)
+        cy = (j + 0.5) * py + layout.jitter * (py / 2 - layout.radius_m) * rng.uniform(-1, 1)
         centres.append((cx, cy))
-    if placement == "rigid":
+    if layout.placement == "rigid":
         return _rigid_specimen(
-            np.asarray(centres), rng, width_m=width_m, height_m=height, length_m=length_m,
-            radius_m=radius_m, tilt_rad=tilt_rad, curvature_per_m=curvature_per_m, z=z,
-            gap_m=gap_m, max_iterations=max_iterations,
+            np.asarray(centres), rng, width_m=layout.width_m, height_m=height, length_m=layout.length_m,
+            radius_m=layout.radius_m, tilt_rad=layout.tilt_rad, curvature_per_m=layout.curvature_per_m, z=z,
+            gap_m=layout.gap_m, max_iterations=layout.max_iterations,
         )
+    return _push_specimen(centres, rng, layout, height, z)
+
+
+def _push_specimen(centres, rng, layout: CassetteLayout, height: float, z) -> tuple[Polylines, dict]:
+    """``placement="push"`` of :func:`cassette_specimen`: tilted, wavy fibers on the jittered
+    lattice, clipped into the cassette and pushed apart where they cross."""
+    n_fibers, length_m, radius_m = layout.n_fibers, layout.length_m, layout.radius_m
+    width_m, points_per_fiber = layout.width_m, layout.points_per_fiber
     lines = []
     for cx, cy in centres:
-        ax, ay = rng.normal(0, 1, 2) * np.broadcast_to(np.asarray(tilt_rad, float), (2,))
+        ax, ay = rng.normal(0, 1, 2) * np.broadcast_to(np.asarray(layout.tilt_rad, float), (2,))
         phase = rng.uniform(0, 2 * np.pi, 2)
-        wx = waviness_m * np.sin(2 * np.pi * z / length_m + phase[0])
-        wy = waviness_m * np.sin(2 * np.pi * z / length_m + phase[1])
+        wx = layout.waviness_m * np.sin(2 * np.pi * z / length_m + phase[0])
+        wy = layout.waviness_m * np.sin(2 * np.pi * z / length_m + phase[1])
         x = cx + ax * (z - length_m / 2) + wx
         y = cy + ay * (z - length_m / 2) + wy
         lines.append(np.c_[x, y, z])
@@ -147,15 +154,7 @@ def cassette_specimen(
         if inside and info_overlap["max_overlap_after_m"] <= 1e-8:
             break
     fibers = Polylines.from_list(list(pts), radius_m)
-    info = {
-        "width_m": width_m,
-        "height_m": float(height),
-        "length_m": length_m,
-        "volume_fraction": float(area * length_m / (width_m * height * length_m)),
-        "box_min_m": [-width_m / 2, 0.0, 0.0],
-        "box_max_m": [width_m / 2, float(height), length_m],
-    }
-    return fibers, info
+    return fibers, _box_info(width_m, height, length_m, n_fibers * np.pi * radius_m**2 * length_m)
 
 
 def _box_info(width_m, height_m, length_m, fiber_volume_m3) -> dict:
@@ -321,9 +320,7 @@ def _relax_rigid(ends, bows, z, lo, hi, min_distance, *, max_iterations, coarse=
     return e, report
 
 
-def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad, curvature_per_m,
-                      z, gap_m, y_tilt_scale, top="plate", settle="slide", slide_cost=1e-3, candidates=1,
-                      wave=(0.0, None, 0), bow_plane="random", curvatures_per_m=None, progress=None):
+def _deposit_specimen(rng, layout: CassetteLayout, height_m: float, z, *, curvatures_per_m=None, progress=None):
     """``placement="deposit"`` of :func:`cassette_specimen`: a gravity-deposited loose pile.
 
     # Strategy: random sequential deposition of rigid fibers, each the smooth arc of the
@@ -341,13 +338,17 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
     # a looser pile. ``top="plate"`` keeps the nominal cassette height (from ``volume_fraction``);
     # ``top="pile"`` sets it to the pile's top (+ ``gap_m``), so the upper plate touches it.
     """
+    n, width_m, length_m, radius_m = layout.n_fibers, layout.width_m, layout.length_m, layout.radius_m
+    gap_m, tilt_rad, candidates = layout.gap_m, layout.tilt_rad, layout.candidates
+    wave = (layout.wave_curvature_per_m, layout.wave_lengths_m, layout.wave_modes)
     r, need = radius_m, 2 * radius_m + gap_m
     sigma = np.broadcast_to(np.asarray(tilt_rad, float), (2,))
     zc = z - length_m / 2
-    sag = _arc_sagitta(zc, length_m, curvature_per_m)
-    planes = _plane_angles(_bow_planes(rng, n), bow_plane)
+    sag = _arc_sagitta(zc, length_m, layout.curvature_per_m)
+    planes = _plane_angles(_bow_planes(rng, n), layout.bow_plane)
     waves = _wave_offsets(rng, n, z, *wave) if wave[0] > 0 else None
     xlo, xhi = -width_m / 2 + r + gap_m, width_m / 2 - r - gap_m
+    cassette = _Cassette(z, r, need, gap_m, xlo, xhi)
     X = np.zeros((n, len(z)))
     Y = np.zeros((n, len(z)))
     supports = []
@@ -360,16 +361,16 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
         best = None
         for _c in range(candidates):  # keep the lowest of a few trial drops ("careful placement")
             for _ in range(1000):
-                a = rng.normal(0, 1, 2) * sigma * np.array([1.0, y_tilt_scale])
+                a = rng.normal(0, 1, 2) * sigma * np.array([1.0, layout.y_tilt_scale])
                 xs = a[0] * zc + bow[:, 0]
                 if xs.max() - xs.min() <= 0.9 * (xhi - xlo):
                     break
             else:  # pragma: no cover - only for absurd tilts
                 raise ValueError(f"tilt_rad={tilt_rad!r}: a fiber does not fit the cassette")
             x0 = rng.uniform(xlo - xs.min(), xhi - xs.max()) + xs
-            if settle == "slide":
-                xk, yk, contact = _settle(x0, bow[:, 1], a[1], X[:k], Y[:k], z, r, need, gap_m, xlo, xhi,
-                                          slide_cost=slide_cost)
+            if layout.settle == "slide":
+                xk, yk, contact = _settle(x0, bow[:, 1], a[1], X[:k], Y[:k], cassette,
+                                          _SlideSteps(slide_cost=layout.slide_cost))
             else:
                 h, s, contact = _rest(x0, bow[:, 1], a[1], X[:k], Y[:k], z, r, need, gap_m)
                 xk, yk = x0, h + s * zc + bow[:, 1]
@@ -381,7 +382,7 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
             progress(k + 1, n)
     pts = np.stack([X, Y, np.broadcast_to(z, X.shape)], axis=2)
     top_m = float((Y + r).max())
-    if top == "pile":
+    if layout.top == "pile":
         height_m = top_m + gap_m
     fibers = Polylines.from_list(list(pts), radius_m)
     info = _box_info(width_m, height_m, length_m, n * np.pi * radius_m**2 * length_m)
@@ -393,7 +394,7 @@ def _deposit_specimen(rng, *, n, width_m, height_m, length_m, radius_m, tilt_rad
         "candidates": candidates,
         **({"wave_curvature_per_m": float(wave[0]), "wave_lengths_m": [float(v) for v in wave[1]],
             "wave_modes": int(wave[2])} if waves is not None else {}),
-        "slide_cost": slide_cost,
+        "slide_cost": layout.slide_cost,
         "pile_top_m": top_m,
         "top_clearance_m": float(height_m - top_m),
         "contacts": len(touching),
@@ -602,8 +603,30 @@ def _rest(x, bow_y, s0, X, Y, z, r, need, gap_m, ds0=2e-3, ds_min=1e-7, support_
     return float(h), float(s), _supports(x, h + s * zc + bow_y, X, Y, z, r, need, gap_m, support_tol)
 
 
-def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3, trust0=5e-5,
-            trust_max=2e-4, margin=5e-9, max_steps=400):
+class _Cassette(NamedTuple):
+    """The deposit's cassette: the fibers' z stations, radius, the centre distance of two touching
+    fibers (2r + gap), the contact clearance and the x range of fiber centres between the walls."""
+
+    z: np.ndarray
+    r: float
+    need: float
+    gap_m: float
+    xlo: float
+    xhi: float
+
+
+class _SlideSteps(NamedTuple):
+    """The settling's linear programs: the cost per metre of sideways and vertical motion, the
+    trust region (first and largest), the clearance each linearised gap keeps, the step budget."""
+
+    slide_cost: float = 1e-3
+    trust0: float = 5e-5
+    trust_max: float = 2e-4
+    margin: float = 5e-9
+    max_steps: int = 400
+
+
+def _settle(x, bow_y, s0, X, Y, cassette: _Cassette, steps: _SlideSteps = _SlideSteps()):
     """Rest pose of a fiber dropped at slope ``s0``: it may sink, turn in its y-z plane and slide
     sideways (x) as a whole, its x-tilt and shape kept; returns its points' x, y and supports.
 
@@ -619,6 +642,8 @@ def _settle(x, bow_y, s0, X, Y, z, r, need, gap_m, xlo, xhi, *, slide_cost=1e-3,
     """
     from scipy.optimize import linprog
 
+    z, r, need, gap_m, xlo, xhi = cassette
+    slide_cost, trust0, trust_max, margin, max_steps = steps
     length = z[-1] - z[0]
     u = (z - z[0]) / length
     zmid = 0.5 * (z[0] + z[-1])

@@ -44,43 +44,60 @@ def specimen_config(raw: dict, where: str):
     return cfg, cfg.specimen
 
 
-def target_height_m(sp, radius_m: float) -> float:
+def target_height_m(specimen, radius_m: float) -> float:
     """The plate gap of the target v_f0: N π r² L / (w h L) = v_f0."""
-    return sp.n_fibers * math.pi * radius_m**2 / (sp.volume_fraction * sp.width)
+    return specimen.n_fibers * math.pi * radius_m**2 / (specimen.volume_fraction * specimen.width)
 
 
-def check_fits(sp, radius_m: float, where: str) -> None:
+def check_fits(specimen, radius_m: float, where: str) -> None:
     """Refuse, before anything is drawn, a specimen whose fibers cannot fit its cassette."""
-    free = sp.width - 2 * radius_m - 2 * sp.gap
+    free = specimen.width - 2 * radius_m - 2 * specimen.gap
     if free <= 0:
-        raise ConfigError(f"specimen.width = {sp.width * 1e3:.4g} mm cannot hold a fiber of diameter "
+        raise ConfigError(f"specimen.width = {specimen.width * 1e3:.4g} mm cannot hold a fiber of diameter "
                           f"{2 * radius_m * 1e3:.4g} mm (plus the clearance): widen the cassette", where=where)
-    radii = [sp.bow.spool_radius] if sp.bow.spool_radius is not None else list(sp.bow.spool_radius_range or [])
-    if radii and min(radii) <= sp.length / 2:
+    radii = [specimen.bow.spool_radius] if specimen.bow.spool_radius is not None else list(specimen.bow.spool_radius_range or [])
+    if radii and min(radii) <= specimen.length / 2:
         raise ConfigError(f"specimen.bow: a spool radius of {min(radii) * 1e3:.4g} mm cannot bend a "
-                          f"{sp.length * 1e3:.4g} mm fiber (it must exceed half the length)", where=where)
-    if radii and sp.bow.plane != "upright":
+                          f"{specimen.length * 1e3:.4g} mm fiber (it must exceed half the length)", where=where)
+    if radii and specimen.bow.plane != "upright":
         rmin = min(radii)
-        sag = rmin - math.sqrt(rmin**2 - sp.length**2 / 4)
+        sag = rmin - math.sqrt(rmin**2 - specimen.length**2 / 4)
         if sag > 0.9 * free:
             raise ConfigError(f"specimen: a fiber bowed by the spool radius {rmin * 1e3:.4g} mm spans {sag * 1e3:.3g} mm "
                               f"across, more than the {0.9 * free * 1e3:.3g} mm its cassette (specimen.width = "
-                              f"{sp.width * 1e3:.4g} mm) leaves: widen it, raise the spool radius or set "
+                              f"{specimen.width * 1e3:.4g} mm) leaves: widen it, raise the spool radius or set "
                               "specimen.bow.plane: upright", where=where)
-    h = target_height_m(sp, radius_m)
-    if sp.upper_plate == "target" and h < 2 * radius_m:
-        raise ConfigError(f"specimen.volume_fraction = {sp.volume_fraction:g} makes the cassette {h * 1e3:.3g} mm high, "
+    h = target_height_m(specimen, radius_m)
+    if specimen.upper_plate == "target" and h < 2 * radius_m:
+        raise ConfigError(f"specimen.volume_fraction = {specimen.volume_fraction:g} makes the cassette {h * 1e3:.3g} mm high, "
                           f"less than a fiber diameter: lower it or add fibers", where=where)
 
 
-def fiber_curvatures(sp, seed: int):
+def fiber_curvatures(specimen, seed: int):
     """One curvature (1/m) per fiber: 1/spool_radius, or 1/R with R uniform over the range
     (its own random stream, so the deposit's draws do not depend on it)."""
-    if sp.bow.spool_radius is not None:
-        return None, 1.0 / sp.bow.spool_radius
-    lo, hi = sp.bow.spool_radius_range
-    rr = np.random.default_rng([seed, 1]).uniform(lo, hi, sp.n_fibers)
+    if specimen.bow.spool_radius is not None:
+        return None, 1.0 / specimen.bow.spool_radius
+    lo, hi = specimen.bow.spool_radius_range
+    rr = np.random.default_rng([seed, 1]).uniform(lo, hi, specimen.n_fibers)
     return 1.0 / rr, float(np.mean(1.0 / rr))
+
+
+def cassette_height_m(specimen, radius_m: float, top_m: float, pile: str, where: str) -> float:
+    """The cassette's height over the ``pile`` (settled or deposited) whose top is at ``top_m``: the
+    pile's top plus the gap with ``upper_plate: pile``, else the height of the target v_f0, which
+    the pile must fit under (a one-line error naming the keys to change if it does not)."""
+    if specimen.upper_plate == "pile":
+        return top_m + specimen.gap
+    height = target_height_m(specimen, radius_m)
+    if top_m > height:
+        vmax = specimen.n_fibers * math.pi * radius_m**2 / (specimen.width * top_m)
+        raise ConfigError(
+            f"specimen: the {pile} pile (top {top_m * 1e3:.4g} mm) does not fit its "
+            f"cassette under the upper plate at {height * 1e3:.4g} mm (v_f0 = {specimen.volume_fraction:g}): lower "
+            f"specimen.volume_fraction to at most {vmax:.4g}, raise specimen.candidates (a denser pile) or set "
+            "specimen.upper_plate: pile", where=where)
+    return height
 
 
 def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print,
@@ -94,56 +111,46 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
     from fiberpipe.progress import progress_bar
 
-    cfg, sp = specimen_config(raw, where)
-    seed = sp.seed if seed is None else int(seed)
+    cfg, specimen = specimen_config(raw, where)
+    seed = specimen.seed if seed is None else int(seed)
     r = float(cfg.fiber.radius)
-    check_fits(sp, r, where)
-    curvatures, kappa = fiber_curvatures(sp, seed)
+    check_fits(specimen, r, where)
+    curvatures, kappa = fiber_curvatures(specimen, seed)
     params = {
-        "seed": seed, "n_fibers": sp.n_fibers, "width_m": sp.width, "length_m": sp.length, "radius_m": r,
-        "volume_fraction": sp.volume_fraction, "points_per_fiber": sp.points_per_fiber, "placement": "deposit",
-        "tilt_rad": float(sp.phi_mean / math.sqrt(math.pi)), "curvature_per_m": float(kappa),
-        "candidates": sp.candidates, "top": "pile", "gap_m": sp.gap, "y_tilt_scale": sp.y_tilt_scale,
-        "bow_plane": sp.bow.plane,
+        "seed": seed, "n_fibers": specimen.n_fibers, "width_m": specimen.width, "length_m": specimen.length, "radius_m": r,
+        "volume_fraction": specimen.volume_fraction, "points_per_fiber": specimen.points_per_fiber, "placement": "deposit",
+        "tilt_rad": float(specimen.phi_mean / math.sqrt(math.pi)), "curvature_per_m": float(kappa),
+        "candidates": specimen.candidates, "top": "pile", "gap_m": specimen.gap, "y_tilt_scale": specimen.y_tilt_scale,
+        "bow_plane": specimen.bow.plane,
     }
-    if sp.waviness.curvature_per_m > 0:
-        params.update(wave_curvature_per_m=sp.waviness.curvature_per_m,
-                      wave_lengths_m=tuple(sp.waviness.wavelengths), wave_modes=sp.waviness.modes)
+    if specimen.waviness.curvature_per_m > 0:
+        params.update(wave_curvature_per_m=specimen.waviness.curvature_per_m,
+                      wave_lengths_m=tuple(specimen.waviness.wavelengths), wave_modes=specimen.waviness.modes)
     t0 = time.perf_counter()
     with progress_bar("deposit", progress) as bar:
         try:
             fibers, info = cassette_specimen(**params, curvatures_per_m=curvatures, progress=bar)
         except ValueError as exc:
             if "does not fit the cassette" in str(exc):
-                raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(sp.phi_mean):.3g} deg "
-                                  f"does not fit the {sp.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
+                raise ConfigError(f"specimen: a fiber tilted by specimen.phi_mean = {math.degrees(specimen.phi_mean):.3g} deg "
+                                  f"does not fit the {specimen.width * 1e3:.4g} mm cassette: lower phi_mean or widen it",
                                   where=where) from None
             raise
     deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
     deposit["wall_time_s"] = time.perf_counter() - t0
     settle = None
-    if sp.settle.enabled:
-        st = sp.settle
+    if specimen.settle.enabled:
+        settle_cfg = specimen.settle
         with progress_bar("settle", progress) as bar:
             fibers, settle = settle_pile(
-                fibers, raw, width_m=sp.width, alpha_per_s=st.damping_alpha, time_s=st.time, mu=st.mu,
-                lock=None if st.lock_axial == "none" else st.lock_axial, frames=st.frames,
-                mass_scaling=st.mass_scaling, gravity_scale=st.gravity_scale, where=where, progress=bar)
+                fibers, raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
+                lock=None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial, frames=settle_cfg.frames,
+                mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale, where=where, progress=bar)
     pts = fibers.points_m
     top = float(np.max(pts[:, 1] + r))
     lowest = float(np.min(pts[:, 1] - r))
-    if sp.upper_plate == "pile":
-        height = top + sp.gap
-    else:
-        height = target_height_m(sp, r)
-        if top > height:
-            vmax = sp.n_fibers * math.pi * r**2 / (sp.width * top)
-            raise ConfigError(
-                f"specimen: the {'settled' if settle else 'deposited'} pile (top {top * 1e3:.4g} mm) does not fit its "
-                f"cassette under the upper plate at {height * 1e3:.4g} mm (v_f0 = {sp.volume_fraction:g}): lower "
-                f"specimen.volume_fraction to at most {vmax:.4g}, raise specimen.candidates (a denser pile) or set "
-                "specimen.upper_plate: pile", where=where)
-    box_min, box_max = [-sp.width / 2, 0.0, 0.0], [sp.width / 2, height, sp.length]
+    height = cassette_height_m(specimen, r, top, "settled" if settle else "deposited", where)
+    box_min, box_max = [-specimen.width / 2, 0.0, 0.0], [specimen.width / 2, height, specimen.length]
     stats = specimen_statistics(fibers, box_min_m=box_min, box_max_m=box_max)
     off = fibers.offsets
     nb = neighbour_orientations(fibers)
@@ -156,32 +163,32 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
                       fiber_contacts=fiber_contacts(pts, off, r), lowest_surface_m=lowest,
                       fibers_on_lower_plate=int(np.sum(per_fiber_low <= 1e-7)))
     info = {
-        "width_m": sp.width, "height_m": float(height), "length_m": sp.length,
-        "volume_fraction": float(sp.n_fibers * math.pi * r**2 / (sp.width * height)),
-        "target_volume_fraction": sp.volume_fraction,
-        "pile_volume_fraction": float(sp.n_fibers * math.pi * r**2 / (sp.width * top)),
+        "width_m": specimen.width, "height_m": float(height), "length_m": specimen.length,
+        "volume_fraction": float(specimen.n_fibers * math.pi * r**2 / (specimen.width * height)),
+        "target_volume_fraction": specimen.volume_fraction,
+        "pile_volume_fraction": float(specimen.n_fibers * math.pi * r**2 / (specimen.width * top)),
         "box_min_m": box_min, "box_max_m": box_max,
         "pile_top_m": top, "top_clearance_m": float(height - top), "lowest_surface_m": lowest,
         "contacts_at_U0": {
-            "fiber_fiber": fiber_contacts(pts, off, r, tol_m=sp.gap + 1e-7),
-            "fibers_on_lower_plate": int(np.sum(per_fiber_low <= sp.gap + 1e-7)),
-            "fibers_at_upper_plate": int(np.sum(per_fiber_top >= height - sp.gap - 1e-7)),
+            "fiber_fiber": fiber_contacts(pts, off, r, tol_m=specimen.gap + 1e-7),
+            "fibers_on_lower_plate": int(np.sum(per_fiber_low <= specimen.gap + 1e-7)),
+            "fibers_at_upper_plate": int(np.sum(per_fiber_top >= height - specimen.gap - 1e-7)),
         },
         "phi_histogram_deg": {"edges": edges.tolist(), "counts": counts.astype(int).tolist()},
         "deposit": deposit,
         **({"settle": {k: v for k, v in settle.items() if k != "wall_time_s"}} if settle else {}),
         "generator": {"function": "fiberpipe.model.specimen.cassette_specimen",
                       **{k: (list(v) if isinstance(v, tuple) else v) for k, v in params.items()},
-                      "spool_radius_m": sp.bow.spool_radius, "spool_radius_range_m": sp.bow.spool_radius_range,
+                      "spool_radius_m": specimen.bow.spool_radius, "spool_radius_range_m": specimen.bow.spool_radius_range,
                       **({"settle": {k: settle[k] for k in ("alpha_per_s", "time_s", "mu", "lock_axial", "mass_scaling",
                                                             "gravity_scale") if k in settle}} if settle else {}),
-                      "specimen": sp.model_dump(mode="json")},
+                      "specimen": specimen.model_dump(mode="json")},
         "statistics": stats,
     }
     out.mkdir(parents=True, exist_ok=True)
     write_fibers(out / "fibers.h5", fibers)
     write_json_atomic(out / "specimen.json", info)
-    write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, sp.width, where, strain=sp.strain))
+    write_text_atomic(out / "config.yaml", ready_config_text(raw, out, height, specimen.width, where, strain=specimen.strain))
     if settle:
         info["settle_wall_time_s"] = settle["wall_time_s"]
     return info
@@ -204,14 +211,14 @@ def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, whe
         sec = ready.get(section)
         if isinstance(sec, dict) and isinstance(sec.get(key), str) and os.path.isabs(sec[key]):
             sec[key] = os.path.relpath(sec[key], out.resolve())
-    sc = ready.setdefault("scene", {})
-    if isinstance(sc.get("plates"), dict):
-        sc["plates"] = {**sc["plates"], "lower_position": 0.0, "upper_position": float(height_m)}
-    if isinstance(sc.get("walls"), dict) or "walls" in sc.get("effects", []):
-        sc["walls"] = {**(sc.get("walls") or {}), "x": [-width_m / 2, width_m / 2]}
+    scene = ready.setdefault("scene", {})
+    if isinstance(scene.get("plates"), dict):
+        scene["plates"] = {**scene["plates"], "lower_position": 0.0, "upper_position": float(height_m)}
+    if isinstance(scene.get("walls"), dict) or "walls" in scene.get("effects", []):
+        scene["walls"] = {**(scene.get("walls") or {}), "x": [-width_m / 2, width_m / 2]}
     loading = ""
     if strain is not None:
-        sc["loading"] = {**(sc.get("loading") or {}), "displacement": float(strain * height_m)}
+        scene["loading"] = {**(scene.get("loading") or {}), "displacement": float(strain * height_m)}
         loading = f" loading U = {strain:.6g} × the gap = {strain * height_m * 1e3:.6g} mm."
     head = (f"# Made by `fiberpipe specimen` from {where}: the specimen in fibers.h5 (specimen.json: its\n"
             f"# box, generator settings and statistics); plate gap {height_m * 1e3:.6g} mm, cassette {width_m * 1e3:.6g} mm."
@@ -237,7 +244,7 @@ def run_specimen_command(config: str, out: Path, *, seed: int | None = None, ove
 
 def specimen_report(info: dict, out: Path) -> str:
     """The command's summary: v_f0, contacts at U = 0, the Φ histogram, Table 4's curvatures."""
-    st, c = info["statistics"], info["contacts_at_U0"]
+    settle_cfg, c = info["statistics"], info["contacts_at_U0"]
     n = info["generator"]["n_fibers"]
     lines = [
         f"wrote {out}/fibers.h5 ({n} fibers), {out}/specimen.json, {out}/config.yaml",
@@ -246,12 +253,12 @@ def specimen_report(info: dict, out: Path) -> str:
         f"the pile's own {info['pile_volume_fraction']:.4f}, top {info['pile_top_m'] * 1e3:.5g} mm)",
         f"  contacts at U = 0: {c['fiber_fiber']} fiber-fiber ({2 * c['fiber_fiber'] / max(n, 1):.2f} per fiber), "
         f"{c['fibers_on_lower_plate']} fibers on the lower plate, {c['fibers_at_upper_plate']} at the upper plate",
-        f"  Phi of neighbours: mean {st['phi_mean_deg']:.2f} deg (median {st['phi_median_deg']:.2f}, "
-        f"10-90 % {st['phi_p10_deg']:.2f}-{st['phi_p90_deg']:.2f}), {st['neighbour_pairs']} pairs",
+        f"  Phi of neighbours: mean {settle_cfg['phi_mean_deg']:.2f} deg (median {settle_cfg['phi_median_deg']:.2f}, "
+        f"10-90 % {settle_cfg['phi_p10_deg']:.2f}-{settle_cfg['phi_p90_deg']:.2f}), {settle_cfg['neighbour_pairs']} pairs",
         "  Phi histogram (deg: pairs): " + ", ".join(
             f"{int(e)}-{int(e) + 1}: {k}" for e, k in zip(info["phi_histogram_deg"]["edges"], info["phi_histogram_deg"]["counts"])
             if k),
-        f"  Table 4 curvatures at U = 0: XZ {st['curvature_xz_per_m']:.4g} 1/m, YZ {st['curvature_yz_per_m']:.4g} 1/m",
+        f"  Table 4 curvatures at U = 0: XZ {settle_cfg['curvature_xz_per_m']:.4g} 1/m, YZ {settle_cfg['curvature_yz_per_m']:.4g} 1/m",
     ]
     if "wall_time_s" in info.get("deposit", {}):
         lines.append(f"  deposited {n} fibers in {info['deposit']['wall_time_s']:.0f} s wall")

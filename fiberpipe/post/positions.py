@@ -228,11 +228,11 @@ def reference_stage_errors(stages, U_frames, frames, node_offsets, read) -> tupl
     ``mean_m``, ``p95_m``, ``max_fiber_mean_m``) and one row per stage and simulated fiber
     (``stage``, ``fiber``, ``reference_fiber``, ``mean_m``, ``p95_m``)."""
     overall, per_fiber = [], []
-    for k, st in enumerate(stages):
-        ref = read(st["fibers"])
-        pos, u_used = frame_at(U_frames, frames, st["displacement_m"])
+    for k, stage in enumerate(stages):
+        ref = read(stage["fibers"])
+        pos, u_used = frame_at(U_frames, frames, stage["displacement_m"])
         e = position_error(pos, node_offsets, ref.points_m, ref.offsets)
-        overall.append({"stage": k, "displacement_m": float(st["displacement_m"]), "U_m": u_used,
+        overall.append({"stage": k, "displacement_m": float(stage["displacement_m"]), "U_m": u_used,
                         "fibers_matched": int(np.sum(np.isfinite(e["per_fiber_m"]))), "mean_m": e["mean_m"],
                         "p95_m": e["p95_m"], "max_fiber_mean_m": e["max_m"]})
         match = dict(e["matched"])
@@ -254,7 +254,7 @@ def write_reference_stages(out_dir, cfg, sim, U_frames, summary: dict) -> list[s
     if U_frames is None:
         raise ConfigError("post.reference_stages needs plates (the stages are given by the plate displacement U)")
     out_dir = Path(out_dir)
-    stages = [{"displacement_m": st.displacement, "fibers": st.fibers} for st in cfg.post.reference_stages]
+    stages = [{"displacement_m": stage.displacement, "fibers": stage.fibers} for stage in cfg.post.reference_stages]
     overall, per_fiber = reference_stage_errors(stages, U_frames, np.asarray(sim.frames_positions),
                                                 np.asarray(sim.mesh.node_offsets), read_fibers)
     write_csv(out_dir / "reference_stages.csv", {k: [r[k] for r in overall] for k in overall[0]})

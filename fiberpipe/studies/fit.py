@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from fiberpipe.artifacts import write_json_atomic, write_text_atomic
+from fiberpipe.artifacts import write_json_atomic
 from fiberpipe.config import load_raw, set_dotted, validate_config
 from fiberpipe.errors import ConfigError, InputError
 
@@ -252,8 +252,8 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     U_t, F_t = read_target(target)
     if not params:
         raise ConfigError("give at least one --param KEY=LO:HI")
-    ps = [parse_param(p, base, where) for p in params]
-    keys = [p["key"] for p in ps]
+    fit_params = [parse_param(p, base, where) for p in params]
+    keys = [p["key"] for p in fit_params]
     if len(set(keys)) != len(keys):
         raise ConfigError("--param: a key is given twice")
     if seeds < 1 or budget < 1:
@@ -280,9 +280,9 @@ def run_fit(config: str | Path, target: str | Path, params: list[str], *, seeds:
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([base]))
     cluster = _local_cluster(workers) if scheduler is None and workers > 1 and len(seed_list) > 1 else None
     try:
-        return _search(base, ps, U_t, F_t, seed_list, out, workers,
-                       cluster.scheduler_address if cluster is not None else scheduler, where, echo, config, target,
-                       budget, keys)
+        evaluator = _Evaluator(base, fit_params, U_t, F_t, seed_list, out, workers,
+                               cluster.scheduler_address if cluster is not None else scheduler, where, echo)
+        return _search(evaluator, config, target, budget)
     finally:
         if cluster is not None:
             cluster.close()
@@ -299,46 +299,48 @@ def _local_cluster(workers: int):
                         env={"NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS", "1")})
 
 
-def _search(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo, config, target, budget, keys) -> dict:
+def _search(evaluator: _Evaluator, config, target, budget: int) -> dict:
     """The search of :func:`run_fit` with its evaluator; writes the outputs."""
     from scipy.optimize import minimize, minimize_scalar
 
-    ev = _Evaluator(base, ps, U_t, F_t, seed_list, out, workers, scheduler, where, echo)
+    fit_params, U_t, F_t = evaluator.params, evaluator.U_t, evaluator.F_t
+    seed_list, out, echo = evaluator.seeds, evaluator.out, evaluator.echo
+    keys = [p["key"] for p in fit_params]
     echo(f"fit {', '.join(keys)} of {config} to {target} ({len(U_t)} samples), {len(seed_list)} seed(s), "
          f"budget {budget} evaluations")
-    lo, hi = np.array([p["lo"] for p in ps]), np.array([p["hi"] for p in ps])
-    if len(ps) == 1:
+    lo, hi = np.array([p["lo"] for p in fit_params]), np.array([p["hi"] for p in fit_params])
+    if len(fit_params) == 1:
         # Brent's bounded search: one evaluation per iteration; xatol a 1e-4 of the interval
-        res = minimize_scalar(lambda v: ev([v]), bounds=(lo[0], hi[0]), method="bounded",
+        res = minimize_scalar(lambda v: evaluator([v]), bounds=(lo[0], hi[0]), method="bounded",
                               options={"maxiter": budget, "xatol": 1e-4 * (hi[0] - lo[0])})
         method = "scipy.optimize.minimize_scalar(method='bounded')"
     else:
-        res = minimize(lambda u: ev(lo + np.clip(u, 0, 1) * (hi - lo)), x0=np.full(len(ps), 0.5), method="Nelder-Mead",
-                       bounds=[(0.0, 1.0)] * len(ps),
+        res = minimize(lambda u: evaluator(lo + np.clip(u, 0, 1) * (hi - lo)), x0=np.full(len(fit_params), 0.5), method="Nelder-Mead",
+                       bounds=[(0.0, 1.0)] * len(fit_params),
                        options={"maxfev": budget, "xatol": 1e-4, "fatol": 1e-9 * max(float(np.max(np.abs(F_t))), 1e-30),
-                                "initial_simplex": _simplex(len(ps))})
+                                "initial_simplex": _simplex(len(fit_params))})
         method = "scipy.optimize.minimize(method='Nelder-Mead', bounds in [0, 1]^d)"
-    best_key = min(ev.cache, key=lambda k: ev.cache[k]["objective_N"])
-    best = ev.cache[best_key]
+    best_key = min(evaluator.cache, key=lambda k: evaluator.cache[k]["objective_N"])
+    best = evaluator.cache[best_key]
     result = {
         "config": str(config), "target": str(target), "method": method,
         "best": {k: float(v) for k, v in zip(keys, best_key)},
         "objective_N": best["objective_N"],
         "objective_relative": best["objective_N"] / max(float(np.sqrt(np.mean(F_t**2))), 1e-300),
-        "evaluations": len(ev.history),
+        "evaluations": len(evaluator.history),
         "seeds": [s for s in seed_list if s is not None],
         "spread_over_seeds": {
             "rms_N": best["spread_rms_N"],
             "max_N": float(np.max(best["curves"].std(axis=0, ddof=1))) if len(best["curves"]) > 1 else 0.0,
             "final_load_N": [float(c[-1]) for c in best["curves"]],
         },
-        "bounds": {p["key"]: [p["lo"], p["hi"]] for p in ps},
+        "bounds": {p["key"]: [p["lo"], p["hi"]] for p in fit_params},
         "converged": bool(getattr(res, "success", True)),
         "message": str(getattr(res, "message", "")),
         "best_runs": best["runs"],
     }
-    _write(out, result, ev, U_t, F_t, best)
-    echo(f"best: " + ", ".join(f"{k} = {v:.6g}" for k, v in result["best"].items())
+    _write(out, result, evaluator, U_t, F_t, best)
+    echo("best: " + ", ".join(f"{k} = {v:.6g}" for k, v in result["best"].items())
          + f"; RMS {result['objective_N']:.4g} N ({100 * result['objective_relative']:.3g} % of the target's RMS) after "
          f"{result['evaluations']} evaluations; {out}/fit.json, fit.png, history.csv")
     return result
@@ -352,14 +354,13 @@ def _simplex(d: int) -> np.ndarray:
     return s
 
 
-def _write(out: Path, result: dict, ev: _Evaluator, U_t, F_t, best) -> None:
-    from fiberpipe.artifacts import write_text_atomic
+def _write(out: Path, result: dict, evaluator: _Evaluator, U_t, F_t, best) -> None:
     from fiberpipe.post.tables import write_csv
 
-    keys = [p["key"] for p in ev.params]
-    cols = {k: [h[k] for h in ev.history] for k in keys}
-    cols.update({c: [h[c] for h in ev.history] for c in ("objective_N", "spread_rms_N", "wall_time_s")})
-    cols["evaluation"] = list(range(1, len(ev.history) + 1))
+    keys = [p["key"] for p in evaluator.params]
+    cols = {k: [h[k] for h in evaluator.history] for k in keys}
+    cols.update({c: [h[c] for h in evaluator.history] for c in ("objective_N", "spread_rms_N", "wall_time_s")})
+    cols["evaluation"] = list(range(1, len(evaluator.history) + 1))
     write_csv(out / "history.csv", {"evaluation": cols.pop("evaluation"), **cols})
     write_json_atomic(out / "fit.json", result)
     import matplotlib

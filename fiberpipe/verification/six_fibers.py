@@ -5,7 +5,7 @@ Nothing dissipates, so the state functions (the leapfrog kinetic term ½ v_{n−
 strain energy ALLSE and the stored contact potential of plates, walls and fibers) may not exceed the
 loads' work f·(x_n − x0): :func:`energy_excess` is the largest excess over the history rows, a
 fraction of max|W|. Used by ``tests/solver/test_contact_energy_balance.py`` and
-:mod:`fiberpipe.benchmarks.bench_step_energy`.
+``benchmarks/bench_step_energy.py`` of a source checkout.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ that does not. Measured on the quick variant (6 mm beams, 66 N/m at once, 0.6 ms
 case's table is in docs/verification.md (``make three-beam-energy``).
 """
 
-from fiberpipe.benchmarks.bench_three_beam_energy import run
+from fiberpipe.verification.three_beam_energy import three_beam_energy as run
 
 
 def test_undamped_three_beam_residual_shrinks_with_the_step_and_creates_no_energy():

@@ -9,7 +9,7 @@ the contact lowers the stable step: the modal step (:func:`fiberpipe.solver.time
 at seed 0's final state with the tangent of the fiber–fiber contact forces added to the beams',
 over the beams' alone.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_step_energy \\
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_step_energy.py \\
         [--law hertz_oriented ...] [--load 3 30 300 1000] [--dt-safety 0.9] [--seeds 4]
         [--penalty-factor 0.1] [--onset-fraction 0.04 0.004] [--tangent]
 """

@@ -1,9 +1,9 @@
 """Where a paper-40 step spends its time: the step loop with its effects added one at a time, and
 the kernels of one step timed alone, from saved states of the run (early phase and compacted phase).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_profile STATE.npz [STATE.npz ...]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_profile.py STATE.npz [STATE.npz ...]
 
-States come from :mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40`` makes both and
+States come from ``benchmarks/paper40_states.py`` (``make profile-paper40`` makes both and
 runs this). Every variant restarts from a copy of the same state, runs ``--warmup`` steps (the
 contact hook's first call and the neighbour list), then ``--steps`` timed steps, ``--repeats`` times
 in rotation (variants alternate, so a load change on the machine hits them alike); best per variant.
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from fiberpipe.benchmarks.paper40_states import load_state, scene
+from fiberpipe.benchmarks.scenes import load_state, scene
 
 BASE = ["gravity", "damping", "constraints"]
 VARIANTS = [

@@ -1,7 +1,7 @@
 """Cost per element-step of a larger bundle against paper-40, both advanced from rest, alternating
 in one process (CPU time of the process, so the ratio holds on a shared machine).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_bundle_cost \\
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_bundle_cost.py \\
         runs/specimens/bundle-400/config.yaml [--steps 400] [--rounds 6]
 
 The bundle's config is the run config ``fiberpipe specimen`` writes beside its specimen
@@ -17,7 +17,7 @@ from pathlib import Path
 
 
 def measure(bundle_config: Path, steps: int = 400, rounds: int = 6) -> dict:
-    from fiberpipe.benchmarks.paper40_states import scene
+    from fiberpipe.benchmarks.scenes import scene
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.solver.state import State
 

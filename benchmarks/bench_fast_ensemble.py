@@ -10,7 +10,7 @@ five over the 1.15 mm loading). The error of a setting is the largest |ΔF̄| ov
 to the largest window mean of the study settings' ensemble; the scatter of the study settings is the
 same measure of each of its runs against the mean of the others.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_fast_ensemble \\
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_fast_ensemble.py \\
         --out runs/bench/fast-ensemble --runs 6 \\
         --setting study: \\
         --setting ms100:solver.mass_scaling=100,scene.damping.alpha=1e3 1/s

@@ -1,6 +1,6 @@
 """This code's step loop against a reference checkout's, in one process, from one saved state.
 
-    python -m fiberpipe.benchmarks.bench_inprocess --reference CHECKOUT [--state STATE.npz]
+    python benchmarks/bench_inprocess.py --reference CHECKOUT [--state STATE.npz]
         [--config CONFIG.yaml] [--threads N] [--steps 200] [--rounds 20]
 
 Both sides advance their own copy of the state (paper-40's scene from this checkout's config, or
@@ -13,9 +13,9 @@ bias (about 1.01–1.03 for paper-40 on two threads).
 
 Why one process: on a shared virtual machine the same code and state ran up to 1.8× slower in one
 process than in another started minutes later (docs/benchmarks.md), so the worker-per-side
-comparison of :mod:`fiberpipe.benchmarks.bench_ab` cannot tell a few percent apart; blocks
+comparison of ``benchmarks/bench_ab.py`` cannot tell a few percent apart; blocks
 alternated within one process see the same machine. The reference needs this code's interface for
-states and scenes (``benchmarks.paper40_states.scene``, ``load_state``, ``solver.Integrator``); for
+states and scenes (``benchmarks.scenes.scene``, ``load_state``, ``solver.Integrator``); for
 older commits use ``bench_ab``.
 """
 
@@ -71,29 +71,40 @@ def mirror_package(checkout: Path, root: Path | None = None, name: str = MIRROR_
     return root
 
 
+def _scene_module(package: str):
+    """The side's scene and state loaders: ``benchmarks.scenes`` of the package, or
+    ``benchmarks.paper40_states`` of versions that shipped it in the package."""
+    for name in ("benchmarks.scenes", "benchmarks.paper40_states"):
+        try:
+            return importlib.import_module(f"{package}.{name}")
+        except ImportError:
+            continue
+    raise ImportError(f"no {package}.benchmarks.scenes")
+
+
 def _side(package: str, config: Path, state: Path | None, threads: int, warmup: int):
     """``(integrator, state)`` of one side, advanced by ``warmup`` steps (its kernels compiled or
     loaded)."""
     # each side's own scene and state loaders, the ones every version since the named interfaces
-    # has (not paper40_states.scene_and_state, which older references lack)
+    # has (not scene_and_state, which older references lack)
     try:
-        states = importlib.import_module(f"{package}.benchmarks.paper40_states")
+        scenes = _scene_module(package)
         solver = importlib.import_module(f"{package}.solver")
-        model, effects, _, dt = states.scene(config=config)
-        st = states.load_state(state) if state is not None else solver.State.at_rest(model)
-        integ = solver.Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=threads)
+        model, effects, _, dt = scenes.scene(config=config)
+        state_now = scenes.load_state(state) if state is not None else solver.State.at_rest(model)
+        integrator = solver.Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=threads)
     except (ImportError, AttributeError, TypeError) as e:
-        raise SystemExit(f"error: {package}: no paper40_states.scene/load_state or Integrator as this code's "
+        raise SystemExit(f"error: {package}: no benchmarks.scenes.scene/load_state or Integrator as this code's "
                          f"({e}); compare older commits with bench_ab") from None
-    if st.x.shape[0] != model.n_nodes:
-        raise SystemExit(f"error: {state}: a state of {st.x.shape[0]} nodes, the scene has {model.n_nodes} "
+    if state_now.x.shape[0] != model.n_nodes:
+        raise SystemExit(f"error: {state}: a state of {state_now.x.shape[0]} nodes, the scene has {model.n_nodes} "
                          f"(give the state's --config)")
-    _advance(integ, st, warmup, package)
-    return integ, st
+    _advance(integrator, state_now, warmup, package)
+    return integrator, state_now
 
 
-def _advance(integ, st, steps: int, package: str) -> None:
-    status, done, bad = integ.advance(st, steps)
+def _advance(integrator, state, steps: int, package: str) -> None:
+    status, done, bad = integrator.advance(state, steps)
     if status != 0 or done != steps:
         raise SystemExit(f"error: {package}: the run stopped after {done} of {steps} steps (status {status}, "
                          f"node {bad}): its blocks would not be comparable")
@@ -105,7 +116,7 @@ def load_sides(root: Path, *, state: Path | None = None, config: Path | None = N
     mirror in ``root`` (:func:`mirror_package`), each advanced by ``warmup`` steps; both sides read the
     same config (None: this code's paper-40)."""
     if config is None:
-        from ..bench import default_paper40_config
+        from fiberpipe.bench import default_paper40_config
 
         config = Path(default_paper40_config())
     if str(root) not in sys.path:
@@ -122,9 +133,9 @@ def measure(root: Path, *, state: Path | None = None, config: Path | None = None
     blocks = {name: [] for name in sides}
     for r in range(rounds):
         for name in (list(sides) if r % 2 == 0 else list(sides)[::-1]):
-            integ, st = sides[name]
+            integrator, state_now = sides[name]
             t0 = time.perf_counter()
-            _advance(integ, st, steps, name)
+            _advance(integrator, state_now, steps, name)
             blocks[name].append(1e6 * (time.perf_counter() - t0) / steps)
     ref, new = blocks["reference"], blocks["this code"]
     return {"blocks_us": blocks, "ratio_median": statistics.median(n / r for n, r in zip(new, ref)),
@@ -142,12 +153,12 @@ def table(result: dict) -> list[str]:
 
 
 def _check_inputs(state: Path | None, config: Path | None) -> None:
-    """A one-line error for a state that is not one ``paper40_states.save_state`` wrote, or a config
+    """A one-line error for a state that is not one ``fiberpipe.benchmarks.scenes.save_state`` wrote, or a config
     that does not load."""
     import numpy as np
 
-    from ..config import load_config
-    from ..errors import FiberpipeError
+    from fiberpipe.config import load_config
+    from fiberpipe.errors import FiberpipeError
 
     if state is not None:
         try:
@@ -167,7 +178,7 @@ def _check_inputs(state: Path | None, config: Path | None) -> None:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference", type=Path, required=True, help="a checkout's root folder ('.': this one)")
-    ap.add_argument("--state", type=Path, help="a saved state (benchmarks.paper40_states); default: from rest")
+    ap.add_argument("--state", type=Path, help="a saved state (benchmarks/paper40_states.py); default: from rest")
     ap.add_argument("--config", type=Path, help="the run config of the scene (default: paper-40's)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=200, help="steps per block")
@@ -195,9 +206,9 @@ def main(argv=None) -> None:
     for flag, path in (("--state", args.state), ("--config", args.config)):
         if path is not None:
             opts += [flag, str(path.resolve())]
-    package_root = str(Path(__file__).resolve().parents[2])  # this code, whatever the working folder
+    package_root = str(Path(__file__).resolve().parents[1])  # this code, whatever the working folder
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (package_root, os.environ.get("PYTHONPATH")))))
-    child = subprocess.run([sys.executable, "-m", "fiberpipe.benchmarks.bench_inprocess", *opts], env=env)
+    child = subprocess.run([sys.executable, str(Path(__file__).resolve()), *opts], env=env)
     if child.returncode != 0:
         raise SystemExit(f"error: compiling the two sides failed (exit status {child.returncode})")
     result = measure(root, state=args.state, config=args.config, threads=args.threads, steps=args.steps,

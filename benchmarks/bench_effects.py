@@ -9,7 +9,7 @@ time per element-step of
 - the beam-only loop plus one effect at a time (gravity, damping, clamps, loads, plates, walls,
   drives, contact, contact + friction), the difference being that effect's cost per step.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_effects [--steps 3000]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_effects.py [--steps 3000]
 
 Writes docs/bench/effects.md.
 """
@@ -31,7 +31,7 @@ from fiberpipe.benchmarks.bench_solver import bundle  # noqa: E402
 from fiberpipe.solver import (  # noqa: E402
     Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates, State, Walls,
 )
-from fiberpipe.verification.case_config import contact_hook  # noqa: E402
+from fiberpipe.benchmarks.scenes import default_contact  # noqa: E402
 from fiberpipe.solver.integrator import Integrator, SimulationSettings, choose_time_step, simulate  # noqa: E402
 
 R = 0.25e-3
@@ -39,10 +39,10 @@ R = 0.25e-3
 
 def _prepare(model, effects, steps, repeats):
     dt, _ = choose_time_step(model, effects, SimulationSettings())
-    integ = Integrator(model, effects, dt, history_rows=steps * (repeats + 1) // 100 + 4, history_every=100)
-    st = State.at_rest(model)
-    integ.advance(st, 20)  # compile or load from cache
-    return integ, st, dt
+    integrator = Integrator(model, effects, dt, history_rows=steps * (repeats + 1) // 100 + 4, history_every=100)
+    state = State.at_rest(model)
+    integrator.advance(state, 20)  # compile or load from cache
+    return integrator, state, dt
 
 
 def _round_robin(prepared: dict, steps: int, repeats: int) -> dict:
@@ -50,9 +50,9 @@ def _round_robin(prepared: dict, steps: int, repeats: int) -> dict:
     core shifts all of them alike."""
     best = {k: np.inf for k in prepared}
     for _ in range(repeats):
-        for k, (integ, st, _) in prepared.items():
+        for k, (integrator, state, _) in prepared.items():
             t = time.perf_counter()
-            integ.advance(st, steps)
+            integrator.advance(state, steps)
             best[k] = min(best[k], time.perf_counter() - t)
     return {k: v / steps for k, v in best.items()}
 
@@ -89,8 +89,8 @@ def main(argv=None):
                                                     lower_position_m=ymin, upper_position_m=ymax)],
         "walls (x, two planes)": lambda: [Walls({"x": (xmin, xmax)})],
         "drives (one fiber)": lambda: [Drives([Drive(0, [0, -1e-4, 0], 0.1)])],
-        "contact (hertz_oriented)": lambda: [contact_hook(m)],
-        "contact + friction": lambda: [contact_hook(m, friction=True)],
+        "contact (hertz_oriented)": lambda: [default_contact(m)],
+        "contact + friction": lambda: [default_contact(m, friction=True)],
     }
     repeats = 5
     prepared = {"bare": _prepare(m, [], a.steps, repeats)}
@@ -110,7 +110,7 @@ def main(argv=None):
         "# What each effect costs (what a scene leaves out costs nothing)",
         "",
         f"- date: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}; machine: {cpu}, 1 thread, load average {load:.2f}",
-        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_effects --steps {a.steps}`",
+        f"- command: `NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_effects.py --steps {a.steps}`",
         f"- scene: {nf} fibers × 50 elements ({E} elements, 0.3 mm, r = 0.25 mm, wavy, not touching), stable dt × 0.9 = {dt:.3g} s;"
         f" best of {repeats} timed calls of {a.steps} steps, scenes timed in turn",
         "",

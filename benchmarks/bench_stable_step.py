@@ -1,6 +1,6 @@
 """The largest stable step of paper-40, measured, against the eigenvalue estimate.
 
-From a saved state (:mod:`fiberpipe.benchmarks.paper40_states`), the scene is advanced by the same
+From a saved state (``benchmarks/paper40_states.py``), the scene is advanced by the same
 simulated time at time steps ``f × dt_modes`` (``dt_modes``: :func:`fiberpipe.solver.timestep.modal_time_step`
 with the scene's axial lock and plane penalty factor, no safety factor) and at the element bound's
 step; a run is unstable when it stops with a blow-up status or its largest node speed exceeds 10 ×
@@ -9,7 +9,7 @@ step (``c m (2/Δt)²``), as in a run started at that step; ``--fixed-penalties`
 stiffness at the element-bound run's (penalty factor × (Δt/Δt₀)², ``scene.friction.stiffness``
 fixed), so that a run switched to another step at a saved state changes nothing but the step.
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_stable_step STATE.npz \\
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_stable_step.py STATE.npz \\
         [--span 2ms] [--factors 0.95 1.0 1.05 1.1 1.2 1.3]
 """
 
@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from fiberpipe.benchmarks.paper40_states import load_state, scene
+from fiberpipe.benchmarks.scenes import load_state, scene
 
 
 def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:

@@ -2,7 +2,7 @@
 code) advance the same scene alternately by equal spans of simulated time; each span is timed by
 the worker's own CPU clock, so the ratio holds on a shared machine (both see the same load).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_ab \\
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ab.py \\
         --reference /path/to/reference/checkout [--until 12ms] [--spans 20] [--new KEY=VALUE ...]
 
 ``--reference`` is a checkout of the reference commit with its own ``.venv`` (``make setup`` there);

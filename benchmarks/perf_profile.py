@@ -1,10 +1,10 @@
 """Where the step loop's time goes, per thread and per compiled function: Linux ``perf`` sampling
 of the jitted kernels, named.
 
-    python -m fiberpipe.benchmarks.perf_profile [--state STATE.npz] [--config CONFIG] [--threads 2]
+    python benchmarks/perf_profile.py [--state STATE.npz] [--config CONFIG] [--threads 2]
 
 The scene is a run config's (``--config``; paper-40 at the study's settings without it), from a
-state saved by :mod:`fiberpipe.benchmarks.paper40_states` (``--state``) or from rest. A child process compiles the step loop (into an empty numba cache, so that every
+state saved by ``benchmarks/paper40_states.py`` (``--state``) or from rest. A child process compiles the step loop (into an empty numba cache, so that every
 kernel has the LLVM module its name is read from), writes ``/tmp/perf-PID.map`` (the address and
 name of each compiled function, which ``perf report`` reads for code without a symbol table), then
 runs ``--steps`` timed steps under ``perf record -e cycles:u`` (perf falls back to a clock where the
@@ -70,18 +70,18 @@ def write_perf_map() -> int:
 
 
 def _child(a) -> None:
-    from fiberpipe.benchmarks.paper40_states import scene_and_state
+    from fiberpipe.benchmarks.scenes import scene_and_state
     from fiberpipe.solver.integrator import Integrator
 
-    model, effects, dt, st = scene_and_state(a.state, a.config)
-    integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
+    model, effects, dt, state = scene_and_state(a.state, a.config)
+    integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
     print(f"PID {os.getpid()}", flush=True)  # the map's name, for the parent to remove it
-    if integ.advance(st, a.warmup)[0] != 0:
+    if integrator.advance(state, a.warmup)[0] != 0:
         raise SystemExit("the warm-up steps stopped (the state diverges at these settings)")
     write_perf_map()
     t0 = time.clock_gettime(time.CLOCK_MONOTONIC)
     w0 = time.perf_counter()
-    status = integ.advance(st, a.steps)[0]
+    status = integrator.advance(state, a.steps)[0]
     wall = time.perf_counter() - w0
     t1 = time.clock_gettime(time.CLOCK_MONOTONIC)
     if status != 0:
@@ -142,7 +142,7 @@ def table(per: dict, us_per_step: float, main_tid: str, min_share: float = 0.005
 
 def main(argv=None) -> list[str]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--state", help="a state saved by fiberpipe.benchmarks.paper40_states (default: from rest)")
+    ap.add_argument("--state", help="a state saved by benchmarks/paper40_states.py (default: from rest)")
     ap.add_argument("--config", help="the run config of the scene (default: paper-40's)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--steps", type=int, default=3000)
@@ -160,7 +160,7 @@ def main(argv=None) -> list[str]:
     if not per:
         raise SystemExit("perf recorded no samples of the timed steps (kernel.perf_event_paranoid ≤ 2 is needed)")
     where = " ".join(f"--{name} {value}" for name, value in (("config", a.config), ("state", a.state)) if value)
-    lines = [f"`python -m fiberpipe.benchmarks.perf_profile {where} --threads {a.threads} --steps {a.steps}`: "
+    lines = [f"`python benchmarks/perf_profile.py {where} --threads {a.threads} --steps {a.steps}`: "
              f"{n_el} elements, {a.threads} thread(s), perf event {event}, "
              f"load average {os.getloadavg()[0]:.2f}", ""]
     lines += table(per, us, main_tid=pid)
@@ -177,7 +177,7 @@ def _record(a) -> tuple[str, float, int, str, str]:
         threads = max(a.threads, int(os.environ.get("NUMBA_NUM_THREADS") or 0))
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "numba-cache"), NUMBA_NUM_THREADS=str(threads))
         cmd = ["perf", "record", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
-               str(data), "--", sys.executable, "-m", "fiberpipe.benchmarks.perf_profile", "--child",
+               str(data), "--", sys.executable, str(Path(__file__).resolve()), "--child",
                "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
         for flag, value in (("--state", a.state), ("--config", a.config)):
             if value:

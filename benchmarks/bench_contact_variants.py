@@ -1,8 +1,8 @@
 """CPU cost per step of contact variants on saved paper-40 states, alternating in one process.
 
-    NUMBA_NUM_THREADS=1 python -m fiberpipe.benchmarks.bench_contact_variants STATE.npz [STATE.npz ...]
+    NUMBA_NUM_THREADS=1 python benchmarks/bench_contact_variants.py STATE.npz [STATE.npz ...]
 
-The states come from :mod:`fiberpipe.benchmarks.paper40_states` (``make profile-paper40`` saves the
+The states come from ``benchmarks/paper40_states.py`` (``make profile-paper40`` saves the
 early and the compacted phase). Each variant is one Integrator on the same mesh; they advance the same
 state by the same number of steps, in alternating order, each timed by the process's CPU clock, so
 the ratios hold on a busy machine. The friction histories start afresh from each state.
@@ -25,7 +25,7 @@ VARIANTS = {
 def measure(states: list[Path], steps: int = 1500, rounds: int = 6) -> list[dict]:
     from fiberpipe.solver.integrator import Integrator
 
-    from .paper40_states import load_state, scene
+    from fiberpipe.benchmarks.scenes import load_state, scene
 
     integs = {}
     for name, ov in VARIANTS.items():
@@ -51,7 +51,7 @@ def measure(states: list[Path], steps: int = 1500, rounds: int = 6) -> list[dict
 def main(argv=None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     if not argv:
-        raise SystemExit("usage: python -m fiberpipe.benchmarks.bench_contact_variants STATE.npz [STATE.npz ...]")
+        raise SystemExit("usage: python benchmarks/bench_contact_variants.py STATE.npz [STATE.npz ...]")
     print("| state | " + " | ".join(VARIANTS) + " |")
     print("|---" * (len(VARIANTS) + 1) + "|")
     for row in measure([Path(a) for a in argv]):
