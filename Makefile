@@ -53,30 +53,44 @@ bench-solver: setup
 # family (20 seeds, fibretracker beside), slab-by-slab segment of a 1000 x 2000 x 2000 uint16 volume
 .PHONY: bench-real-ct bench-hard-phantoms bench-segment-large
 bench-real-ct: setup
-	$(PY) -m fiberpipe.benchmarks.bench_real_ct
+	$(PY) benchmarks/bench_real_ct.py
 
 bench-hard-phantoms: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
-	$(PY) -m fiberpipe.benchmarks.bench_hard_phantoms --seeds 0-19
+	$(PY) benchmarks/bench_hard_phantoms.py --seeds 0-19
 
 bench-segment-large: setup
-	$(PY) -m fiberpipe.benchmarks.bench_segment_large --shape 1000 2000 2000 --slab 32
+	$(PY) benchmarks/bench_segment_large.py --shape 1000 2000 2000 --slab 32
 
 # segment, skeletonize and trace of a 1000 x 2000 x 2000 uint16 volume (8 GB) chunk by chunk, peak memory per pass
 .PHONY: bench-large-volume
 bench-large-volume: setup
-	$(PY) -m fiberpipe.benchmarks.bench_large_volume --shape 1000 2000 2000 --slab 32 --block 64
+	$(PY) benchmarks/bench_large_volume.py --shape 1000 2000 2000 --slab 32 --block 64
 
 # the pipeline's own stages (fiberpipe run, chunks.mode: on) on the same volume, peak memory per stage
 .PHONY: bench-large-volume-stages
 bench-large-volume-stages: setup
-	$(PY) -m fiberpipe.benchmarks.bench_large_volume --shape 1000 2000 2000 --slab 32 --passes stage-segment stage-skeletonize stage-trace
+	$(PY) benchmarks/bench_large_volume.py --shape 1000 2000 2000 --slab 32 --passes stage-segment stage-skeletonize stage-trace
 
-# the dense-composite family (v_f 0.6, r 2.5-3.5 voxels, CNR 2-3, a cross ply), 10 seeds, fibretracker beside
+# the dense-composite family (v_f 0.45-0.6, r 2.5-5 voxels, CNR 2-5, misaligned, wavy, rings, cupping, a cross ply), 10 seeds, fibretracker beside
 .PHONY: bench-dense-phantoms
 bench-dense-phantoms: setup
 	$(PY) -m pip install --quiet -e '.[test,bench]'
-	$(PY) -m fiberpipe.benchmarks.bench_dense_phantoms --seeds 0-9
+	$(PY) benchmarks/bench_dense_phantoms.py --seeds 0-9
+
+# touching pairs at r = 5.5 voxels, 24 volumes; the structure-tensor package against fiberpipe's orientation
+.PHONY: bench-touching-pairs bench-structure-tensor
+bench-touching-pairs: setup
+	$(PY) benchmarks/bench_touching_pairs.py --seeds 0-11
+
+bench-structure-tensor: setup
+	$(PY) -m pip install --quiet structure-tensor
+	$(PY) benchmarks/bench_structure_tensor.py
+
+# the real cross-ply CT example (qim3d's fibers_150x150x150.tif, fetched with pip download), pictures into docs/img
+.PHONY: bench-cross-ply
+bench-cross-ply: setup
+	$(PY) benchmarks/bench_cross_ply.py --pictures docs/img
 
 .PHONY: bench-contact bench-pyelastica fast-settings docs config-reference
 bench-contact: setup

@@ -15,10 +15,8 @@ import time
 from pathlib import Path
 
 VARIANTS = {
-    "legacy, blend 1 mm": {"scene.contact": {"law": "hertz_oriented", "blend_length": "1 mm", "formulation": "legacy"}},
-    "legacy, blend 0.05 mm": {"scene.contact": {"law": "hertz_oriented", "blend_length": "0.05 mm",
-                                                "formulation": "legacy"}},
-    "potential, blend 0.05 mm (default)": {"scene.contact": {"law": "hertz_oriented"}},
+    "blend 1 mm": {"scene.contact": {"law": "hertz_oriented", "blend_length": "1 mm"}},
+    "blend 0.05 mm (default)": {"scene.contact": {"law": "hertz_oriented"}},
 }
 
 

@@ -75,7 +75,7 @@ def kernel_times(state_path) -> dict:
     """µs per call of the kernels of one step, alone, on the state's positions."""
     from fiberpipe.solver._kernels_beam import EB_SIZE, beam_pass_all, beam_resultants
     from fiberpipe.solver._kernels_boundary import plane_contacts
-    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_pairs import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
     from fiberpipe.solver.contact_state import new_records
     from fiberpipe.solver.friction import friction_forces_ex, plane_friction

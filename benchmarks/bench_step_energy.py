@@ -26,7 +26,7 @@ import numpy as np
 def contact_tangent_ratio(model, law, x, q, onset_m: float) -> float:
     """dt of the modal step with the contact's tangent added, over the beams' alone, at ``(x, q)``
     (all segment pairs of different fibers, the default two Gauss points)."""
-    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_pairs import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
     from fiberpipe.solver.contact_state import new_records
     from fiberpipe.solver.timestep import modal_time_step

@@ -466,7 +466,7 @@ def verify(quick):
 
 @main.group()
 def export():
-    """Write a config's scene in another program's input format."""
+    """Write a config's scene, or traced fibers, in another program's format."""
 
 
 @export.command("abaqus")
@@ -494,6 +494,22 @@ def export_abaqus(config, out_file, run_dir):
     fit = figures.get("contact_fit_error_full_scale")
     _echo(f"Abaqus/Explicit deck: {out_file} (time period {figures['time_period_s']:.6g} s"
           + ("" if fit is None else f"; contact table fit error {100 * fit:.3g} % of full scale") + ")")
+
+
+def _fiber_export_command(fmt: str, what: str):
+    """``fiberpipe export FORMAT FIBERS.h5 [--out FILE]``: traced fibers for another program
+    (fiberpipe.io.writers)."""
+    @export.command(fmt, help=f"The fibers of FIBERS_H5 (a fibers.h5 artifact) for {what}.")
+    @click.argument("fibers_h5", type=click.Path(dir_okay=False))
+    @click.option("--out", "out_file", type=click.Path(dir_okay=False), help="File to write (default: beside FIBERS_H5).")
+    def command(fibers_h5, out_file):
+        from fiberpipe.io.writers import export_fibers
+
+        _echo(f"{what}: {export_fibers(fmt, fibers_h5, out_file)}")
+
+
+for _fmt, _writer in __import__("fiberpipe.io.writers", fromlist=["FIBER_WRITERS"]).FIBER_WRITERS.items():
+    _fiber_export_command(_fmt, _writer.what)
 
 
 if __name__ == "__main__":

@@ -182,11 +182,50 @@ class SkeletonizeConfig(Section):
     )
 
 
+#: Defaults derived from the scan (``null`` in the schema): the study's mesh has elements of 0.3 mm on
+#: fibers 0.5 mm across, 0.6 diameters per element, which the unset ``mesh.element_length`` keeps at
+#: any scale.
+ELEMENT_LENGTH_DIAMETERS = 0.6
+#: The shortest traced piece counted as a fiber, in fiber diameters: the aspect ratio above 3:1 of
+#: the WHO fiber counting rule (WHO 1997, phase-contrast membrane-filter method).
+MIN_FIBER_LENGTH_DIAMETERS = 3.0
+#: The largest node shift the mesh stage makes to resolve overlaps, in fiber radii: two diameters
+#: (traced pieces that run into each other, as skeleton traces of a fiber mat do at crossings, are
+#: pushed apart; more is a tracing error to look at).
+MAX_OVERLAP_SHIFT_RADII = 4.0
+
+
+def element_length_m(mesh: "MeshConfig", radius_m: float) -> float:
+    """``mesh.element_length``, or :data:`ELEMENT_LENGTH_DIAMETERS` fiber diameters when unset
+    (``radius_m``: ``fiber.radius`` or the fibers' median radius)."""
+    if mesh.element_length is not None:
+        return float(mesh.element_length)
+    return ELEMENT_LENGTH_DIAMETERS * 2.0 * float(radius_m)
+
+
+def max_overlap_shift_m(mesh: "MeshConfig", radius_m: float) -> float:
+    """``mesh.max_overlap_shift``, or :data:`MAX_OVERLAP_SHIFT_RADII` fiber radii when unset."""
+    if mesh.max_overlap_shift is not None:
+        return float(mesh.max_overlap_shift)
+    return MAX_OVERLAP_SHIFT_RADII * float(radius_m)
+
+
+def min_fiber_length_m(trace: "TraceConfig", mesh: "MeshConfig", radius_m: float) -> float:
+    """``trace.min_length``, or :data:`MIN_FIBER_LENGTH_DIAMETERS` fiber diameters when unset, and
+    never below two mesh elements (the shortest fiber the mesh takes)."""
+    if trace.min_length is not None:
+        return float(trace.min_length)
+    return max(MIN_FIBER_LENGTH_DIAMETERS * 2.0 * float(radius_m), 2.0 * element_length_m(mesh, radius_m))
+
+
 class TraceConfig(Section):
     """Tracing options; ``None`` means the tracer's own default, scaled by the fiber radius."""
 
-    method: Literal["auto", "slices", "skeleton"] = Field(
-        "auto", description="auto: slices when the fibers are quasi-parallel (see min_aligned_fraction), else skeleton")
+    method: Literal["auto", "slices", "dense", "skeleton"] = Field(
+        "auto", description="auto: dense on a dense pack of thin fibers (mask volume fraction >= 0.35, radius <= 8 "
+        "voxels) that is quasi-parallel or runs mostly along volume axes, else slices when the fibers are "
+        "quasi-parallel (see min_aligned_fraction), else skeleton; dense: the slices tracer on the grey volume (read "
+        "again) with the radius read from it")
     min_aligned_fraction: float = Field(0.9, ge=0, le=1, description="auto picks the slices tracer when at least this "
                                         "fraction of the fiber volume runs within 45 deg of one volume axis (mask "
                                         "structure tensor); slices below it warns")
@@ -196,7 +235,9 @@ class TraceConfig(Section):
     smooth_sigma_vox: Optional[float] = Field(None, ge=0, description="default max(1, r/2)")
     expected_radius: Optional[Length] = None
     min_length: Optional[Length] = Field(None, ge=0, description="shorter traced fibers are dropped, with a warning and a "
-                                         "count in summary.json; default: two mesh elements (2 × mesh.element_length)")
+                                         "count in summary.json; default: derived from the scan, "
+                                         f"{MIN_FIBER_LENGTH_DIAMETERS:g} fiber diameters (the traced fibers' median "
+                                         "radius, or fiber.radius), and at least two mesh elements")
     join_gap_vox: Optional[float] = Field(None, ge=0, description="largest gap bridged between two pieces of one fiber "
                                           "(collinear, in line, similar radius); default max(4, 4 r); 0: no joining")
     pictures: bool = Field(True, description="write trace_slices.png, trace_midlines.png and orientation.png into the run folder")
@@ -250,12 +291,18 @@ class ChunksConfig(Section):
 
 
 class MeshConfig(Section):
-    element_length: Length = 0.3e-3
+    element_length: Optional[Length] = Field(
+        None, description="beam element length; default: derived from the scan, "
+        f"{ELEMENT_LENGTH_DIAMETERS:g} × the fiber diameter (fiber.radius, else the median radius of the fibers "
+        "traced or read): 0.3 mm for the study's fibers 0.5 mm across")
     smooth_sigma: Length = 0.0
     resolve_overlaps: bool = Field(True, description="push apart fibers overlapping in the input (strain-free adjustment; the simulate stage also moves surfaces up to 5 % of r inside a plate or wall back out)")
-    max_overlap_shift: Length = Field(0.1e-3, description="refuse inputs whose overlaps need larger node shifts")
+    max_overlap_shift: Optional[Length] = Field(
+        None, ge=0, description="refuse inputs whose overlaps need larger node shifts; default: derived from the "
+        f"fiber radius, {MAX_OVERLAP_SHIFT_RADII:g} r (fiber.radius, else the fibers' median radius)")
     min_fiber_length: Optional[Length] = Field(None, ge=0, description="shorter fibers are dropped, with a warning and a count "
-                                               "in summary.json; default: two elements (2 × mesh.element_length)")
+                                               "in summary.json; default: derived from the fiber radius as trace.min_length, "
+                                               f"{MIN_FIBER_LENGTH_DIAMETERS:g} fiber diameters and at least two elements")
 
     @field_validator("element_length")
     @classmethod
@@ -354,24 +401,18 @@ class ContactConfig(Section):
         "law takes over by a = 2 ℓ_blend (a sixth of a 0.3 mm element: a crossing whose ellipse spans elements hops "
         "across joints and, as a point force, creates energy; docs/contact.md)"
     )
-    formulation: str = Field(
-        "potential", description="normal contact kernel: 'potential' (the only one) makes every force minus the "
-        "gradient of one stored potential (docs/contact.md)"
+    formulation: Literal["potential"] = Field(
+        "potential", description="normal contact kernel: 'potential' (the one there is) makes every force minus the "
+        "gradient of one stored potential (Gauss points fixed on each segment with end weights, the angle blend "
+        "with its derivatives; docs/contact.md)"
     )
     onset: Length = Field(
-        0.0, description="formulation 'potential': penetration over which force and stiffness rise from zero "
+        0.0, description="penetration over which the fiber–fiber contact's force and stiffness rise from zero "
         "(0: the laws as they are)"
     )
     gauss_points: int = Field(
         2, description="Gauss points per segment of the line (parallel) part, 1…6"
     )
-
-    @field_validator("formulation")
-    @classmethod
-    def _one_formulation(cls, v):
-        if v != "potential":
-            raise ValueError(f"scene.contact.formulation must be 'potential' (the only formulation), got {v!r}")
-        return v
 
     @field_validator("law")
     @classmethod
@@ -712,8 +753,8 @@ class SolverConfig(Section):
     threads: int = Field(1, ge=1, description="numba threads for the beam pass and the node update (4 prange tasks "
                          "of contiguous nodes) and for the potential contact pass's pairs (up to 8 tasks once 64 pairs are "
                          "within reach; the same forces bit for bit) and the fiber–fiber friction's pairs (up to 8 tasks of at "
-                         "least 256 pairs in contact, once 512 are; the same forces bit for bit); the legacy contact pass and the plane "
-                         "friction stay serial; "
+                         "least 256 pairs in contact, once 512 are; the same forces bit for bit); the plane "
+                         "friction stays serial; "
                          "> 1 uses a step loop of its own (with the built-in contact: compiled once and cached, ≈ 1 min); "
                          "pays on an idle machine with a core per thread (docs/benchmarks.md); numba runs at most "
                          "NUMBA_NUM_THREADS threads (read when it starts; fiberpipe study and fit set it to the largest "
@@ -865,6 +906,14 @@ class Config(Section):
             raise ValueError(
                 "skeletonize.enabled is false but trace.method is skeleton, which traces the skeleton: "
                 "remove skeletonize.enabled (or set it true), or use trace.method: slices")
+        return self
+
+    @model_validator(mode="after")
+    def _element_length_from_fiber_radius(self):
+        # the derived default, resolved now where the radius is known (fiber.radius); else the mesh and
+        # trace stages derive it from the radius of the fibers they read
+        if self.mesh.element_length is None and self.fiber.radius is not None:
+            self.mesh.element_length = element_length_m(self.mesh, self.fiber.radius)
         return self
 
     @model_validator(mode="after")

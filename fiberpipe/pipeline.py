@@ -112,7 +112,7 @@ def _do_trace(cfg, run_dir, inputs, key):
         skeleton_path=inputs.get("skeleton"),
         truth_path=_truth_path(cfg, run_dir),
         config_sha256=key,
-        volume_path=_volume_path(cfg, run_dir) if cfg.trace.grey else None,
+        volume_path=_volume_path(cfg, run_dir) if cfg.trace.grey or cfg.trace.method in ("auto", "dense") else None,
     )
 
 

@@ -184,7 +184,7 @@ def test_crossing_fiber_dragged_across_joints_does_not_snag(pressed):
     pressed: the upper fiber 0.02 r into the lower one, which is clamped at its ends only and bends
     under the contact: the contact stays active along the whole drag (no snag, no loss of contact);
     residual 2.3e-3 of the booked balance; from state functions 3.1 %: the point part's crossing
-    hops across the bent fiber's joints (docs/contact.md, "The potential formulation").
+    hops across the bent fiber's joints (docs/contact.md, "Where it stops").
     """
     L, n = 3e-3, 10
     z1 = (2.0 - 0.02) * R if pressed else 2 * R

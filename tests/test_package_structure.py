@@ -79,14 +79,9 @@ def long_functions(pkg: Path = PKG) -> list[str]:
     return found
 
 
-# Functions of the imaging, verification and contact modules that other branches refactor to the
+# Functions of the contact pass and the verification that other branches refactor to the
 # limits: this list only shrinks, and is empty once they have merged.
 PENDING_ELSEWHERE = {
-    "fiberpipe/imaging/fragments.py join_fragments", "fiberpipe/imaging/phantom.py make_phantom",
-    "fiberpipe/imaging/skeleton_trace.py trace_skeleton", "fiberpipe/imaging/trace.py trace_slices",
-    "fiberpipe/imaging/trace_chunked.py trace_chunked",
-    "fiberpipe/solver/contact.py _line_half", "fiberpipe/solver/contact.py contact_forces",
-    "fiberpipe/solver/contact.py contact_forces_ex", "fiberpipe/solver/contact_potential.py _line_part",
     "fiberpipe/solver/contact_potential.py _pairs_range", "fiberpipe/solver/contact_potential.py _pairs_pass",
     "fiberpipe/solver/contact_potential.py _contact_forces_pot",
     "fiberpipe/verification/contact_cases.py three_beam_static",

@@ -1,8 +1,9 @@
 """Contact-pass cost: ns per candidate segment pair, per law, loose and squeezed bundles.
 
 40 fibers × 50 elements (0.3 mm, r = 0.25 mm) in a hexagonal bundle, slightly wavy (so crossing
-angles are small but not zero), centre spacing ``2r + gap``. Times :func:`contact_forces` (normal
-forces only) and the friction pass on the Verlet list the hook would use (skin 0.2 r).
+angles are small but not zero), centre spacing ``2r + gap``. Times the contact pass
+(:func:`fiberpipe.solver.contact_potential.contact_forces_pot`, normal forces only, every candidate
+pair evaluated) and the friction pass on the Verlet list the hook would use (skin 0.2 r).
 
     NUMBA_NUM_THREADS=1 .venv/bin/python -m fiberpipe.benchmarks.bench_contact [--repeats 200]
 """
@@ -14,7 +15,9 @@ import time
 
 import numpy as np
 
-from fiberpipe.solver.contact import contact_forces, gauss_points
+from fiberpipe.solver.contact_pairs import gauss_points
+from fiberpipe.solver.contact_potential import contact_forces_pot
+from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.friction import friction_forces
 from fiberpipe.solver.laws import make_law
 from fiberpipe.solver.neighbours import build_pairs
@@ -56,14 +59,15 @@ def measure(gap, law_name, n_gauss=2, repeats=200, friction=True):
     law = make_law(law_name, E_pa=15e9, nu=0.3, **extra)
     gxi, gw = gauss_points(n_gauss)
     f = np.zeros_like(x)
-    fn, cn, cs, ct, cphi, cd = np.zeros(n), np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
-    args = (x, seg, rad, pairs, n, law.law_id, law.params(), gxi, gw, f, fn, cn, cs, ct, cphi, cd)
-    e, na = contact_forces(*args)
+    rec = new_records(n)
+    fn, cn, cs, ct = rec.fn, rec.normal, rec.s, rec.t
+    args = (x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 0.0, f, rec, np.zeros(0), 0.0)
+    e, na = contact_forces_pot(*args)
     best = np.inf
     for _ in range(5):
         t = time.perf_counter()
         for _ in range(repeats):
-            contact_forces(*args)
+            contact_forces_pot(*args)
         best = min(best, (time.perf_counter() - t) / repeats)
     v = np.zeros_like(x)
     hist = np.zeros((n, 3))

@@ -58,8 +58,9 @@ def run_fibretracker(vol: np.ndarray, vs: float, r: float) -> Polylines:
     """fibretracker 0.1.0 on the grey volume, tuned to the phantom's radius (its own defaults
     are for r ~ 2.5-5 px): blob std r/2, min_distance r, peak threshold 0.5 of the contrast,
     intensity-weighted centroids, max_jump r/2, Gaussian-smoothed tracks."""
-    from fibretracker.models.detector import get_fiber_coords
-    from fibretracker.models.tracker import track_fibers
+    # fibretracker's own (British) names
+    from fibretracker.models.detector import get_fibre_coords as get_fiber_coords
+    from fibretracker.models.tracker import track_fibres as track_fibers
 
     lo, hi = np.percentile(vol, [1, 99])
     v = np.clip((vol - lo) / (hi - lo), 0, 1).astype(np.float64)

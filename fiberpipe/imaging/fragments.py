@@ -8,6 +8,8 @@ ends continue each other; :func:`drop_short` removes what is left below a length
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -67,16 +69,41 @@ def join_fragments(polylines: Polylines, *, max_gap_m: float, max_offset_m: floa
     n_joins : int
         Number of gaps bridged.
     """
-    # Strategy: a k-d tree over all end points finds the candidate pairs within max_gap; the
-    # tangents come from the last ~2 gap lengths of each piece (the tracers' smoothing bends the
-    # last point or two, a longer reach averages that out).
     n = polylines.n_fibers
     if n < 2 or max_gap_m <= 0:
         return polylines, 0
     fibers = [polylines.fiber(i) for i in range(n)]
     lengths = polylines.lengths_m()
     radius = polylines.radius_m
-    reach = max(2.0 * max_gap_m, 4.0 * float(np.median(radius)))
+    bounds = _JoinBounds(max_gap_m, max_offset_m, max_angle_deg, max_radius_ratio)
+    cand = _join_candidates(fibers, lengths, radius, bounds)
+    if not cand:
+        return polylines, 0
+    partner, n_joins = _pair_ends(sorted(cand), n)
+    if n_joins == 0:
+        return polylines, 0
+    out_f, out_r = _chain_pieces(fibers, lengths, radius, partner, spacing_m if spacing_m is not None else max_gap_m / 4,
+                                 spacing_m is None)
+    res = Polylines.from_list(out_f, np.asarray(out_r))
+    res.meta.update(polylines.meta)
+    return res, n_joins
+
+
+class _JoinBounds(NamedTuple):
+    max_gap_m: float
+    max_offset_m: float
+    max_angle_deg: float
+    max_radius_ratio: float
+
+
+def _join_candidates(fibers: list, lengths, radius, b: _JoinBounds) -> list:
+    """(cost, end a, end b) of every pair of piece ends that may be joined (:func:`join_fragments`'s
+    rules); end 2 i is piece i's first point, 2 i + 1 its last."""
+    # Strategy: a k-d tree over all end points finds the candidate pairs within max_gap; the
+    # tangents come from the last ~2 gap lengths of each piece (the tracers' smoothing bends the
+    # last point or two, a longer reach averages that out).
+    n = len(fibers)
+    reach = max(2.0 * b.max_gap_m, 4.0 * float(np.median(radius)))
     ends = np.empty((2 * n, 3))
     tang = np.empty((2 * n, 3))
     for i, p in enumerate(fibers):
@@ -84,34 +111,34 @@ def join_fragments(polylines: Polylines, *, max_gap_m: float, max_offset_m: floa
             ends[2 * i + side] = p[-1] if side else p[0]
             tang[2 * i + side] = _end_direction(p, bool(side), min(reach, 0.5 * lengths[i]) if lengths[i] > 0 else reach)
     cand = []
-    for a, b in cKDTree(ends).query_pairs(max_gap_m, output_type="ndarray"):
-        i, j = a // 2, b // 2
-        if i == j:
+    for a, c in cKDTree(ends).query_pairs(b.max_gap_m, output_type="ndarray"):
+        i, j = a // 2, c // 2
+        if i == j or max(radius[i], radius[j]) > b.max_radius_ratio * min(radius[i], radius[j]):
             continue
-        ri, rj = radius[i], radius[j]
-        if max(ri, rj) > max_radius_ratio * min(ri, rj):
-            continue
-        ta, tb = tang[a], tang[b]
+        ta, tb = tang[a], tang[c]
         if not (np.any(ta) and np.any(tb)):
             continue
         ang = _angle_deg(ta, -tb)
-        if ang > max_angle_deg:
+        if ang > b.max_angle_deg:
             continue
-        g = ends[b] - ends[a]
+        g = ends[c] - ends[a]
         d = float(np.linalg.norm(g))
-        if d > max_offset_m:
+        if d > b.max_offset_m:
             u = g / d
-            if _angle_deg(ta, u) > max_angle_deg or _angle_deg(-tb, u) > max_angle_deg:
+            if _angle_deg(ta, u) > b.max_angle_deg or _angle_deg(-tb, u) > b.max_angle_deg:
                 continue
-        off_b = np.linalg.norm(g - np.dot(g, ta) * ta)  # b from a's extrapolated axis
+        off_b = np.linalg.norm(g - np.dot(g, ta) * ta)  # c from a's extrapolated axis
         off_a = np.linalg.norm(g - np.dot(g, tb) * tb)
         off = max(off_a, off_b)
-        if off > max_offset_m:
+        if off > b.max_offset_m:
             continue
-        cand.append((d / max_gap_m + ang / max_angle_deg + off / max_offset_m, int(a), int(b)))
-    if not cand:
-        return polylines, 0
-    cand.sort()
+        cand.append((d / b.max_gap_m + ang / b.max_angle_deg + off / b.max_offset_m, int(a), int(c)))
+    return cand
+
+
+def _pair_ends(cand: list, n: int) -> tuple[np.ndarray, int]:
+    """Accept candidate pairs in order (sorted by cost), each end at most once, never closing a
+    loop (union-find over pieces). Returns each end's partner end (-1: free) and the joins."""
     partner = -np.ones(2 * n, dtype=np.int64)
     root = np.arange(n)
 
@@ -131,9 +158,15 @@ def join_fragments(polylines: Polylines, *, max_gap_m: float, max_offset_m: floa
         partner[a], partner[b] = b, a
         root[ra] = rb
         n_joins += 1
-    if n_joins == 0:
-        return polylines, 0
+    return partner, n_joins
 
+
+def _chain_pieces(fibers: list, lengths, radius, partner: np.ndarray, step_m: float, mean_step: bool):
+    """The fibers after joining: unjoined pieces unchanged and in order, then each chain of pieces
+    (from a piece with a free end, following the partners) as one resampled line with the
+    length-weighted mean radius. ``mean_step``: resample at the pieces' mean point spacing, else
+    at ``step_m``."""
+    n = len(fibers)
     out_f, out_r = [], []
     done = np.zeros(n, dtype=bool)
     for i in range(n):
@@ -145,37 +178,37 @@ def join_fragments(polylines: Polylines, *, max_gap_m: float, max_offset_m: floa
         if done[i] or (partner[2 * i] >= 0 and partner[2 * i + 1] >= 0):
             continue  # start chains at a piece with a free end
         # orient i so that its joined end is last
-        side_out = 1 if partner[2 * i + 1] >= 0 else 0
-        chain = [(i, side_out)]
+        chain = [(i, 1 if partner[2 * i + 1] >= 0 else 0)]
         done[i] = True
         while partner[2 * chain[-1][0] + chain[-1][1]] >= 0:
             nb = int(partner[2 * chain[-1][0] + chain[-1][1]])
-            j, side_in = nb // 2, nb % 2
-            chain.append((j, 1 - side_in))
-            done[j] = True
-        pts, wsum, rsum, spacing = [], 0.0, 0.0, []
-        for j, side_out_j in chain:
-            p = fibers[j] if side_out_j == 1 else fibers[j][::-1]
-            if pts:
-                # drop the points of this piece that lie behind the previous end (overlapping ends)
-                e, t = pts[-1][-1], pts[-1][-1] - pts[-1][-2] if len(pts[-1]) > 1 else np.zeros(3)
-                ahead = (p - e) @ t > 0 if np.any(t) else np.ones(len(p), dtype=bool)
-                first = int(np.argmax(ahead)) if ahead.any() else len(p)
-                p = p[first:]
-                if len(p) == 0:
-                    continue
-            pts.append(p)
-            wsum += lengths[j]
-            rsum += lengths[j] * radius[j]
-            if len(fibers[j]) > 1:
-                spacing.append(lengths[j] / (len(fibers[j]) - 1))
-        line = np.concatenate(pts)
-        step = spacing_m if spacing_m is not None else (float(np.mean(spacing)) if spacing else max_gap_m / 4)
-        out_f.append(resample_arclength(line, step))
-        out_r.append(rsum / wsum if wsum > 0 else float(np.mean([radius[j] for j, _ in chain])))
-    res = Polylines.from_list(out_f, np.asarray(out_r))
-    res.meta.update(polylines.meta)
-    return res, n_joins
+            chain.append((nb // 2, 1 - nb % 2))
+            done[nb // 2] = True
+        line, r, spacing = _join_chain(fibers, lengths, radius, chain)
+        out_f.append(resample_arclength(line, float(np.mean(spacing)) if mean_step and spacing else step_m))
+        out_r.append(r)
+    return out_f, out_r
+
+
+def _join_chain(fibers: list, lengths, radius, chain: list):
+    """One chain's points in order (each piece's points behind the previous end dropped: overlapping
+    ends), its length-weighted radius and its pieces' point spacings."""
+    pts, wsum, rsum, spacing = [], 0.0, 0.0, []
+    for j, side_out_j in chain:
+        p = fibers[j] if side_out_j == 1 else fibers[j][::-1]
+        if pts:
+            e, t = pts[-1][-1], pts[-1][-1] - pts[-1][-2] if len(pts[-1]) > 1 else np.zeros(3)
+            ahead = (p - e) @ t > 0 if np.any(t) else np.ones(len(p), dtype=bool)
+            p = p[int(np.argmax(ahead)) if ahead.any() else len(p):]
+            if len(p) == 0:
+                continue
+        pts.append(p)
+        wsum += lengths[j]
+        rsum += lengths[j] * radius[j]
+        if len(fibers[j]) > 1:
+            spacing.append(lengths[j] / (len(fibers[j]) - 1))
+    r = rsum / wsum if wsum > 0 else float(np.mean([radius[j] for j, _ in chain]))
+    return np.concatenate(pts), r, spacing
 
 
 def drop_short(polylines: Polylines, min_length_m: float) -> tuple[Polylines, np.ndarray]:

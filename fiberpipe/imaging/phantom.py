@@ -8,6 +8,8 @@ and Gaussian noise at a chosen contrast-to-noise ratio.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
@@ -137,16 +139,27 @@ def check_phantom_fits(shape, radius_vox: float, n_fibers: int = 1) -> None:
             f"enlarge the shape or lower radius_vox (at most {(min(ny, nx) - 3) / 2:g} for this shape)")
 
 
+class PhantomOptions(NamedTuple):
+    """The paths and the rendering of :func:`make_phantom` (its keyword options)."""
+
+    touching_fraction: float = 1 / 3
+    waviness_vox: float = 2.0
+    wavelength_vox: float | None = None
+    max_tilt: float = 0.04
+    min_gap_vox: float = 0.5
+    contrast_to_noise: float = 5.0
+    blur_sigma_vox: float = 1.0
+    background: float = 0.0
+    foreground: float = 1.0
+    dtype: str = "float32"
+    max_attempts: int = 20000
+
+
 def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float = 5.0,
-                 voxel_size_m: float | None = None, touching_fraction: float = 1 / 3,
-                 waviness_vox: float = 2.0, wavelength_vox: float | None = None,
-                 max_tilt: float = 0.04, min_gap_vox: float = 0.5,
-                 contrast_to_noise: float = 5.0, blur_sigma_vox: float = 1.0, seed: int = 0,
-                 background: float = 0.0, foreground: float = 1.0, dtype="float32",
-                 max_attempts: int = 20000):
+                 voxel_size_m: float | None = None, seed: int = 0, **options):
     """Make a synthetic volume of curved quasi-parallel fibers along z, with ground truth.
 
-    Parameters
+    Parameters (``options``: the fields of :class:`PhantomOptions`)
     ----------
     n_fibers : int
         Number of fibers.
@@ -196,29 +209,47 @@ def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float
     # accepted only if, in every slice, it keeps 2 r + min_gap from every fiber placed before. Pairs
     # go first (they need the most room). Rendering is exact distance-to-polyline with a one-voxel
     # partial-volume ramp, then PSF blur, then noise.
+    unknown = sorted(set(options) - set(PhantomOptions._fields))
+    if unknown:
+        raise TypeError(f"make_phantom() got an unexpected keyword argument {unknown[0]!r}")
+    o = PhantomOptions(**options)
     nz, ny, nx = (int(s) for s in shape)
     r = float(radius_vox)
     check_phantom_fits(shape, r, n_fibers)
     if voxel_size_m is None:
         voxel_size_m = STUDY_FIBER_DIAMETER_M / (2 * r)
     vs = float(np.asarray(voxel_size_m).reshape(-1)[0])
-    rng = np.random.default_rng(seed)
-    lam0 = float(wavelength_vox or max(nz, 100))
     ext = int(np.ceil(r + 2))
     z = np.arange(-ext, nz + ext, dtype=np.float64)
-    zc = 0.5 * (nz - 1)
-    n_pairs = int(round(n_fibers * touching_fraction / 2.0))
-    n_pairs = min(n_pairs, n_fibers // 2)
+    n_pairs = min(int(round(n_fibers * o.touching_fraction / 2.0)), n_fibers // 2)
     units = [2] * n_pairs + [1] * (n_fibers - 2 * n_pairs)
+    placed, touching = _place_units(units, z, (nz, ny, nx), r, o, np.random.default_rng(seed))
+    inside = (z >= 0) & (z <= nz - 1)
+    lines_vox = [np.column_stack([z, p[:, 0], p[:, 1]]) for p in placed]
+    vol = _render_vox(lines_vox, [r] * len(lines_vox), (nz, ny, nx), blur_sigma_vox=o.blur_sigma_vox,
+                      contrast_to_noise=o.contrast_to_noise, seed=seed + 1, background=o.background,
+                      foreground=o.foreground, dtype=o.dtype)
+    truth = Polylines.from_list([voxel_to_xyz_m(l[inside], vs) for l in lines_vox], r * vs)
+    truth.meta.update(touching=np.array(touching, dtype=bool), voxel_size_m=vs,
+                      radius_vox=r, seed=seed)
+    return vol, truth
+
+
+def _place_units(units: list, z: np.ndarray, shape, r: float, o: PhantomOptions, rng) -> tuple[list, list]:
+    """Random sequential addition of the units (1: a fiber, 2: a touching pair) in the
+    cross-section: the accepted paths ((len(z), 2) y, x each) and whether each fiber touches."""
+    nz, ny, nx = shape
+    lam0 = float(o.wavelength_vox or max(nz, 100))
+    zc = 0.5 * (nz - 1)
     lo_y, hi_y = r + 1.0, ny - 2.0 - r
     lo_x, hi_x = r + 1.0, nx - 2.0 - r
     inside = (z >= 0) & (z <= nz - 1)
-    placed: list[np.ndarray] = []  # each (len(z), 2) y, x
+    placed: list[np.ndarray] = []
     touching: list[bool] = []
     for size in units:
-        for _attempt in range(max_attempts):
-            tilt = rng.uniform(-max_tilt, max_tilt, 2)
-            amp = waviness_vox * rng.uniform(0.3, 1.0, 2)
+        for _attempt in range(o.max_attempts):
+            tilt = rng.uniform(-o.max_tilt, o.max_tilt, 2)
+            amp = o.waviness_vox * rng.uniform(0.3, 1.0, 2)
             lam = lam0 * rng.uniform(0.7, 1.5, 2)
             phase = rng.uniform(0, 2 * np.pi, 2)
             base = np.array([rng.uniform(lo_y, hi_y), rng.uniform(lo_x, hi_x)])
@@ -227,38 +258,20 @@ def make_phantom(*, n_fibers: int = 40, shape=(200, 120, 120), radius_vox: float
             if size == 2:
                 a = rng.uniform(0, np.pi)
                 cand.append(path + 2 * r * np.array([np.sin(a), np.cos(a)]))
-            ok = True
-            for c in cand:
-                cin = c[inside]
-                if (cin[:, 0].min() < lo_y or cin[:, 0].max() > hi_y or cin[:, 1].min() < lo_x
-                        or cin[:, 1].max() > hi_x):
-                    ok = False
-                    break
-            if not ok:
-                continue
-            if placed:
+            ok = all(c[inside][:, 0].min() >= lo_y and c[inside][:, 0].max() <= hi_y and c[inside][:, 1].min() >= lo_x
+                     and c[inside][:, 1].max() <= hi_x for c in cand)
+            if ok and placed:
                 P = np.stack(placed)  # (F, Z, 2)
-                for c in cand:
-                    d = np.sqrt(((P - c[None]) ** 2).sum(-1)).min()
-                    if d < 2 * r + min_gap_vox:
-                        ok = False
-                        break
+                ok = all(np.sqrt(((P - c[None]) ** 2).sum(-1)).min() >= 2 * r + o.min_gap_vox for c in cand)
             if ok:
                 placed.extend(cand)
                 touching.extend([size == 2] * size)
                 break
         else:
             raise InputError(
-                f"phantom: cannot place {n_fibers} fibers of radius {r} vox in a {ny}x{nx} cross-section "
-                f"(placed {len(placed)}); use fewer fibers, a smaller radius or a larger volume")
-    lines_vox = [np.column_stack([z, p[:, 0], p[:, 1]]) for p in placed]
-    vol = _render_vox(lines_vox, [r] * len(lines_vox), (nz, ny, nx), blur_sigma_vox=blur_sigma_vox,
-                      contrast_to_noise=contrast_to_noise, seed=seed + 1, background=background,
-                      foreground=foreground, dtype=dtype)
-    truth = Polylines.from_list([voxel_to_xyz_m(l[inside], vs) for l in lines_vox], r * vs)
-    truth.meta.update(touching=np.array(touching, dtype=bool), voxel_size_m=vs,
-                      radius_vox=r, seed=seed)
-    return vol, truth
+                f"phantom: cannot place {sum(units)} fibers of radius {r} vox in a {ny}x{nx} "
+                f"cross-section (placed {len(placed)}); use fewer fibers, a smaller radius or a larger volume")
+    return placed, touching
 
 
 def make_short_fiber_phantom(*, shape=(100, 180, 270), n_fibers: int = 150, radius_vox: float = 2.7,

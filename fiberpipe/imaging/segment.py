@@ -51,6 +51,34 @@ def _remove_small_and_fill(mask: np.ndarray, min_object_vox: int, fill_holes: bo
     return int(n)
 
 
+#: Otsu's separability (between-class over total grey variance, Otsu 1979 eq. 12) below which a
+#: volume split near its median has no fiber phase: a unimodal Gaussian histogram gives 2/pi = 0.64,
+#: dense composite phantoms at CNR 2 give 0.78, the real polymer scaffold 0.72.
+MIN_SEPARABILITY = 0.7
+#: Only a split this balanced is judged by separability: a sparse fiber phase (a few % of the
+#: voxels) has a low separability however clear its contrast.
+_BALANCED_SPLIT = 0.3
+
+
+def otsu_threshold(sample: np.ndarray) -> float:
+    """Otsu's threshold of a grey sample, refused when the sample has no second phase: constant, or
+    split near its median with a separability below :data:`MIN_SEPARABILITY` (noise or a
+    homogeneous sample: no fiber phase to segment)."""
+    if np.ptp(sample) == 0:
+        raise InputError("segment: the volume is constant, nothing to threshold")
+    t = float(threshold_otsu(sample))
+    upper = sample > t
+    share = float(np.count_nonzero(upper)) / sample.size
+    if _BALANCED_SPLIT < share < 1.0 - _BALANCED_SPLIT:
+        between = share * (1.0 - share) * (float(sample[upper].mean()) - float(sample[~upper].mean())) ** 2
+        separability = between / float(sample.var())
+        if separability < MIN_SEPARABILITY:
+            raise InputError(f"segment: the volume has no fiber phase (Otsu's threshold explains {separability:.0%} "
+                             f"of the grey variance, a single-phase histogram below {MIN_SEPARABILITY:.0%}): "
+                             "check input.volume, or set segment.method: fixed with segment.threshold")
+    return t
+
+
 def segment(volume: np.ndarray, *, method: str = "otsu", threshold: float | None = None,
             smooth_sigma_vox: float = 1.0, min_object_vox: int = 64, fill_holes: bool = True,
             invert: bool = False):
@@ -100,9 +128,7 @@ def segment(volume: np.ndarray, *, method: str = "otsu", threshold: float | None
     if method == "otsu":
         sample = _strided_sample(work, _OTSU_SAMPLE)
         sample = np.asarray(sample, dtype=np.float64).ravel()
-        if np.ptp(sample) == 0:
-            raise InputError("segment: the volume is constant, nothing to threshold")
-        t = float(threshold_otsu(sample))
+        t = otsu_threshold(sample)
     else:
         t = float(threshold)
     mask = (work < t) if invert else (work > t)

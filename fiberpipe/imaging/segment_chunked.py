@@ -18,7 +18,6 @@ import time
 
 import numpy as np
 from scipy import ndimage as ndi
-from skimage.filters import threshold_otsu
 
 from ..errors import InputError
 
@@ -237,9 +236,9 @@ def _otsu_sample(src, ks, sigma: float, step: int) -> np.ndarray:
 
 
 def _otsu(sample: np.ndarray) -> float:
-    if np.ptp(sample) == 0:
-        raise InputError("segment: the volume is constant, nothing to threshold")
-    return float(threshold_otsu(sample))
+    from .segment import otsu_threshold
+
+    return otsu_threshold(sample)
 
 
 def _fixed(method: str, threshold) -> float:

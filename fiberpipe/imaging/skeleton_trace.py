@@ -205,8 +205,30 @@ def trace_skeleton(mask: np.ndarray, voxel_size_m, *, skeleton: np.ndarray | Non
         q = pts_all[p]
         return float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) if len(q) > 1 else 0.0
 
-    # prune spurs repeatedly (removing one can turn a junction into a pass-through)
-    B = [list(b) for b in branches]
+    B = _prune_spurs([list(b) for b in branches], blen, prune)
+    link = _pair_at_junctions(B, pts_all, r, max_turn_deg)
+    fibers = _chain_branches(B, link)
+    out_f, out_r = [], []
+    for path in fibers:
+        if len(path) < 2 or blen(path) < min_len:
+            continue
+        q = pts_all[path]
+        q = smooth_polyline(q, sigma)
+        zyx = q / scale
+        out_f.append(resample_polyline(voxel_to_xyz_m(zyx, v), spacing_vox * v.min()))
+        out_r.append(float(np.median(rad_at[path])) * v.min())
+    res = Polylines.from_list(out_f, np.asarray(out_r) if out_r else 0.0)
+    res.meta.update(method="skeleton", radius_vox_estimate=r, n_skeleton_voxels=len(coords),
+                    n_branches=len(branches), n_branches_pruned=len(B), n_fibers=len(out_f),
+                    time_total_s=time.perf_counter() - t0,
+                    params=dict(prune_length_vox=prune, max_turn_deg=max_turn_deg,
+                                min_length_vox=min_len, smooth_sigma_vox=sigma, spacing_vox=spacing_vox))
+    return res
+
+
+def _prune_spurs(B: list, blen, prune: float) -> list:
+    """Branches ``[a, b, path]`` less the spurs (end branches shorter than ``prune`` at a junction
+    of three or more), repeatedly: removing one can turn a junction into a pass-through."""
     for _ in range(4):
         count = {}
         for a, b, p in B:
@@ -226,30 +248,25 @@ def trace_skeleton(mask: np.ndarray, voxel_size_m, *, skeleton: np.ndarray | Non
         B = keep
         if not removed:
             break
+    return B
 
-    # pair branch ends at junctions by direction continuity
+
+def _pair_at_junctions(B: list, pts_all: np.ndarray, r: float, max_turn_deg: float) -> dict:
+    """At each junction, branch ends paired greedily by direction continuity (outgoing directions
+    most nearly opposite, the fiber turning by less than ``max_turn_deg``): ``link[(i, side)]`` is
+    the branch end that continues branch i's end ``side`` (0: first point, 1: last)."""
     ends_at = {}
     for i, (a, b, p) in enumerate(B):
         if a[0] == "j":
             ends_at.setdefault(a, []).append((i, 0))
-        if b[0] == "j" and not (a == b and len(p) > 1 and False):
+        if b[0] == "j":
             ends_at.setdefault(b, []).append((i, 1))
     link = {}
     cos_max = -np.cos(np.deg2rad(max_turn_deg))
-    for j, lst in ends_at.items():
-        dirs = []
-        for i, side in lst:
-            p = B[i][2] if side == 0 else B[i][2][::-1]
-            dirs.append(_direction_out(pts_all[p], r))
-        cand = []
-        for u in range(len(lst)):
-            for w in range(u + 1, len(lst)):
-                if lst[u][0] == lst[w][0]:
-                    continue  # a loop branch
-                c = float(np.dot(dirs[u], dirs[w]))
-                if c <= cos_max:
-                    cand.append((c, u, w))
-        cand.sort()
+    for lst in ends_at.values():
+        dirs = [_direction_out(pts_all[B[i][2] if side == 0 else B[i][2][::-1]], r) for i, side in lst]
+        cand = sorted((float(np.dot(dirs[u], dirs[w])), u, w) for u in range(len(lst)) for w in range(u + 1, len(lst))
+                      if lst[u][0] != lst[w][0] and float(np.dot(dirs[u], dirs[w])) <= cos_max)  # no loop branch
         used = set()
         for c, u, w in cand:
             if u in used or w in used:
@@ -257,10 +274,14 @@ def trace_skeleton(mask: np.ndarray, voxel_size_m, *, skeleton: np.ndarray | Non
             used.update((u, w))
             link[lst[u]] = lst[w]
             link[lst[w]] = lst[u]
+    return link
 
-    # chain branches into fibers
+
+def _chain_branches(B: list, link: dict) -> list:
+    """The fibers as voxel paths: linked branches chained, each chain from a free end, then the
+    closed chains."""
     visited = set()
-    fibers, radii = [], []
+    fibers = []
 
     def walk(i, side_in):
         """Follow from branch i entered at end side_in; returns the voxel path."""
@@ -281,29 +302,10 @@ def trace_skeleton(mask: np.ndarray, voxel_size_m, *, skeleton: np.ndarray | Non
             continue
         # start from a free end if this chain has one
         if (i, 0) not in link:
-            path = walk(i, 0)
+            fibers.append(walk(i, 0))
         elif (i, 1) not in link:
-            path = walk(i, 1)
-        else:
-            continue
-        fibers.append(path)
+            fibers.append(walk(i, 1))
     for i in range(len(B)):  # closed chains
         if i not in visited:
             fibers.append(walk(i, 0))
-
-    out_f, out_r = [], []
-    for path in fibers:
-        if len(path) < 2 or blen(path) < min_len:
-            continue
-        q = pts_all[path]
-        q = smooth_polyline(q, sigma)
-        zyx = q / scale
-        out_f.append(resample_polyline(voxel_to_xyz_m(zyx, v), spacing_vox * v.min()))
-        out_r.append(float(np.median(rad_at[path])) * v.min())
-    res = Polylines.from_list(out_f, np.asarray(out_r) if out_r else 0.0)
-    res.meta.update(method="skeleton", radius_vox_estimate=r, n_skeleton_voxels=len(coords),
-                    n_branches=len(branches), n_branches_pruned=len(B), n_fibers=len(out_f),
-                    time_total_s=time.perf_counter() - t0,
-                    params=dict(prune_length_vox=prune, max_turn_deg=max_turn_deg,
-                                min_length_vox=min_len, smooth_sigma_vox=sigma, spacing_vox=spacing_vox))
-    return res
+    return fibers

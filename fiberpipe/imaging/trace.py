@@ -12,6 +12,7 @@ Two methods (docs/imaging.md):
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -150,6 +151,39 @@ def _refine_centroids(sl: np.ndarray, peaks: np.ndarray, R: float, samp: np.ndar
     return sites
 
 
+def fit_centres(grey: np.ndarray, centres: np.ndarray, r_vox: float, samp: np.ndarray, *, n_iter: int = 5):
+    """Sub-voxel centres of touching fibers in a grey slice (background 0, fiber 1): blurred disks of
+    radius ``r_vox`` fitted to the slice together by least squares (the kernel
+    :func:`fiberpipe.imaging._kernels.fit_disk_centres`), from the centroid estimates ``centres``.
+
+    Why: a centroid of each fiber's Voronoi cell reads the blurred edge of its neighbours (a
+    pixel's grey near a contact belongs to both fibers), which pulls touching centres toward each
+    other by a few tenths of a voxel; a model of all disks at once assigns every pixel's grey to
+    the disks that make it (template matching, as Avizo's cylinder correlation, but joint). The
+    fitted amplitudes (fiber grey 1) tell a fiber from a candidate between fibers: the blurred grey
+    peaks in the gap between three touching fibers too, but a disk there explains little of it.
+
+    Returns the centres (n, 2) and the amplitudes (n,).
+    """
+    from ._kernels import fit_disk_centres
+    from .dense import FIT_SIGMA_VOX
+
+    start = np.ascontiguousarray(centres, dtype=np.float64)
+    c, amplitude, _ = fit_disk_centres(np.ascontiguousarray(grey, dtype=np.float32), start, np.ones(len(centres)),
+                                       float(r_vox), FIT_SIGMA_VOX, float(samp[0]), float(samp[1]), int(n_iter), True)
+    # a disk that ran off (a neighbour missing from the model, another region's grey) keeps its centroid
+    far = np.linalg.norm((c - start) * samp, axis=1) > MAX_FIT_SHIFT_RADII * r_vox
+    c[far] = start[far]
+    return c, amplitude
+
+
+#: The farthest a fitted centre may move from its centroid estimate, in radii.
+MAX_FIT_SHIFT_RADII = 0.3
+#: Fitted disks below this amplitude (the fibers' grey is 1) are no fiber: half the contrast, the
+#: grey detection's own threshold.
+MIN_FIT_AMPLITUDE = 0.5
+
+
 def _nms(points: np.ndarray, radius: np.ndarray, samp: np.ndarray) -> np.ndarray:
     """Greedy non-maximum suppression in priority order (row order of ``points``).
 
@@ -209,8 +243,8 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     seeds : (m, 2) float ndarray, optional
         Predicted centres (pixel indices) of fibers already tracked, in priority order. They are
         refined like peaks and win over EDT peaks within ``seed_nms * r_vox``.
-    refine : bool
-        Sub-voxel centroid refinement.
+    refine : bool or "fit"
+        Sub-voxel centroid refinement; "fit": then the joint disk fit (:func:`fit_centres`, grey).
     smooth_edt : bool
         Blur the EDT (sigma 1 pixel) before looking for maxima.
     seed_nms, peak_nms : float
@@ -270,20 +304,29 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     rad = np.where(source >= 0, seed_nms * r_vox, peak_nms * r_vox)
     keep = _nms(cand, rad, samp)
     cand, source = cand[keep], source[keep]
-    if refine:
-        w = sl if grey is None else np.clip(grey, 0.0, 1.0)
-        c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
-        # candidates that converged onto an earlier (higher-priority) one are duplicates
-        keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
-        c, source = c[keep], source[keep]
-    else:
-        c = cand
+    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine) if refine else (cand, source)
     ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
     ridge = edt[ci[:, 0], ci[:, 1]]
     ok = (ridge >= thr) & sl[ci[:, 0], ci[:, 1]]
     if grey is not None:  # the radius of a grey detection is the expected one
         ridge = np.full(len(ridge), float(r_vox))
     return c[ok], ridge[ok], source[ok]
+
+
+def _refine(sl, grey, cand, source, r_vox: float, samp, refine):
+    """Sub-voxel centres of the candidates (:func:`detect_slice`): the centroids of their Voronoi
+    cells, then (``refine="fit"``, grey) the joint disk fit, fitted disks below
+    :data:`MIN_FIT_AMPLITUDE` dropped; candidates that converged onto an earlier (higher-priority)
+    one are duplicates and dropped."""
+    w = sl if grey is None else np.clip(grey, 0.0, 1.0)
+    c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
+    if refine == "fit" and grey is not None and len(c):
+        # the grey of another region (a cross ply beside this one) is no fiber of this slice's model
+        near = ndi.binary_dilation(sl, iterations=2)
+        c, amplitude = fit_centres(np.where(near, grey, 0.0), c, r_vox, samp)
+        c, source = c[amplitude >= MIN_FIT_AMPLITUDE], source[amplitude >= MIN_FIT_AMPLITUDE]
+    keep = _nms(c, np.full(len(c), 0.5 * r_vox), samp)
+    return c[keep], source[keep]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -601,26 +644,53 @@ def finish_tracks(raw, v, perm, r: float, *, merge_gap_vox: int, max_jump: float
     return Polylines.from_list(fibers, np.asarray(radii) if radii else 0.0), len(merged)
 
 
+class SliceOptions(NamedTuple):
+    """Options of the slices tracer (:func:`trace`, ``method="slices"`` or ``"dense"``); ``None``
+    means scaled by the radius r (voxels)."""
+
+    max_jump_vox: float | None = None     # max(2, 0.6 r)
+    max_skip: int = 3
+    momentum: float = 0.5
+    min_length_vox: float | None = None   # max(10, 3 r)
+    merge_gap_vox: int | None = None      # max(6, 3 r)
+    smooth_sigma_vox: float | None = None  # max(1, r / 2)
+    spacing_vox: float = 1.0
+    peak_threshold: float = 0.5
+    refine: bool | str = True             # True: Voronoi centroids; "fit": + joint disk fit (grey)
+    off_axis: str = "trace"
+    off_axis_min_fraction: float = 0.02
+    radius_from: str = "mask"             # "grey": the dense tracer's radius (dense.estimate_radius_grey)
+
+
+def slice_options(options: dict) -> SliceOptions:
+    """:class:`SliceOptions` from keyword options, an unknown name a one-line InputError."""
+    unknown = sorted(set(options) - set(SliceOptions._fields))
+    if unknown:
+        raise InputError(f"trace: unknown option {unknown[0]!r} of the slices tracer (known: "
+                         f"{', '.join(SliceOptions._fields)})")
+    return SliceOptions(**options)
+
+
 def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | None = None,
-                 axis: int | str = "auto", max_jump_vox: float | None = None, max_skip: int = 3,
-                 momentum: float = 0.5, min_length_vox: float | None = None,
-                 merge_gap_vox: int | None = None, smooth_sigma_vox: float | None = None,
-                 spacing_vox: float = 1.0, peak_threshold: float = 0.5, refine: bool = True,
-                 off_axis: str = "trace", off_axis_min_fraction: float = 0.02,
-                 grey: np.ndarray | None = None, progress=None) -> Polylines:
-    """Slice-wise tracer; see :func:`trace` (``method="slices"``) for the parameters."""
+                 axis: int | str = "auto", grey: np.ndarray | None = None, progress=None,
+                 **options) -> Polylines:
+    """Slice-wise tracer; see :func:`trace` (``method="slices"``) for the parameters; ``options``:
+    the fields of :class:`SliceOptions`."""
     t0 = time.perf_counter()
+    o = slice_options(options)
     v = voxel_size_zyx(voxel_size_m)
     if axis == "auto":
         ax, direction = dominant_axis(mask, v)
     else:
         ax, direction = int(axis), None
-    if off_axis != "none":
-        opts = dict(expected_radius_m=expected_radius_m, max_jump_vox=max_jump_vox, max_skip=max_skip,
-                    momentum=momentum, min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
-                    smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox, peak_threshold=peak_threshold,
-                    refine=refine, progress=progress, grey=grey)
-        split = _trace_axis_regions(mask, voxel_size_m, ax, direction, off_axis, off_axis_min_fraction, opts)
+    if o.radius_from == "grey" and expected_radius_m is None:
+        if grey is None:
+            raise InputError("trace: the dense tracer reads the grey volume (grey=)")
+        expected_radius_m = grey_radius_vox(mask, grey, v, ax) * float(v[[i for i in range(3) if i != ax]].min())
+    if o.off_axis != "none":
+        opts = dict(expected_radius_m=expected_radius_m, progress=progress, grey=grey,
+                    **o._replace(off_axis="none")._asdict())
+        split = _trace_axis_regions(mask, voxel_size_m, ax, direction, o.off_axis, o.off_axis_min_fraction, opts)
         if split is not None:
             split.meta["time_total_s"] = time.perf_counter() - t0
             return split
@@ -628,19 +698,13 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
     mask_t = mask.transpose(perm)  # a view: slices across the fibers
     vt = v[list(perm)]
     samp = vt[1:] / vt[1:].min()
-    if expected_radius_m is not None:
-        r = float(expected_radius_m) / vt[1:].min()
-    else:
-        r = estimate_radius_vox(mask_t, samp)
+    r = float(expected_radius_m) / vt[1:].min() if expected_radius_m is not None else estimate_radius_vox(mask_t, samp)
+    o = o._replace(
+        max_jump_vox=float(o.max_jump_vox) if o.max_jump_vox is not None else max(2.0, 0.6 * r),
+        min_length_vox=o.min_length_vox if o.min_length_vox is not None else max(10.0, 3.0 * r),
+        merge_gap_vox=o.merge_gap_vox if o.merge_gap_vox is not None else int(max(6, 3 * r)),
+        smooth_sigma_vox=o.smooth_sigma_vox if o.smooth_sigma_vox is not None else max(1.0, 0.5 * r))
     min_distance = max(1, int(round(0.5 * r)))
-    max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
-    if min_length_vox is None:
-        min_length_vox = max(10.0, 3.0 * r)
-    if merge_gap_vox is None:
-        merge_gap_vox = int(max(6, 3 * r))
-    if smooth_sigma_vox is None:
-        smooth_sigma_vox = max(1.0, 0.5 * r)
-
     grey_t = None
     if grey is not None:
         if grey.shape != mask.shape:
@@ -648,21 +712,42 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
         grey_t = _GreySlices(grey.transpose(perm), mask_t, samp)
         min_distance = max(1, int(round(0.75 * r)))
     raw, n_det = track_slices(mask_t, r, samp, min_distance=min_distance,
-                              peak_threshold=peak_threshold, max_jump=max_jump, max_skip=max_skip,
-                              momentum=momentum, refine=refine, progress=progress, grey_t=grey_t)
+                              peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox, max_skip=o.max_skip,
+                              momentum=o.momentum, refine=o.refine, progress=progress, grey_t=grey_t)
     t_det = time.perf_counter() - t0
-    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
-                                  min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
-                                  spacing_vox=spacing_vox)
-    out.meta.update(method="slices", axis=ax, direction_zyx=direction, radius_vox_estimate=r,
-                    n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
-                    n_fibers=out.n_fibers, time_detect_s=t_det,
-                    time_total_s=time.perf_counter() - t0,
-                    params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
-                                min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
-                                smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
-                                peak_threshold=peak_threshold, min_distance_vox=min_distance))
+    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=o.merge_gap_vox, max_jump=o.max_jump_vox,
+                                  min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
+                                  spacing_vox=o.spacing_vox)
+    out.meta.update(method="dense" if o.radius_from == "grey" else "slices", axis=ax, direction_zyx=direction,
+                    radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
+                    n_fibers=out.n_fibers, time_detect_s=t_det, time_total_s=time.perf_counter() - t0,
+                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, momentum=o.momentum,
+                                min_length_vox=o.min_length_vox, merge_gap_vox=o.merge_gap_vox,
+                                smooth_sigma_vox=o.smooth_sigma_vox, spacing_vox=o.spacing_vox,
+                                peak_threshold=o.peak_threshold, min_distance_vox=min_distance))
     return out
+
+
+def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.ndarray, ax: int) -> float:
+    """The fiber radius (pixels across ``ax``) of a dense pack, from its grey slices
+    (:func:`fiberpipe.imaging.dense.estimate_radius_grey`, started from the mask's estimate)."""
+    from .dense import estimate_radius_grey
+    from .orientation import axis_regions
+
+    # on the fibers along ax only: a cross ply's stripes in these slices are no cross-sections
+    labels, fractions = axis_regions(mask, voxel_size_zyx_m, grey=grey)
+    if max(fractions[b] for b in range(3) if b != ax) >= 0.02:
+        mask = mask & (labels == ax)
+    perm = (ax,) + tuple(i for i in range(3) if i != ax)
+    mask_t = mask.transpose(perm)
+    vt = voxel_size_zyx_m[list(perm)]
+    samp = vt[1:] / vt[1:].min()
+    r0 = estimate_radius_vox(mask_t, samp)
+
+    def detect(sl, g, r):
+        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
+
+    return estimate_radius_grey(_GreySlices(grey.transpose(perm), mask_t, samp), mask_t, samp, r0, detect)
 
 
 def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, min_fraction: float,
@@ -687,14 +772,14 @@ def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, m
     if not others:
         return None
     main = mask & ~np.isin(labels, others)
-    parts = [trace_slices(main, voxel_size_m, axis=ax, off_axis="none", **opts)]
+    parts = [trace_slices(main, voxel_size_m, axis=ax, **opts)]
     del main
     info = {}
     for b in others:
         n = 0
         if off_axis == "trace":
             sub = mask & (labels == b)
-            pb = trace_slices(sub, voxel_size_m, axis=b, off_axis="none", **opts)
+            pb = trace_slices(sub, voxel_size_m, axis=b, **opts)
             del sub
             parts.append(pb)
             n = pb.n_fibers
@@ -763,13 +848,17 @@ def trace(mask: np.ndarray, *, voxel_size_m, method: str = "slices", skeleton: n
     join = {k: options.pop(k) for k in ("join_gap_vox", "join_offset_vox", "join_angle_deg") if k in options}
     if method == "slices":
         out = trace_slices(mask, voxel_size_m, expected_radius_m=expected_radius_m, **options)
+    elif method == "dense":
+        if options.get("grey") is None:
+            raise InputError("trace: method 'dense' finds the fiber centres in the grey volume: pass grey=")
+        out = trace_slices(mask, voxel_size_m, expected_radius_m=expected_radius_m, radius_from="grey", **options)
     elif method == "skeleton":
         from .skeleton_trace import trace_skeleton
 
         out = trace_skeleton(mask, voxel_size_m, skeleton=skeleton, radius_vox=radius_vox,
                              expected_radius_m=expected_radius_m, **options)
     else:
-        raise InputError(f"trace: unknown method {method!r} (use 'slices' or 'skeleton')")
+        raise InputError(f"trace: unknown method {method!r} (use 'slices', 'dense' or 'skeleton')")
     return _join(out, voxel_size_m, **join)
 
 

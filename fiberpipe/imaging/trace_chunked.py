@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
-from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, track_slices
+from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_slices
 
 
 class SliceSource:
@@ -192,10 +192,8 @@ GREY_HALO = 8
 
 
 def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, block: int = 128,
-                  scheduler=None, grey=None, max_jump_vox: float | None = None, max_skip: int = 3,
-                  momentum: float = 0.5, min_length_vox: float | None = None, merge_gap_vox: int | None = None,
-                  smooth_sigma_vox: float | None = None, spacing_vox: float = 1.0, peak_threshold: float = 0.5,
-                  refine: bool = True, progress=None, axis: int | str = "auto", join: dict | None = None) -> Polylines:
+                  scheduler=None, grey=None, progress=None, axis: int | str = "auto", join: dict | None = None,
+                  **options) -> Polylines:
     """The slices tracer (:func:`fiberpipe.imaging.trace.trace_slices`) on a mask read slice by
     slice across ``axis`` (the fibers' axis; 0 reads slabs of the storage order, 1 or 2 boxes
     across it), in blocks of ``block`` slices.
@@ -214,10 +212,6 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         Dask scheduler address (or client): blocks are tracked on its workers.
     grey : SliceSource or array-like, optional
         The grey volume, for detection on grey (see :func:`fiberpipe.imaging.trace.detect_slice`).
-    max_jump_vox, max_skip, momentum, min_length_vox, merge_gap_vox, smooth_sigma_vox, spacing_vox,
-    peak_threshold, refine
-        As :func:`fiberpipe.imaging.trace.trace`; fibers must run within ~45 degrees of ``axis``
-        (one slicing axis: no region split).
     progress : callable(done_blocks, total_blocks), optional
     axis : int or "auto"
         The slicing axis (0, 1 or 2); ``"auto"``: the volume axis nearest the dominant fiber
@@ -225,6 +219,11 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         (read a sampled slice at a time; axis 0 when the sample is too thin to tell).
     join : dict, optional
         ``join_gap_vox``, ``join_offset_vox``, ``join_angle_deg`` of :func:`fiberpipe.imaging.trace.trace`.
+    **options
+        The tracking fields of :class:`fiberpipe.imaging.trace.SliceOptions` (``max_jump_vox``,
+        ``max_skip``, ``momentum``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
+        ``spacing_vox``, ``peak_threshold``, ``refine``); fibers must run within ~45 degrees of
+        ``axis`` (one slicing axis: no region split).
 
     Returns
     -------
@@ -232,6 +231,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     ``blocks``, ``block_slices`` and ``time_track_s``.
     """
     t0 = time.perf_counter()
+    o = slice_options(options)
     arr = src.open() if hasattr(src, "open") else src
     shape = tuple(arr.shape)
     if len(shape) != 3:
@@ -239,14 +239,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     if int(block) < 1:
         raise InputError(f"trace: block must be at least 1 slice, got {block!r}")
     v = voxel_size_zyx(voxel_size_m)
-    if axis == "auto":
-        from .orientation import mask_orientation
-
-        o = mask_orientation(StridedSample(arr), v)
-        axis = {"z": 0, "y": 1, "x": 2}[o["nearest_volume_axis"]] if o.get("n_samples") else 0
-    if axis not in (0, 1, 2):
-        raise InputError(f"trace: axis must be 0, 1, 2 or 'auto', got {axis!r}")
-    axis = int(axis)
+    axis = _slicing_axis(arr, v, axis)
     perm = (axis,) + tuple(i for i in range(3) if i != axis)
     vt = v[list(perm)]
     samp = vt[1:] / vt[1:].min()
@@ -255,12 +248,13 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     else:
         r = estimate_radius_vox(_Block(arr, 0, shape[axis], axis=axis, read_ahead=1), samp)  # 16 spread slices
     min_distance = max(1, int(round((0.75 if grey is not None else 0.5) * r)))
-    max_jump = float(max_jump_vox) if max_jump_vox is not None else max(2.0, 0.6 * r)
-    min_length_vox = max(10.0, 3.0 * r) if min_length_vox is None else min_length_vox
-    merge_gap_vox = int(max(6, 3 * r)) if merge_gap_vox is None else merge_gap_vox
-    smooth_sigma_vox = max(1.0, 0.5 * r) if smooth_sigma_vox is None else smooth_sigma_vox
-    params = dict(min_distance=min_distance, peak_threshold=peak_threshold, max_jump=max_jump,
-                  max_skip=max_skip, momentum=momentum, refine=refine)
+    o = o._replace(
+        max_jump_vox=float(o.max_jump_vox) if o.max_jump_vox is not None else max(2.0, 0.6 * r),
+        min_length_vox=max(10.0, 3.0 * r) if o.min_length_vox is None else o.min_length_vox,
+        merge_gap_vox=int(max(6, 3 * r)) if o.merge_gap_vox is None else o.merge_gap_vox,
+        smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox)
+    params = dict(min_distance=min_distance, peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox,
+                  max_skip=o.max_skip, momentum=o.momentum, refine=o.refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
     levels = None
@@ -268,30 +262,47 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         g = grey.open() if hasattr(grey, "open") else grey
         levels = grey_levels(_Block(g, 0, shape[axis], dtype=None, axis=axis, read_ahead=1),
                              _Block(arr, 0, shape[axis], axis=axis, read_ahead=1))
-    client = _client(scheduler)
-    results = []
-    if client is None:
-        for i, (b0, b1) in enumerate(jobs):
-            results.append(_track_block(src, grey, b0, b1, r, samp, params, axis, levels))
-            if progress is not None:
-                progress(i + 1, len(jobs))
-    else:
-        futures = [client.submit(_track_block, src, grey, b0, b1, r, samp, params, axis, levels, pure=False)
-                   for b0, b1 in jobs]
-        results = client.gather(futures)
+    results = _track_blocks(src, grey, jobs, (r, samp, params, axis, levels), scheduler, progress)
     t_track = time.perf_counter() - t0
     raw = [_Piece(k, p.astype(np.float64), rr) for res, _ in results for k, p, rr in res]
     n_det = int(sum(n for _, n in results))
     del results
-    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=merge_gap_vox, max_jump=max_jump,
-                                  min_length_vox=min_length_vox, smooth_sigma_vox=smooth_sigma_vox,
-                                  spacing_vox=spacing_vox)
+    out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=o.merge_gap_vox, max_jump=o.max_jump_vox,
+                                  min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
+                                  spacing_vox=o.spacing_vox)
     out.meta.update(method="slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,
-                    params=dict(max_jump_vox=max_jump, max_skip=max_skip, momentum=momentum,
-                                min_length_vox=min_length_vox, merge_gap_vox=merge_gap_vox,
-                                smooth_sigma_vox=smooth_sigma_vox, spacing_vox=spacing_vox,
-                                peak_threshold=peak_threshold, min_distance_vox=min_distance))
+                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, momentum=o.momentum,
+                                min_length_vox=o.min_length_vox, merge_gap_vox=o.merge_gap_vox,
+                                smooth_sigma_vox=o.smooth_sigma_vox, spacing_vox=o.spacing_vox,
+                                peak_threshold=o.peak_threshold, min_distance_vox=min_distance))
     return _join(out, voxel_size_m, **(join or {}))
 
+
+def _slicing_axis(arr, voxel_size_zyx_m, axis) -> int:
+    """``axis`` checked, or for ``"auto"`` the volume axis nearest the dominant fiber direction of a
+    strided sample (axis 0 when the sample is too thin to tell)."""
+    if axis == "auto":
+        from .orientation import mask_orientation
+
+        o = mask_orientation(StridedSample(arr), voxel_size_zyx_m)
+        axis = {"z": 0, "y": 1, "x": 2}[o["nearest_volume_axis"]] if o.get("n_samples") else 0
+    if axis not in (0, 1, 2):
+        raise InputError(f"trace: axis must be 0, 1, 2 or 'auto', got {axis!r}")
+    return int(axis)
+
+
+def _track_blocks(src, grey, jobs, block_args: tuple, scheduler, progress) -> list:
+    """:func:`_track_block` on every block ``(b0, b1)`` of ``jobs``, in order: here, or on the Dask
+    cluster of ``scheduler``; ``block_args`` = (r, samp, params, axis, levels)."""
+    client = _client(scheduler)
+    if client is not None:
+        futures = [client.submit(_track_block, src, grey, b0, b1, *block_args, pure=False) for b0, b1 in jobs]
+        return client.gather(futures)
+    results = []
+    for i, (b0, b1) in enumerate(jobs):
+        results.append(_track_block(src, grey, b0, b1, *block_args))
+        if progress is not None:
+            progress(i + 1, len(jobs))
+    return results

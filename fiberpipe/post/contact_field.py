@@ -26,7 +26,6 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
     ``contacts_per_fiber`` (K, F) active pairs each fiber takes part in, ``max_normal_force``
     (K,) N, ``max_penetration`` (K,) m.
     """
-    from fiberpipe.solver.contact import compute_contact
     from fiberpipe.solver.laws import law_from_config
     from fiberpipe.solver.neighbours import VerletList, segment_arclength
 
@@ -36,9 +35,8 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
     seg_radius = mesh.element_radius_m()
     arc = segment_arclength(seg, seg_fiber, mesh.nodes_m)
     verlet = VerletList(seg, seg_radius, seg_fiber, arc, skin_m=0.05 * float(seg_radius.max()))
-    # the run's formulation: the potential one (the default) with the run's Gauss points and onset
-    potential = (_potential_pass(seg, seg_radius, arc, law, scene_cfg.contact)
-                 if scene_cfg.contact.formulation == "potential" else None)
+    # the run's contact pass with the run's Gauss points and onset
+    potential = _potential_pass(seg, seg_radius, arc, law, scene_cfg.contact)
     K, N = frames_positions.shape[:2]
     out = {
         "contact_force": np.zeros((K, N, 3)),
@@ -47,7 +45,6 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
         "max_normal_force": np.zeros(K),
         "max_penetration": np.zeros(K),
     }
-    buffers = None
     for k in range(K):
         x = np.ascontiguousarray(frames_positions[k])
         verlet.build(x)
@@ -55,11 +52,8 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
         f = out["contact_force"][k]
         if n == 0:
             continue
-        if potential is not None:
-            buffers = potential(x, verlet.pairs, n, f)
-        else:
-            buffers = compute_contact(x, seg, seg_radius, verlet.pairs, n, law, f, buffers=buffers)[2]
-        fn = np.asarray(buffers.fn[:n])
+        records = potential(x, verlet.pairs, n, f)
+        fn = np.asarray(records.fn[:n])
         active = fn > 0
         pairs = verlet.pairs[:n][active]
         out["contacts"][k] = int(active.sum())
@@ -67,15 +61,15 @@ def frame_contact_forces(mesh, frames_positions: np.ndarray, scene_cfg, material
         np.add.at(out["contacts_per_fiber"][k], seg_fiber[pairs[:, 1]], 1)
         if active.any():
             out["max_normal_force"][k] = float(fn[active].max())
-            out["max_penetration"][k] = float(np.asarray(buffers.delta[:n])[active].max())
+            out["max_penetration"][k] = float(np.asarray(records.delta[:n])[active].max())
     return out
 
 
 def _potential_pass(seg, seg_radius, arc, law, contact_cfg):
-    """``(x, pairs, n, f) -> records``: the potential formulation's normal forces on the candidate
-    pairs, added into ``f`` (the kernel the run's hook binds for ``law``; no initial-overlap offsets,
-    which a frame does not keep)."""
-    from fiberpipe.solver.contact import gauss_points
+    """``(x, pairs, n, f) -> records``: the contact pass's normal forces on the candidate pairs, added
+    into ``f`` (the kernel the run's hook binds for ``law``; no initial-overlap offsets, which a frame
+    does not keep)."""
+    from fiberpipe.solver.contact_pairs import gauss_points
     from fiberpipe.solver.contact_potential import potential_kernels_for
     from fiberpipe.solver.contact_state import new_records
 

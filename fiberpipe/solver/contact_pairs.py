@@ -1,5 +1,13 @@
-"""What both contact passes share: Gauss points of the line part, the per-pair records and the
-per-pair output buffers of the Python-side evaluation."""
+"""What the fiber–fiber contact pass shares with its callers: the line part's Gauss points and a
+segment pair's records.
+
+* :func:`gauss_points`: Gauss–Legendre nodes on (0, 1) and weights summing to 1, fixed on each
+  segment by :func:`fiberpipe.solver.contact_potential.contact_forces_pot`'s line part
+  (``scene.contact.gauss_points`` per segment).
+* :func:`record_pair`: a pair's records (:class:`~fiberpipe.solver.contact_state.PairRecords`) from
+  the accumulator the contact pass fills while it applies the pair's contact points
+  (:func:`fiberpipe.solver.geometry.apply_line_point`).
+"""
 
 from __future__ import annotations
 
@@ -23,11 +31,14 @@ def gauss_points(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
     return xi.copy(), w.copy()
 
 
-
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def record_pair(out, k, rec, phi, n_active, use_list, use_share):
-    """The pair's records in ``out`` (:class:`~fiberpipe.solver.contact_state.PairRecords`) from its
-    accumulator ``rec`` (Σ|f|, Σf, Σ|f|·s, Σ|f|·t, max δ, share); returns the count of pairs in contact."""
+    """Pair ``k``'s records in ``out`` (:class:`~fiberpipe.solver.contact_state.PairRecords`) from its
+    accumulator ``rec`` (Σ|f| [N], Σf from B to A (3) [N], Σ|f|·s, Σ|f|·t, max δ [m], contact share)
+    and its crossing angle ``phi`` [rad]: the resultant normal force and its direction, the
+    force-weighted contact parameters, the largest penetration; with ``use_list`` the pair's index
+    appended to ``out.active``, with ``use_share`` its share and Σ|f|. Returns the count of pairs in
+    contact (``n_active``, plus one if this one carries a force)."""
     fsum = rec[0]
     if not fsum > 0.0:
         return n_active
@@ -47,24 +58,3 @@ def record_pair(out, k, rec, phi, n_active, use_list, use_share):
         out.share[k] = rec[7]
         out.fsum[k] = fsum
     return n_active + 1
-
-
-class ContactBuffers:
-    """Per-pair output arrays for :func:`contact_forces`, grown with the neighbour list capacity."""
-
-    def __init__(self, capacity: int):
-        self.resize(capacity)
-
-    def resize(self, capacity: int):
-        capacity = max(int(capacity), 1)
-        self.capacity = capacity
-        self.fn = np.zeros(capacity)
-        self.n = np.zeros((capacity, 3))
-        self.s = np.zeros(capacity)
-        self.t = np.zeros(capacity)
-        self.phi = np.zeros(capacity)
-        self.delta = np.zeros(capacity)
-
-    def ensure(self, capacity: int):
-        if capacity > self.capacity:
-            self.resize(int(capacity * 1.5) + 16)

@@ -1,7 +1,7 @@
 """Fiber–fiber normal contact in which every force is minus the gradient of one stored potential.
 
-Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.contact_forces_ex`
-(the hook picks one of the two). The potential of a candidate segment pair (A = segment i, B = j) is
+The normal contact pass of the step loop's contact hook (:mod:`fiberpipe.solver.terms.contact`). The
+potential of a candidate segment pair (A = segment i, B = j) is
 
     Π_AB = (1 − w(Φ)) Π_line + w(Φ) s_joint Π_point
 
@@ -16,8 +16,12 @@ Same inputs, outputs and per-pair records as :func:`fiberpipe.solver.contact.con
   at the nearer end (ties: the later one; a free end keeps its clamped point, the hemispherical
   end cap), so the integrand is ``e_line`` of the distance to fiber B's polyline: a function of the
   node positions only, continuous across straight and kinked joints.
-  ``Π_line = ½ Σ_g w_g L0_A e_line(g(δ_g))`` both ways (A on B and B on A). The closest point is
-  stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions.
+  ``Π_line = Σ_g w_g L0_A λ_AB e_line(g(δ_g))`` both ways (A on B and B on A), with the end weight
+  ``λ_AB = (1 + a_A)(1 − a_B)/(2(1 − a_A a_B))`` (:func:`_line_part`): ½ away from fiber ends; over a fiber's end
+  segment its own way takes the weight over smoothly (a = 3τ² − 2τ³ rising to 1 at the free end), so
+  a fiber end moving past the other way's fixed points does not step the integral. The closest point
+  is stationary (or clamped at a free end), so ``∂δ_g/∂x`` is the normal times the shape functions;
+  λ's gradient enters through the projection parameter on the end segment.
 * **Point part**: clamped segment–segment closest points, ``Π_point = e_point(g(δ_c), Φ)``, with
   the joint share ``s_joint`` of :func:`_joint_share`: smooth ramps, ±(0.3 δ_c + 1e-5 (r_i + r_j)),
   in the difference of each neighbouring pair's clamped distance and the pair's own, their gradient
@@ -89,24 +93,116 @@ def _point_segment_distance2(p0, p1, p2, x, n0, n1):
     return r0 * r0 + r1 * r1 + r2 * r2
 
 
-# columns of the line part's Gauss-point buffer (one row per Gauss point in contact)
-_G_XI, _G_T, _G_D0, _G_D1, _G_D2, _G_D, _G_DELTA, _G_GW, _G_P, _G_E = range(10)
-N_GP_COLUMNS = 10
+# columns of the line part's Gauss-point buffer (one row per Gauss point in contact): parameter on
+# the integrating segment, clamped parameter on the other, distance vector and length, penetration,
+# weight w_g·m (m: the direction's end weight, :func:`_end_weight`), the law's force magnitude and
+# energy, then up to two terms of the end weight's gradient: which segment's parameter (_T_NONE,
+# _T_OWN, _T_NEXT, _T_PREV) and ∂Π_g/∂τ (w_g ∂m/∂τ until the law is known)
+_G_XI, _G_T, _G_D0, _G_D1, _G_D2, _G_D, _G_DELTA, _G_GW, _G_P, _G_E, _G_ENDS, _G_C1, _G_R1, _G_C2, _G_R2 = range(15)
+N_GP_COLUMNS = 15
+_T_NONE, _T_OWN, _T_NEXT, _T_PREV = 0.0, 1.0, 2.0, 3.0
+# a segment's free ends as bit flags (:func:`_segment_ends`): its start is the fiber's start, its end
+# the fiber's end, the segment before it starts the fiber, the segment after it ends the fiber
+_START_FREE, _END_FREE, _PREV_FIRST, _NEXT_LAST = 1, 2, 4, 8
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _smoothstep(u):
+    """``(S(u), S'(u))``, S = 3u² − 2u³ on [0, 1], 0 below and 1 above (C¹)."""
+    if u <= 0.0:
+        return 0.0, 0.0
+    if u >= 1.0:
+        return 1.0, 0.0
+    return u * u * (3.0 - 2.0 * u), 6.0 * u * (1.0 - u)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _segment_ends(seg_nodes, e):
+    """Segment ``e``'s bit flags of the fiber ends near it (``_START_FREE`` … ``_NEXT_LAST``): 0 for a
+    segment with at least one segment on each side between it and either end."""
+    flags = 0
+    if _prev_node(seg_nodes, e) < 0:
+        flags |= _START_FREE
+    elif _prev_node(seg_nodes, e - 1) < 0:
+        flags |= _PREV_FIRST
+    if _next_node(seg_nodes, e) < 0:
+        flags |= _END_FREE
+    elif _next_node(seg_nodes, e + 1) < 0:
+        flags |= _NEXT_LAST
+    return flags
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _own_end_nearness(flags, xi):
+    """a(ξ) of the fiber's material point at parameter ξ of a segment with end ``flags``: S(ξ) on a
+    fiber's last segment, S(1 − ξ) on its first, S(|2ξ − 1|) on a fiber of one segment, 0 elsewhere
+    (1 at a free end, 0 at the segment's inner joint, C¹)."""
+    if flags & (_START_FREE | _END_FREE) == (_START_FREE | _END_FREE):
+        return _smoothstep(abs(2.0 * xi - 1.0))[0]
+    if flags & _START_FREE:
+        return _smoothstep(1.0 - xi)[0]
+    if flags & _END_FREE:
+        return _smoothstep(xi)[0]
+    return 0.0
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _projection(x, p0, p1, p2, n0, n1):
+    """Parameter τ of the projection of point p on the line of the segment of nodes n0, n1 (unclamped)."""
+    t0 = x[n1, 0] - x[n0, 0]
+    t1 = x[n1, 1] - x[n0, 1]
+    t2 = x[n1, 2] - x[n0, 2]
+    return ((p0 - x[n0, 0]) * t0 + (p1 - x[n0, 1]) * t1 + (p2 - x[n0, 2]) * t2) / (t0 * t0 + t1 * t1 + t2 * t2)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _other_end_nearness(x, p, t_raw, nodes, flags):
+    """``(a, ∂a/∂τ_own, ∂a/∂τ_near)``: the other fiber's end nearness a (:func:`_own_end_nearness`)
+    at the projection of point ``p`` on it, from the parameter ``t_raw`` of p on segment B
+    (``nodes = (b0, b1, b_prev, b_next)``, B's end ``flags``); where B's neighbour is the fiber's
+    first or last segment and p lies on its side of B, a is read from p's projection τ_near on that
+    segment (so a point that changes owner at a kinked joint sees the same a from both pairs)."""
+    p0, p1, p2 = p
+    nb0, nb1, b_prev, b_next = nodes
+    tc = min(max(t_raw, 0.0), 1.0)
+    a = 0.0
+    da_own = 0.0
+    if flags & (_START_FREE | _END_FREE) == (_START_FREE | _END_FREE):
+        v = 2.0 * tc - 1.0
+        a, da = _smoothstep(abs(v))
+        da_own = 2.0 * da if v >= 0.0 else -2.0 * da
+    elif flags & _START_FREE:
+        a, da = _smoothstep(1.0 - tc)
+        da_own = -da
+    elif flags & _END_FREE:
+        a, da = _smoothstep(tc)
+        da_own = da
+    da_near = 0.0
+    if flags & _NEXT_LAST and t_raw > 0.5:
+        an, da_near = _smoothstep(_projection(x, p0, p1, p2, nb1, b_next))
+        a += an
+    elif flags & _PREV_FIRST and t_raw <= 0.5:
+        an, da = _smoothstep(1.0 - _projection(x, p0, p1, p2, b_prev, nb0))
+        a += an
+        da_near = -da
+    return a, da_own, da_near
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
     """Stage 1 of a line half: the Gauss points fixed on A, projected on segment B, that touch B and
-    belong to it, written to ``gbuf`` rows from ``n0`` on (with their weight w_g); returns the new
-    row count. ``nodes = (a0, a1, b0, b1, b_prev, b_next)``: the segments' nodes and the far nodes of
-    the segments before and after B on its fiber (−1: B ends there, its clamped point is the end
-    cap)."""
-    na0, na1, nb0, nb1, b_prev, b_next = nodes
+    belong to it, written to ``gbuf`` rows from ``n0`` on (with their weight w_g·m, m the end
+    weight of :func:`_line_part`); returns the new row count. ``nodes = (a0, a1, b0, b1, b_prev,
+    b_next, a_ends, b_ends)``: the segments' nodes, the far nodes of the segments before and after B
+    on its fiber (−1: B ends there, its clamped point is the end cap) and both segments' end flags
+    (:func:`_segment_ends`)."""
+    na0, na1, nb0, nb1, b_prev, b_next, a_ends, b_ends = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
     inv_lb2 = 1.0 / (tb0 * tb0 + tb1 * tb1 + tb2 * tb2)
     reach2 = (rr - off) * (rr - off) if rr > off else 0.0
+    ends = a_ends != 0 or b_ends != 0
     n = n0
     for g in range(gxi.shape[0]):
         xi = gxi[g]
@@ -137,6 +233,23 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
                 continue
         elif b_prev >= 0 and _point_segment_distance2(p0, p1, p2, x, b_prev, nb0) < dd2:
             continue
+        weight = gw[g]
+        has_terms = 0.0  # the columns _G_ENDS … _G_R2 are written and read only near an end
+        if ends:  # near a fiber end: the end weight m = 2 λ_AB (_line_part)
+            a_b, da_own, da_near = _other_end_nearness(x, (p0, p1, p2), t_raw, (nb0, nb1, b_prev, b_next), b_ends)
+            a_a = _own_end_nearness(a_ends, xi)  # < 1: Gauss points are inside their segment
+            inv = 1.0 / (1.0 - a_a * a_b)
+            m = (1.0 + a_a) * (1.0 - a_b) * inv
+            if m <= 0.0:  # beyond the other fiber's end: this direction's points carry none of it
+                continue
+            weight = gw[g] * m
+            if da_own != 0.0 or da_near != 0.0:
+                dm_da = -(1.0 - a_a * a_a) * inv * inv  # ∂m/∂a_B
+                has_terms = 1.0
+                gbuf[n, _G_C1] = _T_OWN if da_own != 0.0 else _T_NONE
+                gbuf[n, _G_R1] = gw[g] * dm_da * da_own
+                gbuf[n, _G_C2] = _T_NONE if da_near == 0.0 else (_T_NEXT if t_raw > 0.5 else _T_PREV)
+                gbuf[n, _G_R2] = gw[g] * dm_da * da_near
         gbuf[n, _G_XI] = xi
         gbuf[n, _G_T] = t
         gbuf[n, _G_D0] = d0
@@ -144,23 +257,70 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
         gbuf[n, _G_D2] = d2
         gbuf[n, _G_D] = d
         gbuf[n, _G_DELTA] = delta
-        gbuf[n, _G_GW] = gw[g]
+        gbuf[n, _G_GW] = weight
+        if ends:
+            gbuf[n, _G_ENDS] = has_terms
         n += 1
     return n
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _line_loads(gbuf, n0, n1, law_id, law_params, ra, rb, ds, scale, la0):
+def _line_loads(gbuf, span, law_id, law_params, ra, rb, ds, scale, la0):
     """Stage 2: the line law at rows ``n0:n1`` of ``gbuf`` (A's radius ``ra``, B's ``rb``, A's
     reference length ``la0``): each Gauss point's force magnitude and energy, weighted by
-    ``scale``·w_g·L0_A. No row depends on another, so the law's evaluations (a logarithm and a table
-    read each) overlap in the pipeline instead of waiting on each other's geometry."""
+    ``scale``·w_g·m·L0_A, and the end weight's gradient terms as ∂Π_g/∂τ. No row depends on
+    another, so the law's evaluations (a logarithm and a table read each) overlap in the pipeline
+    instead of waiting on each other's geometry. ``span = (n0, n1, ends)``: ``ends``, the rows carry
+    the end-weight columns."""
+    n0, n1, ends = span
     for n in range(n0, n1):
         gg, gp = onset(gbuf[n, _G_DELTA], ds)
         pl, el = law_line(law_id, law_params, gg, ra, rb)
         wl = scale * gbuf[n, _G_GW] * la0
         gbuf[n, _G_P] = pl * gp * wl
         gbuf[n, _G_E] = el * wl
+        if ends and gbuf[n, _G_ENDS] != 0.0:
+            gbuf[n, _G_R1] *= scale * la0 * el
+            gbuf[n, _G_R2] *= scale * la0 * el
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _end_weight_force(x, f_out, rows, real, xi, dpi_dtau):
+    """The force −∂Π_g/∂τ ∇τ of one end-weight term: τ the parameter of the Gauss point
+    p = (1 − ξ) a0 + ξ a1 projected on the line of segment e0–e1, ``real = (a0, a1, e0, e1)`` the
+    nodes, ``rows`` their rows of ``f_out``. With t_e = e1 − e0 and r = p − e0:
+    ∂τ/∂p = t_e/|t_e|², ∂τ/∂e1 = (r − 2τ t_e)/|t_e|², ∂τ/∂e0 = −∂τ/∂p − ∂τ/∂e1 (the forces sum to 0)."""
+    na0, na1, ne0, ne1 = real
+    inv = 1.0 / ((x[ne1, 0] - x[ne0, 0]) ** 2 + (x[ne1, 1] - x[ne0, 1]) ** 2 + (x[ne1, 2] - x[ne0, 2]) ** 2)
+    tau = _projection(x, x[na0, 0] + xi * (x[na1, 0] - x[na0, 0]), x[na0, 1] + xi * (x[na1, 1] - x[na0, 1]),
+                      x[na0, 2] + xi * (x[na1, 2] - x[na0, 2]), ne0, ne1)
+    for c in range(3):
+        te = x[ne1, c] - x[ne0, c]
+        r = x[na0, c] + xi * (x[na1, c] - x[na0, c]) - x[ne0, c]
+        g_p = -dpi_dtau * te * inv
+        g_e1 = -dpi_dtau * (r - 2.0 * tau * te) * inv
+        f_out[rows[0], c] += (1.0 - xi) * g_p
+        f_out[rows[1], c] += xi * g_p
+        f_out[rows[3], c] += g_e1
+        f_out[rows[2], c] -= g_p + g_e1
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _end_weight_forces(x, gbuf, n, f_out, rows, real):
+    """Row ``n``'s end-weight terms as forces (:func:`_end_weight_force`); ``rows``/``real``: the block
+    rows / node indices of (a0, a1, b0, b1, b_prev, b_next) of this half. Returns whether a far node
+    (b_prev, b_next) got a force."""
+    far = False
+    for col in (_G_C1, _G_C2):
+        code = gbuf[n, col]
+        if code == _T_NONE:
+            continue
+        k = 2 if code == _T_OWN else (3 if code == _T_NEXT else 4)
+        h = 3 if code == _T_OWN else (5 if code == _T_NEXT else 2)
+        _end_weight_force(x, f_out, (rows[0], rows[1], rows[k], rows[h]), (real[0], real[1], real[k], real[h]),
+                          gbuf[n, _G_XI], gbuf[n, col + 1])
+        far = far or code != _T_OWN
+    return far
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -179,32 +339,81 @@ def _line_half_apply(gbuf, n0, n1, nodes4, f_out, rec, sign, scale):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _end_weight_pass(x, seg_nodes, gbuf, counts, ij, blk):
+    """The end weights' gradient terms of pair ``ij = (i, j)``'s Gauss points (rows of both ways,
+    ``counts = (n_a, n_b)``, after :func:`_line_part`) as forces into its block ``blk`` (rows 0–3:
+    a0, a1, b0, b1; 4–7: the far nodes of the segments before and after A, then B); returns whether
+    a far node got a force."""
+    i, j = ij
+    na0, na1, nb0, nb1 = seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1]
+    real_a = (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j))
+    real_b = (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i))
+    far = False
+    for n in range(counts[1]):
+        if gbuf[n, _G_ENDS] != 0.0:
+            if n < counts[0]:
+                far = _end_weight_forces(x, gbuf, n, blk, (0, 1, 2, 3, 6, 7), real_a) or far
+            else:
+                far = _end_weight_forces(x, gbuf, n, blk, (2, 3, 0, 1, 4, 5), real_b) or far
+    return far
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf):
-    """Stage 1 of pair (i, j)'s line part, both ways (A on B, then B on A): ``(n_a, n_b)``, the rows
-    of ``gbuf`` that end each way's Gauss points."""
+    """Stage 1 of pair (i, j)'s line part, both ways (A on B, then B on A): ``(n_a, n_b, ends)``, the
+    rows of ``gbuf`` that end each way's Gauss points and whether a fiber end is near (the rows then
+    carry the end weight's columns)."""
     na0 = seg_nodes[i, 0]
     na1 = seg_nodes[i, 1]
     nb0 = seg_nodes[j, 0]
     nb1 = seg_nodes[j, 1]
-    n_a = _line_half_points(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j)), rr, gxi,
-                            gw, off, gbuf, 0)
-    n_b = _line_half_points(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i)), rr, gxi,
-                            gw, off, gbuf, n_a)
-    return n_a, n_b
+    ends_i = _segment_ends(seg_nodes, i)
+    ends_j = _segment_ends(seg_nodes, j)
+    n_a = _line_half_points(x, (na0, na1, nb0, nb1, _prev_node(seg_nodes, j), _next_node(seg_nodes, j), ends_i,
+                                ends_j), rr, gxi, gw, off, gbuf, 0)
+    n_b = _line_half_points(x, (nb0, nb1, na0, na1, _prev_node(seg_nodes, i), _next_node(seg_nodes, i), ends_j,
+                                ends_i), rr, gxi, gw, off, gbuf, n_a)
+    return n_a, n_b, (ends_i | ends_j) != 0
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _line_part(gbuf, n_a, n_b, nodes4, lengths, ra, rb, law_id, law_params, scale, ds, f_out, rec):
-    """Stages 2 and 3 of the line part on the Gauss points of :func:`_line_points`, each way with
-    weight ``scale`` (``lengths``: the two segments' reference lengths L0_A, L0_B): forces into
-    ``f_out``, accumulator ``rec``; returns the weighted energy."""
+def _line_part(gbuf, counts, nodes4, geo, law_id, law_params, scale, ds, f_out, rec):
+    """Stages 2 and 3 of the line part on the Gauss points of :func:`_line_points` (``counts = (n_a,
+    n_b, ends)``), each way with weight ``scale`` times its end weight: forces into ``f_out`` at the
+    nodes ``nodes4``, accumulator ``rec``; ``geo = (L0_A, L0_B, r_A, r_B)`` the reference lengths and
+    radii; returns the weighted energy. The end weights' gradient terms are applied after it
+    (:func:`_end_weight_pass`).
+
+    **End weights.** Each way's Gauss points are fixed on its own segments, so the way from A onto
+    fiber B integrates over fiber A's length exactly, while where B ends inside that length its
+    integrand steps from e to 0 between two of A's points: a fiber sliding along another changed its
+    contact length whenever a point passed the other's end (±5.6 % of the normal force). Near a free
+    end the way whose points lie on the ending fiber therefore takes the weight over, smoothly:
+
+        Π_line = Σ_g w_g L0_A (1 − w) λ_AB(p_g) e(g(δ_g))  +  (A ↔ B),
+        λ_AB = (1 + a_A)(1 − a_B) / (2 (1 − a_A a_B)),
+
+    with a_F the end nearness of fiber F (:func:`_own_end_nearness`): a = S(τ) = 3τ² − 2τ³ over the
+    fiber's last segment (τ its parameter, 1 at the free end), S(1 − τ) over its first, 0 elsewhere.
+    a_A is read at the Gauss point's own parameter (fixed, < 1: Gauss points lie inside their
+    segment), a_B at its projection on fiber B's end segment. At one place λ_AB + λ_BA = 1, so the
+    sum still integrates e once; in the interior λ = ½ (the forces of full overlaps are as before bit
+    for bit). λ_AB is 0 where B ends (a_B = 1), with zero slope, whether or not A ends nearby too, so
+    the integrand of the way whose points are fixed on A no longer steps there. Where only B ends,
+    λ_BA = ½(1 + a_B), a cubic on B's end segment, integrated exactly by two or more Gauss points.
+    The force carries λ's gradient, −w_g L0_A (1 − w) e ∂λ_AB/∂a_B ∂a_B/∂τ ∇τ, with τ the projection
+    parameter on B's end segment (from the neighbouring pair, at a kinked joint, too: both owners
+    read the same a_B). Beyond B's end λ_AB = 0: the line part has no end cap (a fiber end meets
+    another fiber's side through its end segment, and a crossing through the point part)."""
     # Strategy: the Gauss points are found first (geometry, before the pair's blend, so it overlaps
     # the point part's), then the law runs on all of them, then the forces are applied: the same
     # arithmetic in the same order as one loop per point, but the law's latency (log, table) no
     # longer chains behind each point's square root and projection.
+    n_a, n_b, ends = counts
+    la0, lb0, ra, rb = geo
     na0, na1, nb0, nb1 = nodes4
-    _line_loads(gbuf, 0, n_a, law_id, law_params, ra, rb, ds, scale, lengths[0])
-    _line_loads(gbuf, n_a, n_b, law_id, law_params, rb, ra, ds, scale, lengths[1])
+    _line_loads(gbuf, (0, n_a, ends), law_id, law_params, ra, rb, ds, scale, la0)
+    _line_loads(gbuf, (n_a, n_b, ends), law_id, law_params, rb, ra, ds, scale, lb0)
     el = _line_half_apply(gbuf, 0, n_a, (na0, na1, nb0, nb1), f_out, rec, 1.0, scale)
     el += _line_half_apply(gbuf, n_a, n_b, (nb0, nb1, na0, na1), f_out, rec, -1.0, scale)
     return el
@@ -486,7 +695,7 @@ _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="alwa
 # columns of a pair's result row in the contact pass (:func:`_pairs_pass`): its force block (rows
 # a0, a1, b0, b1 of the pair's nodes, then the far nodes of the segments before and after each,
 # 3 components each), its accumulator
-# (:func:`fiberpipe.solver.contact.record_pair`), its crossing angle, its new skip threshold, and
+# (:func:`fiberpipe.solver.contact_pairs.record_pair`), its crossing angle, its new skip threshold, and
 # for the merge after the tasks its energy and its outcome, and whether the joint share's forces
 # reach the far nodes (rows 4–7 of the block; zeros otherwise, which the merge then skips)
 _R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME, _R_FAR = 0, 24, 32, 33, 34, 35, 36
@@ -607,7 +816,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             phi = crossing_angle(ta[0], ta[1], ta[2], tb[0], tb[1], tb[2], aa, bb, ab)
             d_own = math.sqrt(dist2)
             delta = rr - d_own - off
-            n_a, n_b = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
+            n_a, n_b, near_end = _line_points(x, seg_nodes, i, j, rr, gxi, gw, off, gbuf)
             w, dw, dw_dd, fp, ep, dep = _pair_blend_point(law_id, law_params, delta, ds, ra, rb, phi)
             e_point = 0.0   # s_joint Π_point (unweighted by w)
             de_point = 0.0  # its ∂/∂Φ at fixed positions of the closest points
@@ -631,8 +840,11 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             e_line = 0.0  # Π_line (unweighted by 1 − w)
             if w < 1.0:
                 half = 0.5 * (1.0 - w)
-                el = _line_part(gbuf, n_a, n_b, loc, (seg_arc[i, 1] - seg_arc[i, 0], seg_arc[j, 1] - seg_arc[j, 0]),
-                                ra, rb, law_id, law_params, half, ds, blk, rec)
+                el = _line_part(gbuf, (n_a, n_b, near_end), loc,
+                                (seg_arc[i, 1] - seg_arc[i, 0], seg_arc[j, 1] - seg_arc[j, 0], ra, rb), law_id,
+                                law_params, half, ds, blk, rec)
+                if near_end and _end_weight_pass(x, seg_nodes, gbuf, (n_a, n_b), (i, j), blk):
+                    far = 1.0
                 e_line = el / (1.0 - w)
             _blend_forces(blk, loc, a0, b0, ta, tb, (sc, tc, dist2, rr, aa, bb, ab),
                           dw_dd * (e_point - e_line), dw * (e_point - e_line) + w * de_point)
@@ -707,10 +919,37 @@ def _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look):
 def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_id, law_params, gxi, gw, ds, f_out,
                         out, c_off, reach):
     """Normal contact forces as minus the gradient of Σ_pairs Π_AB (module docstring), accumulated into
-    ``f_out``. Arguments as :func:`fiberpipe.solver.contact.contact_forces_ex` plus ``seg_arc`` (E, 2)
-    [m], the arc length of each segment's ends along its fiber (their difference, the reference
-    length, weighs the line part's Gauss points), and ``ds`` [m], the onset length δ_s. Returns
-    ``(energy, n_active)``; ``energy`` is the potential itself.
+    ``f_out``.
+
+    Parameters
+    ----------
+    x : (N, 3) float64, m — node positions.
+    seg_nodes : (E, 2) int64 — node indices of each segment. seg_radius : (E,) float64, m.
+    seg_arc : (E, 2) float64, m — the arc length of each segment's ends along its fiber (their
+        difference, the reference length, weighs the line part's Gauss points).
+    pairs : (P, 2) int64 — candidate segment pairs (i, j), only the first ``n_pairs`` rows are used.
+    law_id : int, law_params : float64 array — see :mod:`fiberpipe.solver.laws`.
+    gxi, gw : Gauss nodes on (0, 1) and weights summing to 1
+        (:func:`fiberpipe.solver.contact_pairs.gauss_points`).
+    ds : float, m — the onset length δ_s (0: the laws as they are).
+    f_out : (N, 3) float64, N — accumulated into (not zeroed).
+    out : :class:`fiberpipe.solver.contact_state.PairRecords` — per pair, out: ``fn``, ``normal``,
+        ``s``, ``t``, ``phi``, ``delta``; if size > 0, ``share`` (the pair's contact share: point part
+        its blend weight × joint share, line part the weighted fraction of the segment length in
+        contact; a full-length parallel contact or a crossing counts 1), ``fsum`` (Σ|f| of its
+        contact points [N]) and ``active`` (the indices of the pairs in contact, in order, so that
+        friction and statistics visit only those). ``gap`` (size > 0): in/out, each pair's skip
+        threshold, with ``reach``.
+    c_off : (P,) float64, m — per-pair initial-overlap offset subtracted from every penetration of
+        the pair (size 0: none).
+    reach : float, m — twice a bound on the path any node has travelled since the last
+        neighbour-list build (``2 Σ Δt max_i |v_i|``, non-decreasing). A pair with ``gap > reach``
+        is skipped: when it was last evaluated, at reach ``R_c``, its clamped centre-line distance
+        minus ``r_i + r_j`` was ``g_c`` and ``gap = R_c + g_c``; every point of a segment is a convex
+        combination of its nodes, so since then the gap closed by at most ``reach − R_c``. The
+        build sets ``gap = g_b`` at reach 0; every evaluated pair found apart sets it anew.
+
+    Returns ``(energy, n_active)``: the potential itself [J] and the number of pairs in contact.
 
     ``contact_forces_pot`` runs the pairs in one task; ``contact_forces_pot_threads``
     (``solver.threads`` > 1) in ``prange`` tasks once there are pairs for two, with the same

@@ -116,7 +116,7 @@ def friction_forces_ex(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_o
     hist : (C, 3) or (C, 4) float64 — elastic tangential force per pair [N] (in/out), aligned with
         ``pairs``; a 4th column holds the pair's k_t at its last update (N/m; with ``c_share``).
     f_out : (N, 3) float64 — accumulated into; +f_t on the first segment, −f_t on the second.
-    rec.share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact.contact_forces_ex`);
+    rec.share : (P,) float64 — the pair's contact share (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`);
         the pair's tangential stiffness is ``k_t × share`` (size 0: ``k_t``). Without it a contact
         split over several segment pairs (parallel fibers: each segment touches 2–3 of the other
         fiber) gets ``k_t`` per pair, so a node's tangential stiffness grew with the number of pairs

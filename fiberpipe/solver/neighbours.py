@@ -38,7 +38,7 @@ def max_displacement2_speed2(x, x_ref, v):
     the largest squared node speed [m²/s²] of ``v`` (0 if ``v`` has no rows), in one pass.
 
     The contact hook uses both every step: the first for the rebuild test, the second for the path
-    bound of its per-pair skip (:func:`fiberpipe.solver.contact.contact_forces_ex`).
+    bound of its per-pair skip (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`).
     """
     m = 0.0
     vm = 0.0

@@ -6,7 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from fiberpipe.artifacts import read_fibers, read_mesh, write_mesh
-from fiberpipe.config import Config
+import numpy as np
+
+from fiberpipe.config import MIN_FIBER_LENGTH_DIAMETERS, Config, element_length_m, max_overlap_shift_m
 from fiberpipe.errors import ConfigError
 from fiberpipe.io.abaqus import write_abaqus_deck, write_abaqus_inp
 from fiberpipe.io.vtk import mesh_vtu
@@ -16,15 +18,20 @@ from fiberpipe.stages._common import input_hashes
 
 def run_mesh(cfg: Config, fibers_path: Path, out: Path, *, config_sha256: str = "") -> dict:
     polylines = read_fibers(fibers_path)
-    polylines, dropped, min_len = _drop_short(cfg, polylines)
+    radius = cfg.fiber.radius if cfg.fiber.radius is not None else float(np.median(polylines.radius_m))
+    element_length = element_length_m(cfg.mesh, radius)
+    min_len = (cfg.mesh.min_fiber_length if cfg.mesh.min_fiber_length is not None else
+               max(MIN_FIBER_LENGTH_DIAMETERS * 2.0 * radius, 2.0 * element_length))
+    polylines, dropped = _drop_short(cfg, polylines, min_len)
     mesh = mesh_polylines(
         polylines,
-        cfg.mesh.element_length,
+        element_length,
         smooth_sigma_m=cfg.mesh.smooth_sigma,
         min_fiber_length_m=min_len,
         radius_m=cfg.fiber.radius,
     )
-    overlaps = resolve_overlaps(mesh, max_shift_m=cfg.mesh.max_overlap_shift) if cfg.mesh.resolve_overlaps else None
+    overlaps = (resolve_overlaps(mesh, max_shift_m=max_overlap_shift_m(cfg.mesh, radius)) if cfg.mesh.resolve_overlaps
+                else None)
     m = cfg.material
     write_mesh(
         out,
@@ -68,9 +75,10 @@ def write_deck(cfg: Config, mesh, path: Path) -> None:
                          density_kg_m3=m.density, heading=f"fiberpipe {cfg.name}")
 
 
-def _drop_short(cfg: Config, polylines):
-    """Drop the fibers shorter than ``mesh.min_fiber_length`` (default two elements), with one
-    warning line; refuse when the scene refers to fibers by index (dropping one renumbers them)."""
+def _drop_short(cfg: Config, polylines, min_len: float):
+    """Drop the fibers shorter than ``min_len`` (``mesh.min_fiber_length``; by default the trace
+    stage's rule, :data:`MIN_FIBER_LENGTH_DIAMETERS` fiber diameters and at least two elements), with
+    one warning line; refuse when the scene refers to fibers by index (dropping one renumbers them)."""
     import logging
 
     import numpy as np
@@ -79,10 +87,9 @@ def _drop_short(cfg: Config, polylines):
     from fiberpipe.model.mesh import short_fibers
     from fiberpipe.polylines import Polylines
 
-    min_len = cfg.mesh.min_fiber_length if cfg.mesh.min_fiber_length is not None else 2.0 * cfg.mesh.element_length
     short = short_fibers(polylines, min_len)
     if len(short) == 0:
-        return polylines, 0, min_len
+        return polylines, 0
     lengths = polylines.lengths_m()
     what = f"{len(short)} of {polylines.n_fibers} fibers are shorter than mesh.min_fiber_length = {min_len * 1e3:.3g} mm"
     if len(short) == polylines.n_fibers:
@@ -96,4 +103,4 @@ def _drop_short(cfg: Config, polylines):
     keep = np.setdiff1d(np.arange(polylines.n_fibers), short)
     kept = Polylines.from_list([polylines.fiber(i) for i in keep], polylines.radius_m[keep])
     logging.getLogger("fiberpipe").warning("mesh: dropped %s", what)
-    return kept, int(len(short)), min_len
+    return kept, int(len(short))

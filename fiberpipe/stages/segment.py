@@ -31,14 +31,13 @@ def run_segment(cfg: Config, volume_path: Path, out: Path, *, voxel_size_m=None,
         dtype=inp.dtype,
     )
     s = cfg.segment
-    mask, info = segment(
-        volume,
-        method=s.method,
-        threshold=s.threshold,
-        smooth_sigma_vox=s.smooth_sigma_vox,
-        min_object_vox=s.min_object_vox,
-        fill_holes=s.fill_holes,
-    )
+    try:
+        mask, info = segment(volume, method=s.method, threshold=s.threshold, smooth_sigma_vox=s.smooth_sigma_vox,
+                             min_object_vox=s.min_object_vox, fill_holes=s.fill_holes)
+    except InputError as exc:
+        if exc.where:
+            raise
+        raise InputError(str(exc), where=str(volume_path)) from None
     if not mask.any():
         raise InputError("segmentation found no fiber voxels; check segment.threshold", where=str(volume_path))
     info = {k: (float(v) if isinstance(v, (np.floating, float)) else v) for k, v in dict(info).items()}

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fiberpipe.artifacts import read_artifact, read_fibers, write_fibers, write_json_atomic
-from fiberpipe.config import Config
+from fiberpipe.config import MIN_FIBER_LENGTH_DIAMETERS, Config, element_length_m, min_fiber_length_m
 from fiberpipe.errors import InputError
 from fiberpipe.stages._common import input_hashes
 from fiberpipe.stages.skeletonize import eval_list
@@ -37,13 +37,15 @@ def run_trace(
     mask = art["mask"]
     voxel_size = eval_list(art.attrs["voxel_size_m"])
     t = cfg.trace
+    check_voxel_size(cfg, voxel_size, t.expected_radius or cfg.fiber.radius)
     method, orient_mask = choose_method(cfg, mask, voxel_size)
     kwargs = dict(
         voxel_size_m=voxel_size if len(set(voxel_size)) > 1 else voxel_size[0],
         method=method,
         expected_radius_m=t.expected_radius or cfg.fiber.radius,
     )
-    options = ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method == "slices" else ("min_length_vox", "smooth_sigma_vox")
+    options = (("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox") if method in ("slices", "dense")
+               else ("min_length_vox", "smooth_sigma_vox"))
     kwargs.update({k: getattr(t, k) for k in options if getattr(t, k) is not None})
     inputs = {"mask": Path(mask_path)}
     if method == "skeleton" and skeleton_path is not None and Path(skeleton_path).exists():
@@ -53,9 +55,12 @@ def run_trace(
         inputs["skeleton"] = Path(skeleton_path)
     if t.join_gap_vox is not None:
         kwargs["join_gap_vox"] = t.join_gap_vox
-    if method == "slices":
+    if method == "dense" and volume_path is None:
+        raise InputError("trace.method dense finds the fiber centres in the grey volume, and this run has none "
+                         "(input.volume): set trace.method: slices")
+    if method in ("slices", "dense"):
         kwargs["off_axis"] = t.off_axis
-        if t.grey and volume_path is not None:
+        if (t.grey or method == "dense") and volume_path is not None:
             kwargs["grey"] = load_grey(cfg, volume_path, mask.shape)
             inputs["volume"] = Path(volume_path)
     fibers = trace(mask, **kwargs)
@@ -82,9 +87,12 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
     from fiberpipe.imaging.orientation import fiber_orientation
 
     t = cfg.trace
-    fibers, folds = split_folds_for_mesh(cfg, fibers)
-    fibers, dropped = drop_short_fibers(fibers, min_length_m(cfg), "trace.min_length",
-                                        None if cfg.trace.min_length is not None else "two mesh.element_length")
+    radius = fiber_radius_m(cfg, fibers)
+    fibers, folds = split_folds_for_mesh(cfg, fibers, radius)
+    min_length = min_length_m(cfg, radius)
+    fibers, dropped = drop_short_fibers(fibers, min_length, "trace.min_length",
+                                        None if cfg.trace.min_length is not None else
+                                        f"{MIN_FIBER_LENGTH_DIAMETERS:g} fiber diameters, at least two mesh elements")
     write_fibers(out, fibers, config_sha256=config_sha256, inputs=input_hashes(inputs), attrs={"trace_method": method})
     orientation = {"mask": orient_mask, "fibers": fiber_orientation(fibers)}
     write_json_atomic(Path(out).with_name("orientation.json"), orientation)
@@ -98,7 +106,8 @@ def finish_trace(cfg: Config, fibers, method: str, orient_mask: dict, off_axis: 
         "joined_gaps": int(fibers.meta.get("n_joins", 0)),
         "cut_folds": folds,
         "dropped_short_fibers": dropped,
-        "min_length_m": min_length_m(cfg),
+        "min_length_m": min_length,
+        "element_length_m": element_length_m(cfg.mesh, radius),
         "off_axis": off_axis,
         "mean_length_m": float(fibers.lengths_m().mean()) if fibers.n_fibers else 0.0,
         "mean_radius_m": float(fibers.radius_m.mean()) if fibers.n_fibers else 0.0,
@@ -142,17 +151,45 @@ def load_grey(cfg: Config, volume_path: Path, shape) -> np.ndarray:
     return vol
 
 
-def min_length_m(cfg: Config) -> float:
-    """``trace.min_length``, by default two mesh elements (what the mesh stage needs)."""
-    return cfg.trace.min_length if cfg.trace.min_length is not None else 2.0 * cfg.mesh.element_length
+def fiber_radius_m(cfg: Config, fibers) -> float:
+    """The radius the scan-derived length defaults follow: ``fiber.radius``, else the traced fibers'
+    median radius (m)."""
+    if cfg.fiber.radius is not None:
+        return float(cfg.fiber.radius)
+    return float(np.median(fibers.radius_m)) if fibers.n_fibers else 0.0
+
+
+def min_length_m(cfg: Config, radius_m: float) -> float:
+    """``trace.min_length``, by default derived from the fiber radius (config.min_fiber_length_m)."""
+    return min_fiber_length_m(cfg.trace, cfg.mesh, radius_m)
+
+
+def check_voxel_size(cfg: Config, voxel_size, radius_m: float | None) -> None:
+    """A nominal radius (``trace.expected_radius`` or ``fiber.radius``) that spans less than 1.5
+    voxels across the fibers is a one-line error: no tracer resolves such fibers, and it usually
+    means a voxel size in the wrong unit."""
+    if radius_m is None:
+        return
+    diameter_vox = 2.0 * float(radius_m) / float(min(voxel_size))
+    if diameter_vox < MIN_DIAMETER_VOX:
+        key = "trace.expected_radius" if cfg.trace.expected_radius else "fiber.radius"
+        raise InputError(f"input.voxel_size = {min(voxel_size) * 1e6:.4g} um makes the fibers ({key} = "
+                         f"{radius_m * 1e6:.4g} um) {diameter_vox:.2g} voxels across, thinner than {MIN_DIAMETER_VOX:g}: "
+                         "check the voxel size and its unit")
+
+
+#: Fibers thinner than this many voxels across are not traced (an error naming the voxel size).
+MIN_DIAMETER_VOX = 1.5
 
 
 def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     """The tracer to run and the mask's orientation distribution.
 
-    ``trace.method: auto`` picks ``slices`` when at least ``trace.min_aligned_fraction`` of the
-    fiber volume runs within 45 deg of one volume axis, else ``skeleton``; an explicit ``slices`` on
-    fibers that are not quasi-parallel runs, with one warning line naming the key.
+    ``trace.method: auto`` picks ``dense`` on a dense pack of thin fibers (:func:`dense_pack`) that
+    is quasi-parallel or runs at least half along volume axes, else ``slices`` when at least
+    ``trace.min_aligned_fraction`` of the fiber volume runs within 45 deg of one volume axis, else
+    ``skeleton``; an explicit ``slices`` on fibers that are not quasi-parallel runs, with one
+    warning line naming the key.
     """
     from fiberpipe.imaging.orientation import is_quasi_parallel, mask_orientation
 
@@ -164,7 +201,10 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     parallel = is_quasi_parallel(orient, t.min_aligned_fraction) or along_axes or not orient.get("n_samples")
     frac = 100 * float(orient.get("aligned_fraction_45deg", 0.0))
     if t.method == "auto":
-        method = "slices" if parallel else "skeleton"
+        # a dense pack's mask is one merged region whose skeleton cannot separate its fibers: the
+        # dense tracer takes it, region by region, whenever most of it runs along volume axes
+        along = float(orient.get("axis_aligned_fraction_30deg", 0.0)) >= DENSE_MIN_AXIS_ALIGNED_FRACTION
+        method = "dense" if (parallel or along) and dense_pack(mask, orient) else "slices" if parallel else "skeleton"
         log.info("trace: %.0f %% of the fiber volume within 45 deg of axis %s: method %s", frac,
                  orient.get("nearest_volume_axis"), method)
         return method, orient
@@ -175,13 +215,42 @@ def choose_method(cfg: Config, mask, voxel_size) -> tuple[str, dict]:
     return t.method, orient
 
 
-def split_folds_for_mesh(cfg: Config, fibers):
+#: ``trace.method: auto`` picks the dense tracer on a dense pack when at least this share of the fiber
+#: volume runs within 30 deg of a volume axis (a cross ply: each ply along its own axis).
+DENSE_MIN_AXIS_ALIGNED_FRACTION = 0.5
+
+
+def dense_pack(mask, orient: dict) -> bool:
+    """Whether a quasi-parallel scan is a dense pack of thin fibers (``trace.method: auto`` then
+    picks ``dense``): the mask's volume fraction and its radius across the dominant axis
+    (:func:`fiberpipe.imaging.dense.is_dense_pack`). A chunked mask (a dataset on disk, not an
+    array) is not judged: False."""
+    from fiberpipe.imaging.dense import is_dense_pack
+    from fiberpipe.imaging.trace import estimate_radius_vox
+
+    if not isinstance(mask, np.ndarray):
+        return False
+    ax = {"z": 0, "y": 1, "x": 2}.get(orient.get("nearest_volume_axis"), 0)
+    mask_t = mask.transpose((ax,) + tuple(i for i in range(3) if i != ax))
+    fraction = float(np.count_nonzero(mask[::2, ::2, ::2])) / max(1, mask[::2, ::2, ::2].size)
+    if fraction < 0.3:
+        return False
+    try:
+        radius = estimate_radius_vox(mask_t, np.ones(2))
+    except InputError:
+        return False
+    return is_dense_pack(fraction, radius)
+
+
+def split_folds_for_mesh(cfg: Config, fibers, radius_m: float):
     """Cut traced fibers where they fold back (a turn above 90 deg between two consecutive mesh
     elements, nodes placed as the mesh stage places them), which the mesh stage would refuse."""
     from fiberpipe.imaging.fragments import split_folds
     from fiberpipe.model.mesh import resample_polyline
 
-    el, sm = cfg.mesh.element_length, cfg.mesh.smooth_sigma
+    if not fibers.n_fibers:
+        return fibers, 0
+    el, sm = element_length_m(cfg.mesh, radius_m), cfg.mesh.smooth_sigma
     return split_folds(fibers, lambda p: resample_polyline(p, el, smooth_sigma_m=sm), max_turn_deg=90.0)
 
 
@@ -198,7 +267,7 @@ def drop_short_fibers(fibers, min_length: float, key: str, default_of: str | Non
     if len(dropped) and kept.n_fibers == 0:
         origin = f" (unset: {default_of}; a length without a unit is in metres)" if default_of else ""
         raise InputError(f"all {fibers.n_fibers} fibers are shorter than {key} = {min_length * 1e3:.3g} mm{origin} "
-                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key} or mesh.element_length")
+                         f"(longest {fibers.lengths_m().max() * 1e3:.3g} mm); lower {key}")
     if len(dropped):
         log.warning("%s: dropped %d of %d fibers shorter than %s = %.3g mm", key.split(".")[0], len(dropped),
                     fibers.n_fibers, key, min_length * 1e3)
@@ -235,6 +304,7 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     t = cfg.trace
     with open_checked(mask_path, "mask") as f:
         voxel_size = eval_list(f.attrs["voxel_size_m"])
+    check_voxel_size(cfg, voxel_size, t.expected_radius or cfg.fiber.radius)
     src = SliceSource(mask_path, "mask")
     sample = StridedSample(src.open())
     method, orient_mask = choose_method(cfg, sample, voxel_size)
@@ -249,7 +319,7 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     fr = axis_fractions(sample, voxel_size)
     split = any(b != axis and fr[b] >= OFF_AXIS_MIN_FRACTION for b in range(3))
     grey, inputs = None, {"mask": Path(mask_path)}
-    if t.grey and volume_path is not None:
+    if (t.grey or method == "dense") and volume_path is not None:
         grey = grey_source(cfg, volume_path, src.shape)
         inputs["volume"] = Path(volume_path)
     opts = {k: getattr(t, k) for k in ("max_jump_vox", "max_skip", "min_length_vox", "smooth_sigma_vox")

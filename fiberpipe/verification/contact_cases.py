@@ -29,12 +29,12 @@ import numpy as np
 from ..solver import (Clamp, Clamps, Damping, Drive, Drives, Gravity, LineLoad, Loads, Plates,
                       SimulationSettings, State, Walls, build_model, choose_time_step)
 from ..solver._kernels_boundary import plane_static_penetration
-from ..solver.contact import contact_forces, gauss_points
+from ..solver.contact_pairs import gauss_points
 from ..solver.laws import make_law
 from ..solver.neighbours import build_pairs
 from .case_config import CaseSetup, case_setup, contact_hook
 from .cases import E_PA, MATERIAL, NU, R_M, Row
-from .energy_residual import recorded_simulate as simulate
+from .energy_residual import simulate
 
 E_STAR = E_PA / (2 * (1 - NU**2))
 
@@ -93,16 +93,15 @@ def _segments(model):
     return seg
 
 
-def pair_force(model, x, law, fa, fb, *, formulation=None, n_gauss=None):
+def pair_force(model, x, law, fa, fb, *, n_gauss=None):
     """Force vector (N) that fiber ``fa`` exerts on fiber ``fb`` at positions ``x``, from the normal
-    contact kernel of ``formulation`` with ``n_gauss`` points per segment (defaults: the config
-    schema's, as the runs' hooks have them)."""
+    contact kernel with ``n_gauss`` points per segment and the onset of the config schema (defaults:
+    the schema's, as the runs' hooks have them)."""
     from ..config import ContactConfig
     from ..solver.contact_potential import contact_forces_pot
     from ..solver.contact_state import new_records
 
     cc = ContactConfig()
-    formulation = cc.formulation if formulation is None else formulation
     n_gauss = int(cc.gauss_points) if n_gauss is None else n_gauss
     seg = _segments(model)
     E = len(seg)
@@ -119,15 +118,10 @@ def pair_force(model, x, law, fa, fb, *, formulation=None, n_gauss=None):
     f = np.zeros_like(x)
     gxi, gw = gauss_points(n_gauss)
     radius = model.el_radius.astype(float)
-    if formulation == "potential":
-        L0 = np.asarray(model.el_L0, dtype=float)
-        arc = np.c_[np.zeros(E), L0]  # the kernel needs each segment's reference length only
-        contact_forces_pot(x, seg, radius, arc, pr, m, law.law_id, law.params(), gxi, gw, float(cc.onset), f,
-                           new_records(max(m, 1)), np.zeros(0), 0.0)
-    else:
-        z = np.zeros(max(m, 1))
-        contact_forces(x, seg, radius, pr, m, law.law_id, law.params(), gxi, gw, f,
-                       z.copy(), np.zeros((max(m, 1), 3)), z.copy(), z.copy(), z.copy(), z.copy())
+    L0 = np.asarray(model.el_L0, dtype=float)
+    arc = np.c_[np.zeros(E), L0]  # the kernel needs each segment's reference length only
+    contact_forces_pot(x, seg, radius, arc, pr, m, law.law_id, law.params(), gxi, gw, float(cc.onset), f,
+                       new_records(max(m, 1)), np.zeros(0), 0.0)
     nodes = model.node_fiber == fb
     return f[nodes].sum(axis=0)
 
@@ -570,8 +564,8 @@ def sliding_parallel(quick: bool = False, p: float = 66.0, speed_m_s: float = 5.
     ref = p * LB
     err = float(np.max(np.abs(F - ref)) / ref)
     moved = float(res.frames_positions[-1, m.node_fiber == 1, 0].mean() - m.nodes_m[m.node_fiber == 1, 0].mean())
-    return Row(f"sliding along a parallel fiber ({moved * 1e3:.2f} mm, {moved / 0.25e-3:.1f} × B's elements, "
-               f"potential formulation): normal force", ref, float(F[np.argmax(np.abs(F - ref))]), err, 0.01, "N")
+    return Row(f"sliding along a parallel fiber ({moved * 1e3:.2f} mm, {moved / 0.25e-3:.1f} × B's elements): "
+               f"normal force", ref, float(F[np.argmax(np.abs(F - ref))]), err, 0.01, "N")
 
 
 def _crossed(phi):

@@ -67,7 +67,7 @@ def six_fibers(L=6e-3, n_el=20, phi_deg=3.0, lift_m=0.0):
     return build_model(np.vstack(fibers), off, R, MATERIAL), pitch
 
 
-def six_fibers_run(law, q_n_per_m, *, formulation="potential", t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
+def six_fibers_run(law, q_n_per_m, *, t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
                    penalty_factor=DEFAULT_PENALTY_FACTOR, onset_fraction=DEFAULT_ONSET_FRACTION, steps=None):
     """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibers
     (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;

@@ -215,7 +215,9 @@ def test_large_volume_benchmark_runs_the_pipeline_stages(tmp_path, capsys):
     time and peak memory; every fiber of the 5 x 5 grid traced."""
     import json
 
-    from fiberpipe.benchmarks import bench_large_volume
+    from imaging._bench_scripts import load_bench
+
+    bench_large_volume = load_bench("bench_large_volume")
 
     bench_large_volume.main(["--shape", "40", "96", "96", "--slab", "16", "--dir", str(tmp_path),
                              "--passes", "stage-segment", "stage-skeletonize", "stage-trace"])

@@ -127,7 +127,7 @@ def _volume_with_a_short_fiber(tmp_path):
 
 
 def test_trace_stage_drops_short_fibers_with_a_warning_and_a_count(tmp_path, write_yaml, caplog):
-    from fiberpipe.config import load_config
+    from fiberpipe.config import MIN_FIBER_LENGTH_DIAMETERS, load_config
     from fiberpipe.pipeline import run_pipeline
 
     vol = _volume_with_a_short_fiber(tmp_path)
@@ -137,7 +137,7 @@ def test_trace_stage_drops_short_fibers_with_a_warning_and_a_count(tmp_path, wri
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     tr = summary["stages"]["trace"]
     assert tr["fibers"] == 2 and tr["dropped_short_fibers"] == 1
-    assert tr["min_length_m"] == pytest.approx(0.6e-3)
+    assert tr["min_length_m"] == pytest.approx(MIN_FIBER_LENGTH_DIAMETERS * 2 * tr["median_radius_m"])  # 3 d
     assert summary["stages"]["mesh"]["fibers"] == 2
     assert any("trace.min_length" in r.getMessage() for r in caplog.records)
     # trace.min_length: 0 keeps it (the mesh stage then drops it by its own rule)
@@ -189,7 +189,7 @@ def test_a_tiff_folder_of_a_short_fiber_suspension_runs_through_mesh_with_defaul
     run_pipeline(cfg, tmp_path / "run")
     st = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]
     assert st["trace"]["method"] == "skeleton" and st["trace"]["dropped_short_fibers"] > 0
-    long_true = int((truth.lengths_m() >= 0.6e-3).sum())
+    long_true = int((truth.lengths_m() >= st["trace"]["min_length_m"]).sum())
     assert 0.5 * long_true <= st["mesh"]["fibers"] <= 1.5 * long_true, (st["mesh"]["fibers"], long_true)
 
 

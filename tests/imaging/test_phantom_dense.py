@@ -108,7 +108,7 @@ def test_mask_only_tracer_loses_the_dense_pack(dense):
 
 @pytest.mark.parametrize("off_axis", ["trace", "drop"])
 def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_path, write_yaml, caplog, dense, off_axis):
-    """The stage: auto picks slices (fibers along volume axes), trace.grey reads the volume, one warning, counts in summary.json."""
+    """The stage: auto picks dense (a dense pack along volume axes), which reads the volume, one warning, counts in summary.json."""
     import json
 
     from fiberpipe.config import load_config
@@ -125,7 +125,7 @@ def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_p
     with caplog.at_level("WARNING", logger="fiberpipe"):
         run_pipeline(cfg, tmp_path / "run", to_stage="trace")
     tr = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]["trace"]
-    assert tr["method"] == "slices" and tr["aligned_fraction_45deg_mask"] < 0.9
+    assert tr["method"] == "dense" and tr["aligned_fraction_45deg_mask"] < 0.9
     info = tr["off_axis"]["x"]
     msgs = [r.getMessage() for r in caplog.records if "across the slicing axis" in r.getMessage()]
     assert len(msgs) == 1 and "\n" not in msgs[0] and "trace.off_axis" in msgs[0]
@@ -135,3 +135,49 @@ def test_trace_stage_on_a_cross_ply_picks_slices_and_reports_the_cross_ply(tmp_p
     else:
         assert info["fibers"] == 0 and info["action"] == "left out"
         assert abs(tr["fibers"] - truth.meta["n_main"]) <= 0.02 * truth.meta["n_main"]
+
+
+def test_a_misaligned_wavy_ply_keeps_its_fibers_apart_and_inside():
+    """The main ply tilted by 3 degrees and wavy by 1 voxel: the true mid-lines' mean direction is 3
+    degrees off z (within 0.3), the packing still has no overlap beyond 0.2 voxel, every fiber runs
+    through the whole volume inside it."""
+    from fiberpipe.imaging.phantom_dense import make_dense_phantom
+
+    vol, truth = make_dense_phantom(shape=(80, 64, 64), radius_vox=3.0, cross_ply_fraction=0.0, misalignment_deg=3.0,
+                                    waviness_vox=1.0, contrast_to_noise=4.0, seed=5, dtype="float32")
+    vs = truth.meta["voxel_size_m"]
+    chords = np.array([truth.fiber(i)[-1] - truth.fiber(i)[0] for i in range(truth.n_fibers)])
+    mean = chords.sum(axis=0) / np.linalg.norm(chords.sum(axis=0))
+    assert abs(np.degrees(np.arccos(abs(mean[2]))) - 3.0) < 0.3
+    assert truth.meta["min_surface_gap_vox"] > -0.2
+    pts = np.concatenate([truth.fiber(i) for i in range(truth.n_fibers)]) / vs
+    assert pts.min() >= 0 and pts[:, 0].max() <= 63 and pts[:, 1].max() <= 63
+    assert all(abs(truth.fiber(i)[-1, 2] / vs - 79) < 0.5 for i in range(truth.n_fibers))
+
+
+def test_rings_and_cupping_change_the_grey_as_declared():
+    """Cupping c darkens the fibers at the rotation axis to 1 - c of their grey (the border keeps
+    1); a ring is a thin circle of its contrast in every slice."""
+    from fiberpipe.imaging.phantom_dense import ScanArtefacts, make_dense_phantom
+
+    kw = dict(shape=(20, 64, 64), radius_vox=3.0, cross_ply_fraction=0.0, contrast_to_noise=1e6, seed=1, dtype="float32")
+    clean, truth = make_dense_phantom(**kw)
+    cupped, _ = make_dense_phantom(**kw, artefacts=ScanArtefacts(cupping=0.2))
+    ratio = cupped[:, 28:36, 28:36] / np.where(clean[:, 28:36, 28:36] > 0.5, clean[:, 28:36, 28:36], np.nan)
+    assert abs(np.nanmean(ratio) - 0.8) < 0.01
+    ringed, _ = make_dense_phantom(**kw, artefacts=ScanArtefacts(ring_contrast=0.3, n_rings=1))
+    diff = ringed - clean
+    assert np.allclose(diff[0], diff[-1]) and 0.25 < np.abs(diff).max() < 0.35
+    assert np.mean(np.abs(diff[0]) > 0.05) < 0.15  # a thin circle, not a shade
+
+
+def test_the_dense_family_draws_within_its_declared_ranges():
+    from fiberpipe.imaging.phantom_dense import DENSE_FAMILY, make_dense_family_phantom
+
+    for seed in (0, 1):
+        _, truth = make_dense_family_phantom(seed, shape=(24, 100, 100))
+        m = truth.meta
+        for key in ("radius_vox", "contrast_to_noise", "misalignment_deg", "waviness_vox"):
+            lo, hi = DENSE_FAMILY[key]
+            assert lo <= m[key] <= hi, (key, m[key])
+        assert m["n_cross"] > 0 and m["contact_fraction"] > 0.5

@@ -81,7 +81,9 @@ def test_missing_dataset_is_one_line(tmp_path, on_disk):
 
 def test_large_volume_benchmark_runs_every_pass(tmp_path, capsys):
     """bench_large_volume on a small volume: the three passes report wall time, CPU time and peak memory; full-length fibers."""
-    from fiberpipe.benchmarks import bench_large_volume
+    from imaging._bench_scripts import load_bench
+
+    bench_large_volume = load_bench("bench_large_volume")
 
     bench_large_volume.main(["--shape", "40", "96", "96", "--slab", "16", "--block", "16", "--dir", str(tmp_path)])
     out = capsys.readouterr().out

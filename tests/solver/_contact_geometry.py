@@ -60,7 +60,7 @@ def two_fiber_segments(n, le):
 def pot_energy_forces(x, seg, pairs, arc, law, ds=0.0, n_gauss=2, radius=None):
     """``(energy [J], forces (N, 3) [N], pairs in contact)`` of the potential formulation's kernel
     on every candidate pair (onset ``ds`` [m], no initial-overlap offsets)."""
-    from fiberpipe.solver.contact import gauss_points
+    from fiberpipe.solver.contact_pairs import gauss_points
     from fiberpipe.solver.contact_potential import contact_forces_pot
     from fiberpipe.solver.contact_state import new_records
 
@@ -71,3 +71,23 @@ def pot_energy_forces(x, seg, pairs, arc, law, ds=0.0, n_gauss=2, radius=None):
     e, n_act = contact_forces_pot(x, seg, radius, arc, pairs, P, law.law_id, law.params(), gxi, gw, ds, f,
                                   new_records(P), np.zeros(0), 0.0)
     return e, f, n_act
+
+
+def contact_pass(x, seg, rad, pairs, n_pairs, law, f_out, n_gauss=4):
+    """``(energy [J], pairs in contact, records)`` of the contact pass on the first ``n_pairs``
+    candidate pairs, forces added into ``f_out``; each segment's reference length is its length at
+    ``x`` (no onset, no initial-overlap offsets)."""
+    from fiberpipe.solver.contact_pairs import gauss_points
+    from fiberpipe.solver.contact_potential import potential_kernels_for
+    from fiberpipe.solver.contact_state import new_records
+
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    seg = np.ascontiguousarray(seg, dtype=np.int64)
+    arc = np.zeros((seg.shape[0], 2))
+    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
+    gxi, gw = gauss_points(n_gauss)
+    records = new_records(max(int(n_pairs), 1))
+    e, n_act = potential_kernels_for(law)(x, seg, np.ascontiguousarray(rad, dtype=np.float64), arc,
+                                          np.ascontiguousarray(pairs, dtype=np.int64), int(n_pairs), law.law_id,
+                                          law.params(), gxi, gw, 0.0, f_out, records, np.zeros(0), 0.0)
+    return e, n_act, records

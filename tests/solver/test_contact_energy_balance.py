@@ -4,9 +4,8 @@ no energy their loads did not supply (state functions only: the leapfrog kinetic
 work f·(x_n − x0)).
 
 Scene: four parallel fibers on a fixed plate between walls, two on top crossing them at ±3°, a line
-load on the top two. With the potential formulation every law stays at or below the loads' work
-(measured ≤ +0.001 of max|W| at 3 N/m); the legacy kernel of hertz_oriented creates +22 % here
-(blend and K(Φ) without their derivatives, with ℓ_blend = 1 mm; see docs/contact.md)."""
+load on the top two. Every law stays at or below the loads' work (measured ≤ +0.001 of max|W| at
+3 N/m; docs/contact.md)."""
 
 import numpy as np
 import pytest
@@ -15,9 +14,9 @@ from fiberpipe.solver.laws import make_law
 from fiberpipe.verification.six_fibers import LAWS, energy_excess, six_fibers_law, six_fibers_run
 
 
-def _excess(law, q, formulation):
+def _excess(law, q):
     """max over the rows of (state energy − loads' work)/max|W|, and the kinetic energy per row."""
-    _, res = six_fibers_run(law, q, formulation=formulation)
+    _, res = six_fibers_run(law, q)
     return energy_excess(res)
 
 
@@ -26,7 +25,7 @@ def _excess(law, q, formulation):
 # (docs/contact.md); a plane onset of 0.004 r made 1000 N/m gain 3–42 % of W here
 @pytest.mark.parametrize("q,lift_m", [(3.0, 0.0), (300.0, 0.0), (1000.0, 0.0), (1000.0, 1e-9)])
 @pytest.mark.parametrize("law_name,kw", LAWS)
-def test_six_fibers_create_no_energy_with_the_potential_formulation(law_name, kw, q, lift_m):
+def test_six_fibers_create_no_energy(law_name, kw, q, lift_m):
     # two seeds of the chaotic 1000 N/m scene (lift_m: top fibers raised), where the sudden load rattles
     # the fibers on the plate and the walls
     _, res = six_fibers_run(six_fibers_law(law_name, kw), q, lift_m=lift_m)
@@ -42,24 +41,17 @@ def test_six_fibers_create_no_energy_with_the_potential_formulation(law_name, kw
                    "(measured +5.7 % of the loads' work for table1_phi6)")
 def test_six_fibers_create_no_energy_with_the_point_part_alone_at_300_n_per_m():
     law = make_law("scaled_stiffness", preset="table1_phi6", E_pa=15e9, nu=0.3)  # blend_length_m None: off
-    excess, _ = _excess(law, 300.0, "potential")
+    excess, _ = _excess(law, 300.0)
     assert excess < 0.01, excess
 
 
-@pytest.mark.xfail(strict=True, reason="known defect of the legacy kernel: hertz_oriented's blend and K(Φ) enter "
-                   "without their derivatives (measured +22 % of the loads' work)")
-def test_six_fibers_create_no_energy_with_the_legacy_hertz_oriented():
-    excess, _ = _excess(make_law("hertz_oriented", E_pa=15e9, nu=0.3, blend_length_m=1e-3), 3.0, "legacy")
-    assert excess < 0.01, excess
-
-
-def test_a_pressed_undamped_bundle_gains_no_kinetic_energy_over_1e5_steps():
-    """The six fibers resting under 30 N/m, undamped, for 1e5 steps: the state energy stays at or
-    below the loads' work, and the kinetic energy of the last eighth is no larger than that of the
-    second (the first is the fall onto the lower fibers). Measured: ratio 0.91, excess −0.0000."""
+def test_a_pressed_undamped_bundle_creates_no_energy_over_1e5_steps():
+    """The six fibers under 30 N/m, undamped and frictionless, for 1e5 steps: the state energy stays at
+    or below the loads' work at every row. Nothing holds the fibers along their axes, and the line
+    part's potential is smooth along them (its end weights), so they slide out of the set and the
+    top ones fall (as at 100 N/m and above within 5e4 steps): the kinetic energy grows from the loads'
+    work (measured: the last eighth's 3.8× the second's, excess −6.6e-6 of W)."""
     _, res = six_fibers_run(six_fibers_law("hertz_oriented", {}), 30.0, steps=100_000)
     assert res.steps == 100_000
-    excess, ke = energy_excess(res)
+    excess, _ = energy_excess(res)
     assert excess < 0.01, excess
-    n = len(ke) // 8
-    assert np.mean(ke[-n:]) < 1.1 * np.mean(ke[n:2 * n]), (np.mean(ke[-n:]), np.mean(ke[n:2 * n]))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from fiberpipe.solver.contact import gauss_points
+from fiberpipe.solver.contact_pairs import gauss_points
 from fiberpipe.solver.contact_potential import contact_forces_pot, onset
 from fiberpipe.solver.contact_state import new_records
 from fiberpipe.solver.laws import make_law
@@ -180,3 +180,80 @@ def test_a_law_with_its_own_kernels_gets_minus_the_gradient(phi_deg):
     assert n_act > 0 and e > 0
     g = central_gradient(lambda xx: ef(xx)[0], x, 1e-9)
     assert np.abs(f + g).max() < 1e-4 * np.abs(f).max()
+
+
+def _parallel_pair(shift, n_a, le_a, n_b=20, le_b=0.3e-3, depth=0.3e-6, kink=0.0):
+    """Fiber 0 (``n_b`` segments of ``le_b``) along x, fiber 1 (``n_a`` of ``le_a``) parallel above it at
+    penetration ``depth``, starting at 1 mm + ``shift``; fiber 0's inner nodes lifted alternately by
+    ±``kink``. Returns (x, seg, pairs, arc, nodes of fiber 1)."""
+    xb = np.c_[np.arange(n_b + 1) * le_b, np.zeros(n_b + 1), np.zeros(n_b + 1)]
+    xb[1:-1:2, 2] += kink
+    xb[2:-1:2, 2] -= kink
+    xa = np.c_[1e-3 + shift + np.arange(n_a + 1) * le_a, np.zeros(n_a + 1), np.full(n_a + 1, 2 * R - depth)]
+    seg = np.array([[k, k + 1] for k in range(n_b)] + [[n_b + 1 + k, n_b + 2 + k] for k in range(n_a)], np.int64)
+    pairs = np.array([[i, n_b + j] for i in range(n_b) for j in range(n_a)], np.int64)
+    arc = np.zeros((n_b + n_a, 2))
+    arc[:n_b, 1] = le_b
+    arc[n_b:, 1] = le_a
+    return np.vstack([xb, xa]), seg, pairs, arc, slice(n_b + 1, None)
+
+
+@pytest.mark.parametrize("n_gauss,n_a,le_a,limit", [(2, 12, 0.25e-3, 5e-3), (2, 11, 0.27e-3, 5e-3),
+                                                    (4, 12, 0.25e-3, 1e-3)])
+def test_a_fiber_sliding_along_a_parallel_one_keeps_its_normal_force(n_gauss, n_a, le_a, limit):
+    """A fiber sliding along a longer parallel one (other element lengths, 241 poses over two of its
+    elements): the normal force stays within ``limit`` of Johnson's line load × the fiber's length.
+    With each way's Gauss points fixed and no end weights the force read 0.9–2.5 % apart (1.6 % with
+    4 points) as the other fiber's end passed them."""
+    from fiberpipe.solver.laws import law_line
+
+    law = make_law("hertz_parallel", E_pa=15e9, nu=0.3)
+    depth = 0.3e-6
+    forces = []
+    for shift in np.linspace(0.0, 0.6e-3, 241):
+        x, seg, pairs, arc, top = _parallel_pair(shift, n_a, le_a, depth=depth)
+        forces.append(_energy_forces(x, seg, pairs, arc, law, n_gauss=n_gauss)[1][top, 2].sum())
+    ref = law_line(law.law_id, law.params(), depth, R, R)[0] * n_a * le_a
+    err = np.abs(np.array(forces) / ref - 1.0).max()
+    assert err < limit, err
+
+
+@pytest.mark.parametrize("n_a,le_a,shift,kink", [
+    (3, 0.25e-3, 0.07e-3, 0.0),     # fiber 1's ends inside fiber 0's segments
+    (3, 0.25e-3, 0.07e-3, 0.4e-6),  # ... fiber 0 kinked at every inner node
+    (2, 0.25e-3, 0.21e-3, 0.4e-6),  # two segments: the first's neighbour is the last
+    (1, 0.4e-3, 0.13e-3, 0.4e-6),   # one segment, free at both ends
+    (4, 0.3e-3, 3.0e-3, 0.4e-6),    # fiber 1 beyond fiber 0's end (6 mm) by part of its length
+])
+def test_end_weights_forces_are_minus_the_gradient(n_a, le_a, shift, kink):
+    """Where a fiber ends inside another's contact, each way's end weight ½(1 + a_A − a_B) and its
+    gradient (the other fiber's end nearness at the Gauss point's projection, also read from the
+    neighbouring segment at a kinked joint) enter the forces: forces = −∇Π by central differences."""
+    law = make_law("hertz_parallel", E_pa=15e9, nu=0.3)
+    x, seg, pairs, arc, _ = _parallel_pair(shift, n_a, le_a, depth=1e-6, kink=kink)
+    rng = np.random.default_rng(n_a)
+    x = x + 0.05e-6 * rng.standard_normal(x.shape)
+    ef = lambda xx: _energy_forces(xx, seg, pairs, arc, law, 1e-7)  # noqa: E731
+    e, f, n_act = ef(x)
+    assert n_act > 0 and e > 0
+    g = central_gradient(lambda xx: ef(xx)[0], x, 1e-9)
+    scale = np.abs(f).max()
+    assert np.abs(f + g).max() < 1e-4 * scale
+    assert np.abs(f.sum(axis=0)).max() < 1e-9 * scale
+
+
+@pytest.mark.parametrize("kink", [0.0, 0.4e-6, -0.4e-6])
+def test_energy_is_continuous_as_a_fiber_end_slides_along_another(kink):
+    """The potential stays one continuous function while fiber 1's ends slide across fiber 0's joints
+    and past fiber 0's end (straight or kinked): the largest step between neighbouring poses halves
+    with the pose step."""
+    law = make_law("hertz_parallel", E_pa=15e9, nu=0.3)
+
+    def largest_step(n):
+        es = np.array([_energy_forces(*_parallel_pair(sh, 3, 0.25e-3, kink=kink)[:4], law, 1e-7)[0]
+                       for sh in np.linspace(4.5e-3, 5.3e-3, n)])
+        assert es.max() > 0
+        return np.abs(np.diff(es)).max() / es.max()
+
+    coarse, fine = largest_step(201), largest_step(401)
+    assert fine <= 0.6 * coarse + 1e-12, (coarse, fine)

@@ -1,6 +1,6 @@
 """The contact pass's work-saving bookkeeping is exact.
 
-* per-pair skip refreshed by a path bound (``c_gap``/``reach`` of ``contact_forces_ex``): a pair is
+* per-pair skip refreshed by a path bound (``c_gap``/``reach`` of ``contact_forces_pot``): a pair is
   skipped only while it cannot have closed its gap, so forces equal those of evaluating every pair;
 * the list of pairs in contact (``c_active``);
 * time-stamped friction histories (fiber–fiber and fiber–plane): the same forces and histories as
@@ -17,7 +17,8 @@ import pytest
 
 from fiberpipe.solver import laws as L
 from _contact_geometry import LE, R, assemble, fiber
-from fiberpipe.solver.contact import contact_forces_ex, gauss_points
+from fiberpipe.solver.contact_pairs import gauss_points
+from fiberpipe.solver.contact_potential import contact_forces_pot
 from fiberpipe.solver.contact_state import PairRecords
 from fiberpipe.solver.geometry import pair_gap
 from fiberpipe.solver.friction import friction_forces_ex, plane_friction, plane_friction_arrays
@@ -59,20 +60,33 @@ def _potential_bundle(rng):
     return x, seg, rad, pairs, arc, L.make_law("hertz_oriented", E_pa=15e9, nu=0.3), gxi, gw
 
 
-def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active):
+def _arc(x, seg):
+    """Each segment's reference length as the arc lengths of its ends (its length at ``x``)."""
+    arc = np.zeros((len(seg), 2))
+    arc[:, 1] = np.linalg.norm(x[seg[:, 1]] - x[seg[:, 0]], axis=1)
+    return arc
+
+
+def _records(n, c_gap, c_active):
+    out = [np.zeros(n) for _ in range(7)]
+    return PairRecords(out[0], np.zeros((n, 3)), out[1], out[2], out[3], out[4], out[5], out[6], c_gap, c_active)
+
+
+def _pass(x, seg, rad, pairs, law, c_gap, reach, c_active, arc=None):
     n = len(pairs)
     gxi, gw = gauss_points(2)
     f = np.zeros_like(x)
-    out = [np.zeros(n) for _ in range(7)]
-    cn = np.zeros((n, 3))
-    rec = PairRecords(out[0], cn, out[1], out[2], out[3], out[4], out[5], out[6], c_gap, c_active)
-    e, na = contact_forces_ex(x, seg, rad, pairs, n, law.law_id, law.params(), gxi, gw, f, rec, np.zeros(0), reach)
-    return f, out[0], na
+    rec = _records(n, c_gap, c_active)
+    arc = _arc(x, seg) if arc is None else arc
+    e, na = contact_forces_pot(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 0.0, f, rec,
+                               np.zeros(0), reach)
+    return f, rec.fn, na
 
 
 def test_path_bound_skip_is_exact_and_refreshes():
     rng = np.random.default_rng(3)
     x, seg, rad, pairs = _bundle(rng)
+    arc = _arc(x, seg)
     law = L.make_law("hertz_oriented", E_pa=15e9, nu=0.3)
     n = len(pairs)
     c_gap = np.array([pair_gap(x, seg, rad, pairs, k) for k in range(n)])  # the build
@@ -80,8 +94,8 @@ def test_path_bound_skip_is_exact_and_refreshes():
     skipped_total = 0
     for x, reach in _squeezed(rng, x):
         skipped_total += int(np.sum(c_gap > reach))
-        f_skip, fn_skip, na_skip = _pass(x, seg, rad, pairs, law, c_gap, reach, c_active)
-        f_all, fn_all, na_all = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, np.zeros(0, np.int64))
+        f_skip, fn_skip, na_skip = _pass(x, seg, rad, pairs, law, c_gap, reach, c_active, arc)
+        f_all, fn_all, na_all = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, np.zeros(0, np.int64), arc)
         assert np.array_equal(f_skip, f_all) and np.array_equal(fn_skip, fn_all) and na_skip == na_all
         # the pairs in contact, listed in order
         assert np.array_equal(c_active[:na_skip], np.flatnonzero(fn_all > 0))
@@ -196,11 +210,9 @@ def test_stamped_friction_history_equals_clearing_it():
         c_active = np.zeros(1, np.int64)
         f0, fn, na = _pass(x, seg, rad, pairs, law, np.zeros(0), 0.0, c_active)
         gxi, gw = gauss_points(2)
-        out = [np.zeros(1) for _ in range(7)]
-        cn = np.zeros((1, 3))
-        rec = PairRecords(out[0], cn, out[1], out[2], out[3], out[4], out[5], out[6], np.zeros(0), c_active)
-        contact_forces_ex(x, seg, rad, pairs, 1, law.law_id, law.params(), gxi, gw, np.zeros_like(x), rec, np.zeros(0),
-                          0.0)
+        rec = _records(1, np.zeros(0), c_active)
+        contact_forces_pot(x, seg, rad, _arc(x, seg), pairs, 1, law.law_id, law.params(), gxi, gw, 0.0,
+                           np.zeros_like(x), rec, np.zeros(0), 0.0)
         v = np.zeros_like(x)
         v[rng[0][0]:rng[0][1], 0] = 0.3 * (1 + 0.1 * np.sin(step))
         f1 = np.zeros_like(x)

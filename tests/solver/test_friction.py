@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from fiberpipe.solver import laws as L
-from _contact_geometry import LE, R, all_pairs_between, assemble, fiber
-from fiberpipe.solver.contact import compute_contact
+from _contact_geometry import LE, R, all_pairs_between, assemble, contact_pass, fiber
 from fiberpipe.solver._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
 from fiberpipe.solver.friction import friction_forces, plane_friction, plane_friction_arrays, remap_history
 
@@ -19,7 +18,7 @@ def _pressed_pair(delta=1e-6):
     x, seg, rad, fib, rng = assemble(xa, xb)
     pairs = all_pairs_between(fib, 0, 1)
     f = np.zeros_like(x)
-    _, nact, buf = compute_contact(x, seg, rad, pairs, len(pairs), L.HertzCrossedLaw(90.0), f)
+    _, nact, buf = contact_pass(x, seg, rad, pairs, len(pairs), L.HertzCrossedLaw(90.0), f)
     assert nact == 1
     return x, seg, pairs, buf, rng
 
@@ -33,7 +32,7 @@ def _slide(v_rel, n_steps, hist=None):
     diss = 0.0
     for _ in range(n_steps):
         f = np.zeros_like(x)
-        diss += friction_forces(v, seg, pairs, 1, buf.fn, buf.n, buf.s, buf.t, MU, KT, DT, hist, f)
+        diss += friction_forces(v, seg, pairs, 1, buf.fn, buf.normal, buf.s, buf.t, MU, KT, DT, hist, f)
     return f, hist, diss, fn, rng
 
 
@@ -87,8 +86,8 @@ def test_history_rotated_into_tangent_plane():
     x, seg, pairs, buf, rng = _pressed_pair()
     hist = np.array([[0.3, 0.0, 0.4]])  # has a normal (z) component
     f = np.zeros_like(x)
-    friction_forces(np.zeros_like(x), seg, pairs, 1, buf.fn, buf.n, buf.s, buf.t, 10.0, KT, DT, hist, f)
-    assert abs(hist[0] @ buf.n[0]) < 1e-12 and np.linalg.norm(hist[0]) == pytest.approx(0.5)
+    friction_forces(np.zeros_like(x), seg, pairs, 1, buf.fn, buf.normal, buf.s, buf.t, 10.0, KT, DT, hist, f)
+    assert abs(hist[0] @ buf.normal[0]) < 1e-12 and np.linalg.norm(hist[0]) == pytest.approx(0.5)
 
 
 def test_plane_friction_stick_and_slip():

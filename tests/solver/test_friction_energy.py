@@ -59,7 +59,7 @@ def test_sliding_fiber_is_stopped_by_friction_and_stays_stopped():
 
 def test_sliding_fiber_state_residual_stays_below_one_percent():
     """The state-function balance (stored contact energy, springs included, from the first step's)
-    closes within 1 % while friction stops the fiber (it read 1.7–2 % with the legacy kernel)."""
+    closes within 1 % while friction stops the fiber."""
     m, res, a, b, v0 = _slide()
     assert np.max(np.abs(res.history["energy/residual"][1:])) < 0.01
 

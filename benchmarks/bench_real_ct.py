@@ -3,7 +3,7 @@ skeleton path on a short-fiber suspension phantom of the size of a typical lab s
 
 Usage (from the repository root)::
 
-    python -m fiberpipe.benchmarks.bench_real_ct [--volume RAW] [--out FILE.md]
+    python benchmarks/bench_real_ct.py [--volume RAW] [--out FILE.md]
 
 (a) The real CT of a polymer fiber scaffold (128^3 uint8 raw, no header; by default the copy kept
     beside the repository, skipped if absent) through segment -> skeletonize -> trace -> mesh ->
@@ -28,8 +28,9 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-ROOT = Path(__file__).resolve().parents[2]  # the source checkout
+ROOT = Path(__file__).resolve().parents[1]  # the source checkout
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the other benchmark scripts
 
 import numpy as np  # noqa: E402
 

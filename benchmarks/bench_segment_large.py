@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    python -m fiberpipe.benchmarks.bench_segment_large [--shape 1000 2000 2000] [--slab 32] [--dir /tmp]
+    python benchmarks/bench_segment_large.py [--shape 1000 2000 2000] [--slab 32] [--dir /tmp]
 
 Writes a uint16 raw volume (z y x; default 1000 x 2000 x 2000 = 8 GB) of straight fibers (r = 6
 voxels, noise at CNR 4), then runs :func:`fiberpipe.imaging.segment_chunked.segment_chunked` on
@@ -21,8 +21,9 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-ROOT = Path(__file__).resolve().parents[2]  # the source checkout
+ROOT = Path(__file__).resolve().parents[1]  # the source checkout
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the other benchmark scripts
 
 import numpy as np  # noqa: E402
 

@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    python -m fiberpipe.benchmarks.bench_large_volume [--shape 1000 2000 2000] [--slab 32] [--block 64]
+    python benchmarks/bench_large_volume.py [--shape 1000 2000 2000] [--slab 32] [--block 64]
         [--passes segment trace skeleton] [--dir /tmp] [--scheduler ADDRESS] [--keep]
 
 Writes the uint16 raw volume of :mod:`fiberpipe.benchmarks.bench_segment_large` (straight fibers
@@ -31,8 +31,9 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-ROOT = Path(__file__).resolve().parents[2]  # the source checkout
+ROOT = Path(__file__).resolve().parents[1]  # the source checkout
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the other benchmark scripts
 
 import numpy as np  # noqa: E402
 
@@ -112,7 +113,7 @@ def _stage(name: str, raw: str, shape, slab: int, d: Path, scheduler: str | None
 
 
 def main(argv=None) -> None:
-    from fiberpipe.benchmarks.bench_segment_large import write_volume
+    from bench_segment_large import write_volume
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--shape", type=int, nargs=3, default=[1000, 2000, 2000])

@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    python -m fiberpipe.benchmarks.bench_hard_phantoms [--seeds 0-19] [--out FILE.md]
+    python benchmarks/bench_hard_phantoms.py [--seeds 0-19] [--out FILE.md]
 
 Per seed: 36 fibers, 40 % touching in pairs, r 4-6 voxels, CNR 3-4, tilts up to 10 degrees,
 160 slices; Otsu segmentation, then the ``slices`` tracer (what ``trace.method: auto`` picks
@@ -18,8 +18,9 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-ROOT = Path(__file__).resolve().parents[2]  # the source checkout
+ROOT = Path(__file__).resolve().parents[1]  # the source checkout
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the other benchmark scripts
 
 
 def _seeds(text: str) -> list[int]:
