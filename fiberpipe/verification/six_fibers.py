@@ -72,8 +72,6 @@ def six_fibers_run(law, q_n_per_m, *, t_end_s=2e-3, dt_safety=0.9, lift_m=0.0,
     """``(model, SimulationResult)`` of the scene with line load ``q_n_per_m`` on the top two fibers
     (``penalty_factor``, ``onset_fraction``: the plate's and walls' penalty, :class:`fiberpipe.solver.Plates`;
     ``steps``: run that many steps instead of ``t_end_s``)."""
-    if formulation != "potential":
-        raise ValueError(f"formulation must be 'potential' (the only one), got {formulation!r}")
     m, pitch = six_fibers(lift_m=lift_m)
     planes = dict(penalty_factor=penalty_factor, onset_fraction=onset_fraction)
 
