@@ -42,7 +42,7 @@ def main():
     threads = int(getattr(settings, "threads", 1) or 1)
     kw = {"threads": threads} if threads > 1 else {}
     integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9, **kw)
-    from fiberpipe.solver.effects import SceneArrays
+    from fiberpipe.solver.terms import SceneArrays
     probe = SceneArrays(model, dt)
     for e in effects:
         if e.name in ("plates", "drives"):
@@ -53,7 +53,7 @@ def main():
     Integrator(m2, e2, dt, history_rows=10, history_every=10**9, **kw).advance(State.at_rest(m2), 2)
     st = State.at_rest(model)
     print(f"ready {model.n_elements} {dt:.9g} {end:.9g}", flush=True)
-    upper = int(integ.pl_force.shape[0] > 1)
+    upper = int(integ.planes.force.shape[0] > 1)
     curve = []
     for line in sys.stdin:
         words = line.split()
@@ -67,9 +67,9 @@ def main():
         while st.t < target * (1.0 - 1e-12):
             n = min(2000, max(1, int(round((target - st.t) / dt + 0.5))))
             integ.advance(st, n)
-            curve.append((st.t, float(integ.pl_force[upper])))
+            curve.append((st.t, float(integ.planes.force[upper])))
         c1, w1 = time.process_time(), time.perf_counter()
-        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {st.step - s0} {st.t:.9g} {float(integ.pl_force[upper]):.6g}", flush=True)
+        print(f"{c1 - c0:.6f} {w1 - w0:.6f} {st.step - s0} {st.t:.9g} {float(integ.planes.force[upper]):.6g}", flush=True)
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ def measure(bundle_config: Path, steps: int = 400, rounds: int = 6) -> dict:
     for name, (integ, st, n_el, dt, cpu, done) in runs.items():
         out[name] = {"elements": n_el, "dt_s": dt, "us_per_step": cpu / done * 1e6,
                      "ns_per_element_step": cpu / done / n_el * 1e9, "t_s": st.t,
-                     "contacts": int(integ.scene.contact_data.stats.n_active[0]),
+                     "contacts": int(integ.term_data("contact").stats.n_active[0]),
                      # the whole loading at the cost per step from rest: a lower bound (a compacted
                      # step costs more, paper-40's 1.6× its early one)
                      "total_steps": int(total_steps[name]), "solution_s_from_rest_cost": cpu / done * total_steps[name]}

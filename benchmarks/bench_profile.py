@@ -58,12 +58,13 @@ def step_variants(state_path, steps: int, warmup: int, repeats: int) -> list[dic
             integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
             st = load_state(state_path)
             integ.advance(st, warmup)
-            hook = integ.scene.contact_data
-            b0 = int(hook.stats.n_builds[0]) if integ.scene.contact_on else 0
+            contact_on = any(term.name in ("contact", "friction") for term, _, _ in integ.plan.terms)
+            hook = integ.plan.terms[-1][1] if contact_on else None
+            b0 = int(hook.stats.n_builds[0]) if contact_on else 0
             t = time.process_time()
             integ.advance(st, steps)
             best[name] = min(best[name], (time.process_time() - t) / steps)
-            if integ.scene.contact_on:
+            if contact_on:
                 s = hook.stats
                 info[name] = {"pairs": int(s.n_pairs[0]), "active": int(s.n_active[0]),
                               "builds_per_step": (int(s.n_builds[0]) - b0) / steps}
@@ -99,8 +100,8 @@ def kernel_times(state_path) -> dict:
     f = np.zeros((n, 3))
     pf, pi, pv = np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P)
     out["planes (plane_contacts, all nodes)"] = _best(lambda: plane_contacts(
-        x, m.radius_node, integ.k_pen, integ.pen_onset, sc.pl_axis, sc.pl_sign, integ.pl_pos, f, pf, pi, pv), 2000)
-    data = sc.contact_data
+        x, m.radius_node, integ.planes.k_pen, integ.planes.onset, sc.pl_axis, sc.pl_sign, integ.planes.pos, f, pf, pi, pv), 2000)
+    data = integ.term_data("contact")
     segs, prm = data.segs, data.params
     pl = data.lists[1]
     out["neighbour list build (build_pairs)"] = _best(lambda: build_pairs(

@@ -46,7 +46,7 @@ def run_at(model, effects, dt: float, state_path, span_s: float) -> dict:
         else:
             vmax = np.inf
     return {"dt_s": dt, "steps": done, "status": int(status), "vmax_m_s": vmax,
-            "cpu_s": time.process_time() - t0, "load_cell_N": float(integ.pl_force[-1] if integ.pl_force.size else 0.0)}
+            "cpu_s": time.process_time() - t0, "load_cell_N": float(integ.planes.force[-1] if integ.planes.force.size else 0.0)}
 
 
 def _with_fixed_penalties(dt: float, dt0: float, kt0: float):
@@ -59,7 +59,7 @@ def _with_fixed_penalties(dt: float, dt0: float, kt0: float):
 
 
 def main(argv=None) -> list[str]:
-    from fiberpipe.solver.effects import ContactHook, SceneArrays
+    from fiberpipe.solver.terms import SceneArrays
     from fiberpipe.solver.timestep import modal_time_step, stable_time_step
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -71,7 +71,7 @@ def main(argv=None) -> list[str]:
     model, effects, settings, _ = scene()
     probe = SceneArrays(model, 1.0)
     for e in effects:
-        if not isinstance(e, ContactHook):
+        if e.kernels() is None:
             e.setup(model, probe)
     st = load_state(a.state)
     mt = modal_time_step(model, probe.fix_mask, penalty_factor=probe.penalty_factor, x=st.x, q=st.q)
@@ -86,7 +86,7 @@ def main(argv=None) -> list[str]:
     kt0 = None
     if a.fixed_penalties:
         from fiberpipe.solver.integrator import Integrator
-        kt0 = float(Integrator(model, effects, ref["dt_s"]).scene.contact_data.params.kt_n_per_m)
+        kt0 = float(Integrator(model, effects, ref["dt_s"]).term_data("contact").params.kt_n_per_m)
         lines[0] += f"; penalties fixed at the 0.95 × element-bound step's (k_t = {kt0:.4g} N/m)"
     for f in a.factors:
         dt = f * mt.dt_stable_s

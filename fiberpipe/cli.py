@@ -217,12 +217,12 @@ _stage_command("skeletonize", "Thin the mask to a skeleton with local radii (ske
 _stage_command("mesh", "Mesh the fibers into beam elements (mesh.h5, mesh.vtu, model.inp).")
 
 
-@main.command()
+@main.command("simulate")
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("--out", "out", type=click.Path(file_okay=False), help="Run folder (default: runs/<config name>).")
 @click.option("--force", is_flag=True, help="Rerun even if up to date; discards a checkpoint.")
 @click.option("--resume", is_flag=True, help="Continue from the run folder's simulation.checkpoint.h5 (same config and mesh).")
-def simulate(config, out, force, resume):
+def simulate_command(config, out, force, resume):
     """Simulate the scene on the mesh (simulation.h5, frames/*.vtu, simulation.pvd).
 
     Reads its inputs from, and writes into, the run folder. Writes simulation.checkpoint.h5 every

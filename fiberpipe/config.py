@@ -356,8 +356,14 @@ class FiberConfig(Section):
 # scene
 
 EFFECTS = ("gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives", "constraints")
-Effect = Literal["gravity", "damping", "contact", "friction", "plates", "walls", "clamps", "loads", "drives",
-                 "constraints"]
+
+
+def _registered_terms() -> dict:
+    """The solver's term registry (``fiberpipe.solver.terms.TERMS``): the built-in terms and any term a
+    program registered, whose config block this schema validates with the term's ``config_block``."""
+    from fiberpipe.solver.terms import TERMS  # lazy: the config loads without the solver
+
+    return TERMS
 
 
 class GravityConfig(Section):
@@ -588,7 +594,10 @@ class DriveConfig(Section):
 
 
 class SceneConfig(Section):
-    effects: list[Effect] = Field(default_factory=list)
+    effects: list[str] = Field(
+        default_factory=list, description="the terms the scene runs: gravity, damping, contact, friction, plates, "
+        "walls, clamps, loads, drives, constraints, or the name of a term a program registered "
+        "(fiberpipe.solver.register_term; its block is scene.<name>)")
     gravity: Optional[GravityConfig] = None
     damping: Optional[DampingConfig] = None
     contact: Optional[ContactConfig] = None
@@ -600,11 +609,57 @@ class SceneConfig(Section):
     loads: list[LoadConfig] = Field(default_factory=list)
     drives: list[DriveConfig] = Field(default_factory=list)
     constraints: Optional[ConstraintsConfig] = None
+    # the blocks of registered terms outside this schema (``scene.<name>``), validated by the term's
+    # own ``config_block``; read them with :meth:`block`
+    term_blocks: dict[str, Any] = Field(
+        default_factory=dict, description="the blocks of registered terms, each validated by its term's own "
+        "section; written as scene.<name> (they are collected here)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _collect_term_blocks(cls, data):
+        """``scene.<name>`` of a registered term the schema does not list goes to ``term_blocks``."""
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        terms = _registered_terms()
+        blocks = dict(data.get("term_blocks") or {})
+        for key in [k for k in data if k not in cls.model_fields and k in terms]:
+            if getattr(terms[key], "config_block", None) is not None:
+                blocks[key] = data.pop(key)
+        if blocks:
+            data["term_blocks"] = blocks
+        return data
+
+    @field_validator("effects")
+    @classmethod
+    def _known_effects(cls, v):
+        terms = _registered_terms()
+        for k, name in enumerate(v):
+            if name not in EFFECTS and name not in terms:
+                close = difflib.get_close_matches(name, list(terms), n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ValueError(f"scene.effects[{k}] = {name!r} is not a term{hint}; choose from {sorted(terms)}")
+        return v
+
+    def block(self, name: str):
+        """The config block of term ``name``: a field of this schema, or a registered term's own block."""
+        return getattr(self, name) if name in type(self).model_fields else self.term_blocks.get(name)
 
     @model_validator(mode="after")
     def _defaults_for_effects(self):
         if len(set(self.effects)) != len(self.effects):
             raise ValueError("scene.effects lists an effect twice")
+        terms = _registered_terms()
+        for name in set(self.term_blocks) | {n for n in self.effects if n not in EFFECTS}:
+            block_cls = getattr(terms.get(name), "config_block", None)
+            if block_cls is not None and not isinstance(self.term_blocks.get(name), block_cls):
+                try:
+                    self.term_blocks[name] = block_cls.model_validate(self.term_blocks.get(name) or {})
+                except ValidationError as exc:
+                    err = exc.errors()[0]
+                    key = ".".join(["scene", name] + [str(p) for p in err["loc"]])
+                    raise ValueError(f"{key}: {err['msg']}") from None
         # An effect listed without its block takes the block's defaults.
         defaults = {
             "gravity": GravityConfig,

@@ -226,7 +226,8 @@ def test_friction_stiffness_takes_units_and_a_misspelt_law_gets_a_suggestion():
 def test_the_plane_penalty_defaults_of_the_schema_are_the_solvers():
     from fiberpipe.config import PlatesConfig, WallsConfig
     from fiberpipe.solver._kernels_boundary import DEFAULT_ONSET_FRACTION
-    from fiberpipe.solver.effects import DEFAULT_PENALTY_FACTOR, Plates, Walls
+    from fiberpipe.solver.terms import Plates, Walls
+    from fiberpipe.solver.terms.base import DEFAULT_PENALTY_FACTOR
 
     for schema in (PlatesConfig(), WallsConfig()):
         assert schema.penalty_factor == DEFAULT_PENALTY_FACTOR and schema.onset_fraction == DEFAULT_ONSET_FRACTION
@@ -235,7 +236,7 @@ def test_the_plane_penalty_defaults_of_the_schema_are_the_solvers():
 
 def test_a_plane_onset_outside_its_range_is_refused():
     from fiberpipe.errors import FiberpipeError
-    from fiberpipe.solver.effects import Walls
+    from fiberpipe.solver.terms import Walls
 
     with pytest.raises(FiberpipeError, match="onset_fraction"):
         Walls({"y": (0.0, 1.0)}, onset_fraction=0.0)

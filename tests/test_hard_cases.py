@@ -441,7 +441,7 @@ def test_block_configured_but_not_listed_warns():
 
 
 def test_plates_out_of_reach_are_an_error():
-    from fiberpipe.solver.build import check_scene_geometry
+    from fiberpipe.solver.terms.planes import check_scene_geometry
 
     m = fibers_model([((0, 0, R), (3e-3, 0, R), 10)])
     pl = Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.1e-3, velocity_m_s=0.1,

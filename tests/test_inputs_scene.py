@@ -92,7 +92,7 @@ def _model(n_fibers=1, nodes=11):
     ],
 )
 def test_indices_known_after_meshing_name_the_config_key(make, expected):
-    from fiberpipe.solver.effects import (Clamp, Clamps, Drive, Drives, LineLoad, Loads, PointLoad,
+    from fiberpipe.solver.terms import (Clamp, Clamps, Drive, Drives, LineLoad, Loads, PointLoad,
                                           SceneArrays)
 
     model = _model()

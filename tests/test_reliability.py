@@ -315,7 +315,7 @@ def test_out_of_range_scene_and_solver_input(tmp_path, reference, key, value, me
 
 
 def test_plate_starting_away_from_the_bundle_warns(tmp_path, caplog):
-    from fiberpipe.solver.build import check_scene_geometry
+    from fiberpipe.solver.terms.planes import check_scene_geometry
     from fiberpipe.solver import Plates
 
     m = one_fiber()

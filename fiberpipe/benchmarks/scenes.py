@@ -70,8 +70,7 @@ def default_contact(model, friction: bool = False):
     ``friction``) builds for ``model``, every other key at the config schema's default (the law
     ``hertz_oriented`` for the model's material, μ = 0.2)."""
     from ..config import validate_config
-    from ..solver import build  # noqa: F401  (registers every effect a run config may list)
-    from ..solver.effects import EFFECTS
+    from ..solver.terms import TERMS
 
     material = model.material
     cfg = validate_config({
@@ -80,4 +79,4 @@ def default_contact(model, friction: bool = False):
                      "poisson_ratio": float(material.nu)},
         "scene": {"effects": ["contact", "friction"] if friction else ["contact"]},
     })
-    return EFFECTS["contact"].from_config(cfg.scene, model, cfg)
+    return TERMS["contact"].from_config(cfg.scene, model, cfg)

@@ -241,7 +241,7 @@ def _step_time_s(cfg) -> float:
 
 def _path_plates(ld):
     """The solver's plates effect for a ``scene.loading.path`` (its travel table and times)."""
-    from fiberpipe.solver.effects import Plates
+    from fiberpipe.solver.terms.planes import Plates
 
     return Plates(displacement_m=float(ld.displacement), velocity_m_s=float(ld.velocity), ramp=ld.ramp,
                   ramp_fraction=float(ld.ramp_fraction), path_m=[float(u) for u in ld.path], hold_s=float(ld.hold))

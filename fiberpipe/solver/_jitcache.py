@@ -39,11 +39,22 @@ def _digest(key) -> str:
 _SHARED = tuple(os.path.join(os.pardir, name) for name in ("_vectorise.py", "_prefetch.py", "_tasks.py"))
 
 
+def _solver_sources() -> list[str]:
+    """The solver package's ``*.py`` files, relative to it (subpackages such as ``terms`` included)."""
+    out = []
+    for folder, dirs, files in os.walk(_PKG_DIR):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        rel = os.path.relpath(folder, _PKG_DIR)
+        out += [name if rel == "." else os.path.join(rel, name) for name in sorted(files) if name.endswith(".py")]
+    return out
+
+
 def package_source_digest() -> str:
-    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` and of the modules in ``_SHARED``
-    (``fiberpipe/_vectorise.py``, ``_prefetch.py``, ``_tasks.py``; re-hashed when one changes)."""
+    """SHA-256 of the sources of all modules of ``fiberpipe.solver`` (its subpackages included) and of
+    the modules in ``_SHARED`` (``fiberpipe/_vectorise.py``, ``_prefetch.py``, ``_tasks.py``; re-hashed
+    when one changes)."""
     key = []
-    for name in sorted(n for n in os.listdir(_PKG_DIR) if n.endswith(".py")) + list(_SHARED):
+    for name in _solver_sources() + list(_SHARED):
         st = os.stat(os.path.join(_PKG_DIR, name))
         key.append((name, st.st_mtime_ns, st.st_size))
     return _digest(tuple(key))
@@ -89,7 +100,7 @@ def _install() -> bool:
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if os.path.dirname(os.path.abspath(py_file)) != _PKG_DIR:
+            if not os.path.abspath(py_file).startswith(_PKG_DIR + os.sep):
                 return None
             for other in impl._locator_classes:
                 if other is cls:

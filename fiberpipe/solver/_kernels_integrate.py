@@ -34,25 +34,14 @@ from numba import njit, prange
 
 from ._specialise import specialise
 from ._kernels_beam import PARALLEL_CHUNKS, beam_pass_all, beam_pass_fibers, element_forces_exact
-from ._kernels_boundary import (path_delta, path_travel, penalty_power, plane_candidates, plane_contacts_listed,
-                                plane_position, ramp_fraction)
-from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WF_NEXT, ACC_WK, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z,
-                     H_CONTACTS, H_FD, H_KE, H_KE_LF, H_VD_LF, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_WF, H_WK,
+from ._kernels_boundary import ramp_fraction
+from .layout import (ACC_FD, ACC_PW, ACC_SIZE, ACC_STORED, ACC_STORED0, ACC_V2_MAX, ACC_VD, ACC_WF, ACC_WF_NEXT, ACC_WK,
+                     H_CONTACTS, H_FD, H_KE, H_KE_LF, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_VD_LF, H_WF, H_WK,
                      STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
+from .terms.base import no_forces
+from .terms.planes import eval_planes, finish_planes, record_planes
 
 _FLAGS = dict(cache=True, fastmath=True, error_model="numpy")
-
-
-@njit(cache=True, error_model="numpy")
-def no_contact(x, q, v, w, f, mom, acc, t, dt, data):
-    """The default contact hook: does nothing, returns 0 active contacts."""
-    return 0
-
-
-@njit(cache=True)
-def no_contact_forces(data):
-    """The force array of a hook that adds its forces to ``f`` itself: an empty (0, 3) array."""
-    return np.zeros((0, 3))
 
 
 # ---- the passes of one step, in the manner of warp.sim's one eval_* per force term ------------------
@@ -68,51 +57,6 @@ def eval_external(f, mom, f_ext):
         for c in range(3):
             f[i, c] = f_ext[i, c]
             mom[i, c] = 0.0
-
-
-@njit(inline="always", **_FLAGS)
-def eval_planes(planes, x, v, radius_node, f, acc, t, dt):
-    """Plane penalties at t_n into ``f``; their stored energy to ``acc[ACC_STORED]``, the moving
-    plates' prescribed work to ALLWK and the first half of the penalty work ``½Δt f_n·v_{n−½}`` to
-    ALLPW. Returns the number of touching nodes."""
-    P = planes.axis.shape[0]
-    for p in range(P):
-        planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
-                                       planes.mode[p])
-    _keep_plane_list(planes, x, radius_node, acc, dt)
-    n_pen, stored = plane_contacts_listed(x, radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign,
-                                          planes.pos, f, planes.force, planes.pen_idx, planes.pen_f, planes.cand_idx,
-                                          planes.cand_off)
-    acc[ACC_STORED] += stored
-    wk = 0.0
-    for p in range(P):
-        if planes.move[p, 0] != 0.0:
-            du = 0.5 * path_delta(t + dt, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p])
-            wk += planes.force[p] * du
-    acc[ACC_WK] += wk
-    acc[ACC_PW] += 0.5 * dt * penalty_power(v, planes.pen_idx, planes.pen_f, n_pen) - wk
-    return n_pen
-
-
-@njit(inline="always", **_FLAGS)
-def _keep_plane_list(planes, x, radius_node, acc, dt):
-    """List the nodes near each plane again when one could have closed the list's margin since it was
-    taken: each step every node moves by at most Δt max|v_{n−½}| (``acc[ACC_V2_MAX]``, which the
-    previous update left; < 0 at a call's first step, whose state may have been set from outside)
-    and each plane by its travel since."""
-    slack = planes.cand_slack
-    v2 = acc[ACC_V2_MAX]
-    if v2 >= 0.0:
-        slack[0] -= dt * math.sqrt(v2)
-        moved = 0.0
-        for p in range(planes.axis.shape[0]):
-            moved = max(moved, abs(planes.pos[p] - planes.cand_pos[p]))
-        if slack[0] - moved > 0.0:
-            return
-    plane_candidates(x, radius_node, planes.axis, planes.sign, planes.pos, slack[1], planes.cand_idx, planes.cand_off)
-    for p in range(planes.axis.shape[0]):
-        planes.cand_pos[p] = planes.pos[p]
-    slack[0] = slack[1]
 
 
 @njit(inline="always", **_FLAGS)
@@ -430,7 +374,6 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
     ke, ke_lf, se, vd_lf_shift = energies
     x, v, acc, hist = state.x, state.v, state.acc, work.hist
     f_ext, x0 = scene.f_ext, model.x0
-    planes = scene.planes
     N = x.shape[0]
     wext = 0.0
     if f_ext.shape[0] == N:
@@ -441,15 +384,7 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
             wext += (f_ext[i, 0] * (xi0 - x0[i, 0]) + f_ext[i, 1] * (xi1 - x0[i, 1])
                      + f_ext[i, 2] * (xi2 - x0[i, 2]))
     hist[h_row, H_TIME] = t
-    segment = 0
-    for p in range(planes.axis.shape[0]):
-        c = planes.hist_col[p]
-        if c >= 0:
-            hist[h_row, c] = planes.force[p]
-            if H_PLATE_FORCE <= c < H_PLATE_FORCE + 2:  # a plate: its travel and path segment too
-                u, k = path_travel(t, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p])
-                hist[h_row, H_PLATE_DISP + c - H_PLATE_FORCE] = u
-                segment = max(segment, k // 2)  # the path's entries: moves, each but the last followed by a hold
+    segment = record_planes(hist[h_row], scene.planes, t)
     hist[h_row, H_KE] = ke
     hist[h_row, H_SE] = se
     hist[h_row, H_VD] = 0.5 * (acc_before[ACC_VD] + acc[ACC_VD])
@@ -465,13 +400,13 @@ def write_history(model, scene, state, work, h_row, acc_before, t, dt, energies,
 
 
 @njit(**_FLAGS)
-def check_row(model, state, row, ke, se, vmax2, ctl):
+def check_row(model, state, row, ke, se, vmax2, control):
     """The blow-up checks at a history row: ``(status, bad node or -1)``."""
     if not (ke == ke) or not (se == se) or vmax2 == np.inf:
         return STATUS_NAN, -1
-    if vmax2 > ctl.v_limit_m_s * ctl.v_limit_m_s:
+    if vmax2 > control.v_limit_m_s * control.v_limit_m_s:
         return STATUS_SPEED, -1
-    emax = ctl.e_ref_J
+    emax = control.e_ref_J
     if abs(row[H_WK]) > emax:
         emax = abs(row[H_WK])
     if abs(row[H_PW]) > emax:
@@ -479,7 +414,7 @@ def check_row(model, state, row, ke, se, vmax2, ctl):
     if ke > 1e3 * emax:
         return STATUS_ENERGY, -1
     x, x0 = state.x, model.x0
-    lim2 = ctl.x_limit_m * ctl.x_limit_m
+    lim2 = control.x_limit_m * control.x_limit_m
     for i in range(x.shape[0]):
         ddx = x[i, 0] - x0[i, 0]
         ddy = x[i, 1] - x0[i, 1]
@@ -498,48 +433,47 @@ def _node_array(a, n):
     return np.zeros((n, 3)), False
 
 
-def _advance_template(model, scene, state, work, ctl, contact_data):
-    """Advance ``state`` by up to ``ctl.n_steps`` steps of ``ctl.dt_s`` (s).
+def _advance_template(model, scene, state, work, control, terms, owner):
+    """Advance ``state`` by up to ``control.n_steps`` steps of ``control.dt_s`` (s).
 
-    Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is a ``layout.STATUS_*`` code
-    (not OK: the state is the one at the check that failed).
+    ``terms``: the per-step terms' entries as a chain ``((data, history column), rest)`` ending in
+    ``()`` (:func:`terms_chain`); ``owner``: the data of the term whose force arrays the update applies
+    (``()``: none). Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is a
+    ``layout.STATUS_*`` code (not OK: the state is the one at the check that failed).
     """
     x, q, v, w, acc = state
-    dt = ctl.dt_s
-    h_row = ctl.h_row
+    dt = control.dt_s
+    h_row = control.h_row
     hist = work.hist
     P = scene.planes.axis.shape[0]
-    beta = scene.beta_s
-    beta_over_dt = beta / dt if beta > 0.0 else 0.0
+    beta_over_dt = scene.beta_s / dt if scene.beta_s > 0.0 else 0.0
     vd_scale = scene.alpha_per_s * dt
     N = x.shape[0]
-    # the constant factors of the update, folded once per call
-    coef = damping_factors(scene.alpha_per_s, dt)
+    coef = damping_factors(scene.alpha_per_s, dt)  # the constant factors of the update, folded once per call
     acc_before = np.zeros(ACC_SIZE)
-    # the hook's own force array (a hook that declares one leaves its forces there; the update adds
-    # them, books their work Δt f_n·v̄_n and clears the array; (0, 3) for hooks that add into f),
-    # and its friction force array, whose work the update books as the friction's
-    fc, has_fc = _node_array(_hook_forces(contact_data), N)
-    ff, has_ff = _node_array(_hook_friction(contact_data), N)
+    # the owner term's force array and friction force array, which the update adds to the nodes,
+    # books (Δt f_n·v̄_n; the friction's as friction work too) and clears ((0, 3): none)
+    fc, has_fc = _node_array(_owner_forces(owner), N)
+    ff, has_ff = _node_array(_owner_friction(owner), N)
     fixity = scene.fixity
     f_ext, _ = _node_array(scene.f_ext, N)  # the update resets f to it for every node
     # the forces of the first step; the update resets f and mom for each next one
     eval_external(work.f, work.mom, f_ext)
     # the largest node speed is not known until the first update (the state may have been set
-    # between calls): the contact hook takes it from v itself then
+    # between calls): the terms take it from v itself then
     acc[ACC_V2_MAX] = -1.0
     status = STATUS_OK
     bad = -1
     done = 0
-    for it in range(ctl.n_steps):
-        step = ctl.step_start + it
-        t = ctl.t_start_s + it * dt
-        record = ((step + 1) % ctl.history_every == 0) and h_row < hist.shape[0]
+    for it in range(control.n_steps):
+        step = control.step_start + it
+        t = control.t_start_s + it * dt
+        record = ((step + 1) % control.history_every == 0) and h_row < hist.shape[0]
         if record:
             for k in range(ACC_SIZE):
                 acc_before[k] = acc[k]
         # ---- forces at t_n ----
-        acc[ACC_STORED] = 0.0  # a state at t_n: the planes and the hook add their stored energy
+        acc[ACC_STORED] = 0.0  # a state at t_n: the planes and the terms add their stored energy
         # work.f holds the constant loads and work.mom zeros here (the previous update set them)
         # _beam_pass: beam_pass_all (serial) or beam_pass_fibers (prange per fiber), bound per loop
         # variant by _specialise; it fills ef, the update gathers it. A step with an element rotated
@@ -551,20 +485,13 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
         n_pen = 0
         if P > 0:
             n_pen = eval_planes(scene.planes, x, v, model.radius_node, work.f, acc, t, dt)
-        # the hook adds its forces (or leaves them in its own array) and moments at t_n from x_n, q_n
-        # and the half-step velocities v_{n−½}, w_{n−½}; books its work and friction dissipation (or,
-        # with a friction array, its springs' part: the update books the friction forces' work)
+        # the per-step terms, in turn, at t_n from x_n, q_n and the half-step velocities v_{n−½}, w_{n−½}
         stored_planes = acc[ACC_STORED]
-        n_contacts = _hook(x, q, v, w, work.f, work.mom, acc, t, dt, contact_data)
-        if acc[ACC_STORED0] < 0.0:  # −1: the run's first step; the hook's stored energy at t_0 (≥ 0)
+        n_contacts = _terms_eval(x, q, v, w, work.f, work.mom, acc, t, dt, terms)
+        if acc[ACC_STORED0] < 0.0:  # −1: the run's first step; the terms' stored energy at t_0 (≥ 0)
             acc[ACC_STORED0] = acc[ACC_STORED] - stored_planes
-        eval_drives(scene.drives, t, dt)
-        for k in range(fixity.driven.shape[0]):
-            i = fixity.driven[k]
-            for c in range(3):
-                fixity.v_pres[i, c] = scene.drives.v[scene.node_drive[i], c]
+        _prescribe_drives(scene, fixity, t, dt)
         # ---- update ----
-        # (the fixity apart from the scene: a parallel loop takes no structure nested in another)
         ke, ke_lf, vd, wk_fix, pw_c, wf_0, wf_1, n_spin, v2_max = _update_pass(model, fixity, state, work, f_ext,
                                                                                fc, ff, dt, coef, scene.alpha_per_s)
         acc[ACC_V2_MAX] = v2_max
@@ -572,19 +499,8 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             rotate_large(q, w, dt, 0, N)
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
-        if n_pen > 0:
-            acc[ACC_PW] += 0.5 * dt * penalty_power(v, scene.planes.pen_idx, scene.planes.pen_f, n_pen)
-        if has_fc:
-            acc[ACC_PW] += dt * pw_c
-        if has_ff:
-            # the friction forces' work: to ALLPW as every contact force's, Δt f_n·v̄_n; to the
-            # friction work and, as a loss, to ALLFD as ½Δt (f_{n−1} + f_n)·v_{n−½}, the work over the
-            # displacement the friction springs' energy at t_n changed by (the hook books that change)
-            w_half = 0.5 * dt * wf_0 + acc[ACC_WF_NEXT]
-            acc[ACC_WF_NEXT] = 0.5 * dt * wf_1
-            acc[ACC_PW] += 0.5 * dt * (wf_0 + wf_1) - w_half
-            acc[ACC_WF] += w_half
-            acc[ACC_FD] -= w_half
+        finish_planes(scene.planes, v, acc, dt, n_pen)
+        _book_owner_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1)
         done = it + 1
         # ---- history and checks ----
         if record:
@@ -593,8 +509,9 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
             # − ½αΔt (K_{n+½} − K̄_n), from K_{n+½} at the rows only (the update's loop stays as it is)
             shift = -0.5 * vd_scale * (half_step_kinetic(model, state) - ke)
             write_history(model, scene, state, work, h_row, acc_before, t, dt, (ke, ke_lf, se, shift), n_contacts)
+            _terms_record(hist[h_row], terms)
             h_row += 1
-            status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, ctl)
+            status, bad_x = check_row(model, state, hist[h_row - 1], ke, se, vmax2, control)
             if bad_x >= 0:
                 bad = bad_x
             if status != STATUS_OK:
@@ -602,56 +519,148 @@ def _advance_template(model, scene, state, work, ctl, contact_data):
     return status, done, h_row, bad
 
 
-# ---- specialisations of the step loop, one per contact hook -----------------------------------------
-#
-# The hook is NOT a first-class function argument: each specialisation is a copy of
-# ``_advance_template`` whose globals ``_hook``, ``_hook_forces`` and ``_hook_friction`` are bound to
-# one hook kernel and its force arrays' accessors, so numba compiles the call directly (inlined, no indirect call) and never
-# pickles a dispatcher type into its cache. The built-in hooks are cached on disk under their own
-# names (``step_loop_for(cache_name=...)`` followed by the names of the force arrays' accessors, so a
-# cache entry is found only with the accessors it was compiled with); their freshness covers every module of the package
-# (``_jitcache``), so an edit of a contact module recompiles them. Any other hook gets an uncached
-# specialisation, compiled once per process and hook.
+@njit(inline="always", **_FLAGS)
+def _prescribe_drives(scene, fixity, t, dt):
+    """The driven nodes' prescribed velocities over [t_n, t_{n+1}] (into ``fixity.v_pres``)."""
+    eval_drives(scene.drives, t, dt)
+    for k in range(fixity.driven.shape[0]):
+        i = fixity.driven[k]
+        for c in range(3):
+            fixity.v_pres[i, c] = scene.drives.v[scene.node_drive[i], c]
 
-_hook = no_contact
-_hook_forces = no_contact_forces
-_hook_friction = no_contact_forces
+
+@njit(inline="always", **_FLAGS)
+def _book_owner_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1):
+    """The work of the owner term's forces the update applied (:func:`update_range`'s sums)."""
+    if has_fc:
+        acc[ACC_PW] += dt * pw_c
+    if has_ff:
+        # the friction forces' work: to ALLPW as every contact force's, Δt f_n·v̄_n; to the
+        # friction work and, as a loss, to ALLFD as ½Δt (f_{n−1} + f_n)·v_{n−½}, the work over the
+        # displacement the friction springs' energy at t_n changed by (the term books that change)
+        w_half = 0.5 * dt * wf_0 + acc[ACC_WF_NEXT]
+        acc[ACC_WF_NEXT] = 0.5 * dt * wf_1
+        acc[ACC_PW] += 0.5 * dt * (wf_0 + wf_1) - w_half
+        acc[ACC_WF] += w_half
+        acc[ACC_FD] -= w_half
+
+
+# ---- the per-step terms as a chain of direct calls ---------------------------------------------------
+#
+# A scene's per-step terms are a tuple of kernels known when the integrator is built. The step loop
+# calls them through a chain of small functions, each a copy of a template whose globals are bound
+# to one term's functions and to the rest of the chain (_specialise), so numba compiles every call
+# directly (inlined, no indirect call, nothing pickled into its cache). The data travels as the
+# nested tuple ((data_0, column_0), ((data_1, column_1), ... ())), column the term's first energy
+# column of the history (-1: it declares none).
+
+
+@njit(inline="always", **_FLAGS)
+def _end_eval(x, q, v, w, f, mom, acc, t, dt, terms):
+    return 0
+
+
+@njit(inline="always", **_FLAGS)
+def _end_record(row, terms):
+    return None
+
+
+@njit(inline="always", **_FLAGS)
+def record_energy(row, column, data):
+    """A term's energy slots into the history row: ``data.energy[k]`` to column ``column + k``."""
+    for k in range(data.energy.shape[0]):
+        row[column + k] = data.energy[k]
+
+
+@njit(inline="always", **_FLAGS)
+def no_record(row, column, data):
+    return None
+
+
+def _link_eval(x, q, v, w, f, mom, acc, t, dt, terms):
+    n = _head_eval(x, q, v, w, f, mom, acc, t, dt, terms[0][0])
+    return n + _rest_eval(x, q, v, w, f, mom, acc, t, dt, terms[1])
+
+
+def _link_record(row, terms):
+    _head_record(row, terms[0][1], terms[0][0])
+    _rest_record(row, terms[1])
+
+
+_head_eval = _rest_eval = _end_eval
+_head_record = no_record
+_rest_record = _end_record
+
+
+def terms_chain(kernels, records, tag: str):
+    """``(eval chain, record chain)``: jitted functions calling each of ``kernels`` (the terms' evals)
+    and ``records`` (:func:`record_energy` or :func:`no_record`) in turn; ``tag`` names the copies."""
+    chain_eval, chain_record = _end_eval, _end_record
+    for k in range(len(kernels) - 1, -1, -1):
+        chain_eval = specialise(_link_eval, f"_eval_{tag}_{k}", {"_head_eval": kernels[k], "_rest_eval": chain_eval},
+                                cache=False, inline="always", fastmath=True, error_model="numpy")
+        chain_record = specialise(_link_record, f"_record_{tag}_{k}",
+                                  {"_head_record": records[k], "_rest_record": chain_record}, cache=False,
+                                  inline="always", fastmath=True, error_model="numpy")
+    return chain_eval, chain_record
+
+
+# ---- specialisations of the step loop, one per tuple of per-step terms ----------------------------
+#
+# Each specialisation is a copy of ``_advance_template`` whose globals ``_terms_eval`` and
+# ``_terms_record`` are bound to the chain of the scene's terms and ``_owner_forces`` and
+# ``_owner_friction`` to the force arrays' accessors of the term that hands its forces to the update.
+# Scenes whose terms are all built in are cached on disk under a name made of the terms' cache names
+# and the accessors' names (so an entry is found only with what it was compiled with); their freshness
+# covers every module of the package (``_jitcache``), so an edit of a term's module recompiles them.
+# Any other tuple gets an uncached specialisation, compiled once per process.
+
+_terms_eval = _end_eval
+_terms_record = _end_record
+_beam_pass = beam_pass_all
+_owner_forces = no_forces
+_owner_friction = no_forces
 _update_pass = update_nodes
 
 
-def _specialise(name: str, hook, forces_of, cache: bool, parallel: bool = False, friction_of=no_contact_forces):
+def _specialise(name: str, chain, owner_accessors, cache: bool, parallel: bool = False):
+    (chain_eval, chain_record), (forces_of, friction_of) = chain, owner_accessors
     return specialise(_advance_template, name, {
-        "_hook": hook, "_hook_forces": forces_of, "_hook_friction": friction_of,
+        "_terms_eval": chain_eval, "_terms_record": chain_record,
+        "_owner_forces": forces_of, "_owner_friction": friction_of,
         "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
         "_update_pass": update_nodes_fibers if parallel else update_nodes,
     }, cache=cache, fastmath=True, error_model="numpy")
 
 
-advance_plain = _specialise("advance_plain", no_contact, no_contact_forces, True)
+advance_plain = _specialise("advance_plain", (_end_eval, _end_record), (no_forces, no_forces), True)
 _LOOPS: dict = {}
 
 
-def step_loop_for(hook=no_contact, forces_of=no_contact_forces, threads: int = 1, cache_name: str | None = None,
-                  friction_of=no_contact_forces):
-    """The jitted step loop calling ``hook`` as its contact pass (``no_contact``: none).
+def step_loop_for(kernels=(), records=(), *, forces_of=no_forces, friction_of=no_forces, threads: int = 1,
+                  cache_names=()):
+    """The jitted step loop calling the per-step terms' ``kernels`` in turn (none: ``advance_plain``).
 
-    forces_of : the jitted accessor of the hook's own force array (``no_contact_forces``: the hook
-        adds into ``f``). friction_of : the same for its friction forces (their work booked to the
-        friction work and, as a loss, to ALLFD). cache_name : a built-in hook's name for the on-disk
-        cache (None: compiled in every process). ``threads > 1``: the variant whose beam pass and update
-        run as prange tasks of contiguous nodes; cached whole under its own name, its parallel kernels
-        never on their own (see ``_kernels_beam.beam_pass_fibers``).
+    records : per kernel, :func:`record_energy` (the term declares energy slots) or :func:`no_record`.
+    forces_of, friction_of : the accessors of the owner term's force arrays (``no_forces``: none).
+    cache_names : per kernel, its built-in name for the on-disk cache; the loop is cached when every
+    kernel has one (else compiled in every process). ``threads > 1``: the variant whose beam pass and
+    update run as prange tasks of contiguous nodes; cached whole under its own name, its parallel
+    kernels never on their own (see ``_kernels_beam.beam_pass_fibers``).
     """
     parallel = threads > 1
-    if hook is no_contact and not parallel:
+    kernels, records = tuple(kernels), tuple(records) or (no_record,) * len(kernels)
+    if not kernels and not parallel:
         return advance_plain
-    key = (hook, forces_of, friction_of, parallel)
+    cache = len(cache_names) == len(kernels) and all(cache_names)
+    key = (kernels, records, forces_of, friction_of, parallel, tuple(cache_names) if cache else None)
     loop = _LOOPS.get(key)
     if loop is None:
-        cache = cache_name is not None
-        name = cache_name or ("advance_plain" if hook is no_contact else "advance_hook")
-        if cache:
+        name = "advance_" + ("_".join(cache_names) if cache else "terms") if kernels else "advance_plain"
+        if cache and kernels:
             name += f"_{forces_of.__name__}_{friction_of.__name__}"
-        loop = _specialise(name + ("_threads" if parallel else ""), hook, forces_of, cache, parallel, friction_of)
+        tag = f"{name}{len(_LOOPS)}"
+        loop = _specialise(name + ("_threads" if parallel else ""), terms_chain(kernels, records, tag),
+                           (forces_of, friction_of), cache, parallel)
         _LOOPS[key] = loop
     return loop

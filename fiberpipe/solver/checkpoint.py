@@ -6,15 +6,15 @@ an uninterrupted run and gives the same results bit for bit (same machine, same 
 
 - the State: ``x``, ``q``, ``v``, ``w`` (half-step velocities), ``t``, ``step``, ``acc`` (energy
   accumulators);
-- the integrator's mutable arrays: ``strain_prev`` (stiffness-proportional damping), plate/penalty
-  state (``pl_pos``, ``pl_force``, ``pen_idx``, ``pen_f``), ``drive_v``;
+- the integrator's mutable arrays: ``strain_prev`` (stiffness-proportional damping), ``drive_v`` and
+  the plane pass's (``pl_pos``, ``pl_force``, ``pen_idx``, ``pen_f``: ``terms.planes.CHECKPOINT_FIELDS``);
 - the history rows written so far and the row counter, the frames written so far;
 - the run's constants that would otherwise be recomputed from the *initial* state: the initial
   kinetic + strain energy (energy reference of the blow-up check and the residual), the origin step;
-- the contact hook's ``data`` tuple, saved generically as a (nested) tuple of numpy arrays,
-  numbers and numba typed lists of arrays (buffers the kernel grows are restored at their grown size), and any arrays an effect contributes through ``checkpoint_arrays()`` /
-  ``restore_arrays(arrays)`` (an optional protocol: an effect with Python-side mutable state
-  implements both).
+- each per-step term's ``data``, saved generically as a (nested) tuple of numpy arrays, numbers and
+  numba typed lists of arrays (buffers the kernel grows are restored at their grown size), and any
+  arrays a term contributes through ``checkpoint_arrays()`` / ``restore_arrays(arrays)`` (an optional
+  protocol: a term with Python-side mutable state implements both).
 
 It is an ordinary fiberpipe artifact of kind ``checkpoint`` (written atomically), whose
 ``config_sha256`` is the simulate stage's cache key (config sections + mesh hash): a resume with a
@@ -74,14 +74,14 @@ class Checkpoint:
     wall_time_s: float
     effects: list
     # integrator arrays
-    integ: dict
+    integrator_arrays: dict
     # output so far
     hist: np.ndarray  # (h_row, C)
     frames_time: np.ndarray
     frames_positions: np.ndarray
     frames_rotations: np.ndarray
-    # contact hook data (nested tuple of arrays/scalars) and effects' own arrays
-    contact_data: object = None
+    # the per-step terms' data (nested tuples of arrays/scalars) by term name, and terms' own arrays
+    term_data: dict = field(default_factory=dict)
     effect_arrays: dict = field(default_factory=dict)
 
     @property
@@ -89,10 +89,7 @@ class Checkpoint:
         return int(self.hist.shape[0])
 
 
-INTEG_ARRAYS = ("strain_prev", "pl_pos", "pl_force", "pen_idx", "pen_f", "drive_v")
-
-
-# -- contact data: a nested tuple of arrays and scalars <-> flat datasets ---------------------------
+# -- a term's data: a nested tuple of arrays and scalars <-> flat datasets ---------------------------
 
 
 def _flatten(obj, prefix: str, out: dict, spec: list):
@@ -120,7 +117,7 @@ def _flatten(obj, prefix: str, out: dict, spec: list):
         out[prefix] = np.asarray(obj, dtype=np.float64)
         spec.append(["float", prefix])
     else:
-        raise FiberpipeError(f"checkpoint: the contact hook's data holds a {type(obj).__name__}, which cannot "
+        raise FiberpipeError(f"checkpoint: a term's data holds a {type(obj).__name__}, which cannot "
                              "be saved (only tuples of numpy arrays and numbers)")
 
 
@@ -186,13 +183,13 @@ def write_checkpoint(path: str | Path, ck: Checkpoint, *, config_sha256: str = "
     }
     units = {"state/x": "m", "state/v": "m/s", "state/w": "rad/s", "state/acc": "J",
              "frames/time": "s", "frames/positions": "m"}
-    for k, a in ck.integ.items():
+    for k, a in ck.integrator_arrays.items():
         ds[f"integrator/{k}"] = a
-    spec: list = []
-    if ck.contact_data is not None:
-        flat: dict = {}
-        _flatten(ck.contact_data, "contact/data", flat, spec)
-        ds.update(flat)
+    specs: dict = {}
+    for name, data in ck.term_data.items():
+        spec: list = []
+        _flatten(data, f"terms/{name}", ds, spec)
+        specs[name] = spec[0]
     for ename, arrs in ck.effect_arrays.items():
         for k, a in arrs.items():
             ds[f"effects/{ename}/{k}"] = np.asarray(a)
@@ -202,7 +199,7 @@ def write_checkpoint(path: str | Path, ck: Checkpoint, *, config_sha256: str = "
         "chunk_steps": int(ck.chunk_steps), "checkpoint_every": int(ck.checkpoint_every),
         "e0_kinetic_J": float(ck.e0_ke), "e0_strain_J": float(ck.e0_se), "wall_time_s": float(ck.wall_time_s),
         "effects": list(ck.effects), "h_row": int(ck.h_row),
-        "contact_spec": json.dumps(spec[0] if spec else None),
+        "term_specs": json.dumps(specs),
         "effect_arrays": json.dumps({k: sorted(v) for k, v in ck.effect_arrays.items()}),
     }
     return write_artifact(path, "checkpoint", ds, units=units, attrs=attrs, config_sha256=config_sha256,
@@ -226,12 +223,11 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             f"was written by a version of fiberpipe with {art['state/acc'].shape[0]} energy accumulators (this one "
             f"keeps {ACC_SIZE}), so the run cannot be resumed from it; rerun with --force to start over", where=str(path))
     try:
-        spec = json.loads(a.get("contact_spec", "null"))
-        contact = _unflatten(spec, art.data) if spec is not None else None
+        terms = {name: _unflatten(spec, art.data) for name, spec in json.loads(a.get("term_specs", "{}")).items()}
         eff = {}
         for ename, keys in json.loads(a.get("effect_arrays", "{}")).items():
             eff[ename] = {k: art[f"effects/{ename}/{k}"] for k in keys}
-        integ = {k[len("integrator/"):]: v for k, v in art.data.items() if k.startswith("integrator/")}
+        arrays = {k[len("integrator/"):]: v for k, v in art.data.items() if k.startswith("integrator/")}
         return Checkpoint(
             x=art["state/x"], q=art["state/q"], v=art["state/v"], w=art["state/w"], acc=art["state/acc"],
             t=float(a["t_s"]), step=int(a["step"]), origin_step=int(a["origin_step"]),
@@ -239,9 +235,9 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             chunk_steps=int(a["chunk_steps"]), checkpoint_every=int(a["checkpoint_every"]),
             e0_ke=float(a["e0_kinetic_J"]), e0_se=float(a["e0_strain_J"]), wall_time_s=float(a["wall_time_s"]),
             effects=json.loads(a["effects"]) if isinstance(a["effects"], str) else list(a["effects"]),
-            integ=integ, hist=art["history/rows"], frames_time=art["frames/time"],
+            integrator_arrays=arrays, hist=art["history/rows"], frames_time=art["frames/time"],
             frames_positions=art["frames/positions"], frames_rotations=art["frames/rotations"],
-            contact_data=contact, effect_arrays=eff,
+            term_data=terms, effect_arrays=eff,
         )
     except (KeyError, ValueError, TypeError) as exc:
         raise ArtifactError(f"is an incomplete or damaged checkpoint ({exc})", where=str(path)) from None

@@ -1,6 +1,6 @@
 """Fiber–fiber normal contact in which every force is minus the gradient of one stored potential.
 
-The normal contact pass of the step loop's contact hook (:mod:`fiberpipe.solver.contact_effect`). The
+The normal contact pass of the step loop's contact hook (:mod:`fiberpipe.solver.terms.contact`). The
 potential of a candidate segment pair (A = segment i, B = j) is
 
     Π_AB = (1 − w(Φ)) Π_line + w(Φ) s_joint Π_point

@@ -1,6 +1,6 @@
 """The contact hook's data as named structures (NamedTuples of arrays; a leaf module).
 
-:func:`fiberpipe.solver.contact_effect.contact_step` receives one :class:`ContactData`:
+:func:`fiberpipe.solver.terms.contact.contact_step` receives one :class:`ContactData`:
 
 - ``params`` (:class:`ContactParams`): the law and the friction settings, constant over a run;
 - ``stats`` (:class:`ContactStats`): counters and last-step figures, each a 1-element array so the
@@ -112,9 +112,8 @@ class PlaneFriction(NamedTuple):
     vel: np.ndarray          # (P, 3) m/s, velocity at this step
     hist: np.ndarray         # (N, max(P, 1), 4) tangential spring force (3) and step of last update
     tforce: np.ndarray       # (max(P, 1), 3) N, tangential reaction on each plane
-    cand_idx: np.ndarray     # (N·P,) int64, the nodes near each plane
+    cand_idx: np.ndarray     # (N·P,) int64, the nodes near each plane (the plane pass's list, shared)
     cand_off: np.ndarray     # (P + 1,) int64, CSR offsets into cand_idx
-    pos_cand: np.ndarray     # (P,) m, plane positions when the candidates were listed
 
 
 class ContactData(NamedTuple):

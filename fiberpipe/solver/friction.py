@@ -14,7 +14,7 @@ a tangential penalty spring ``k_t`` [N/m] (elastic stick) and a return map onto 
 
 Dissipation, per contact and step: the energy the contact took from the fibers less what its
 spring stored (the step loop's ALLFD is the same sum taken on the nodes, over the contacts that left
-too: the node update books the friction forces' work, ``contact_effect._friction_pass`` the springs'), ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
+too: the node update books the friction forces' work, ``terms.contact._friction_pass`` the springs'), ``D = −½(f_{n−1}·Δu' + f_n·Δu) − (½|f_n|²/k_n − ½|f_{n−1}|²/k_{n−1})``, with ``Δu``
 the relative displacement over the step at this step's contact point and ``Δu'`` at the point the
 previous force acted at (the contact point slides along the segments). The first term is the
 friction forces' work as the step loop books it (``½Δt f_n·(v_{n−½} + v_{n+½})``, summed by parts),
@@ -61,10 +61,10 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
         h2 -= hn * n2
         new2 = h0 * h0 + h1 * h1 + h2 * h2
         if new2 > 0.0:
-            sc = math.sqrt(old2 / new2)
-            h0 *= sc
-            h1 *= sc
-            h2 *= sc
+            scale = math.sqrt(old2 / new2)
+            h0 *= scale
+            h1 *= scale
+            h2 *= scale
     un = du0 * n0 + du1 * n1 + du2 * n2
     t0 = h0 - kt * (du0 - un * n0)
     t1 = h1 - kt * (du1 - un * n1)
@@ -73,10 +73,10 @@ def _return_map(h, k, n0, n1, n2, du0, du1, du2, fn, mu, kt):
     lim = mu * fn
     # stick (the common case of a compacted bundle) needs no square root
     if tm2 > lim * lim:
-        sc = lim / math.sqrt(tm2)
-        t0 *= sc
-        t1 *= sc
-        t2 *= sc
+        scale = lim / math.sqrt(tm2)
+        t0 *= scale
+        t1 *= scale
+        t2 *= scale
     h[k, 0] = t0
     h[k, 1] = t1
     h[k, 2] = t2
@@ -223,10 +223,10 @@ def _friction_range(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, la
                 # softer: scale f_t by √(k_new/k_old), which keeps the stored energy ½|f_t|²/k;
                 # stiffer: keep f_t (its energy falls, booked as dissipated with the step's)
                 if 0.0 < ktp < k_prev:
-                    sc = math.sqrt(ktp / k_prev)
-                    hist[k, 0] *= sc
-                    hist[k, 1] *= sc
-                    hist[k, 2] *= sc
+                    scale = math.sqrt(ktp / k_prev)
+                    hist[k, 0] *= scale
+                    hist[k, 1] *= scale
+                    hist[k, 2] *= scale
                 hist[k, 3] = ktp
             f0, f1, f2 = _return_map(hist, k, c_n[k, 0], c_n[k, 1], c_n[k, 2], dm0, dm1, dm2, fn, mu, ktp)
             e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / ktp
@@ -445,5 +445,4 @@ def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce
                          np.asarray(sign, float), np.asarray(pos, float).copy(), z, np.ones(P), z.copy(),
                          np.zeros(P, np.int64), np.asarray(pos, float), np.asarray(vel, float), hist, tforce,
                          np.zeros(0, np.int64) if cand_idx is None else np.asarray(cand_idx, np.int64),
-                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64),
-                         np.asarray(pos, float).copy())
+                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64))

@@ -20,23 +20,26 @@ from typing import Callable, NamedTuple, Sequence
 import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
-from ._kernels_integrate import step_loop_for
+from ._kernels_integrate import no_record, record_energy, step_loop_for
 from ._kernels_beam import EB_SIZE, PARALLEL_CHUNKS, beam_forces, new_element_forces, node_beams
-from ._kernels_boundary import PLANE_LIST_MARGIN, plane_contacts
-from .checkpoint import INTEG_ARRAYS, Checkpoint, SimulationInterrupted, restore_into
-from .effects import ContactHook, Effect, SceneArrays
-from .layout import (ACC_SIZE, ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_FD, H_KE, H_KE_LF, H_VD_LF, H_SEGMENT, H_STORED, H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_TIME, H_VD, H_WALL, H_WF, H_WK,
-                     H_CONTACTS, STATUS_ENERGY, STATUS_NAN, STATUS_OK, STATUS_RUNAWAY, STATUS_SPEED)
+from .checkpoint import Checkpoint, SimulationInterrupted, restore_into
+from .layout import (ACC_SIZE, ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_CONTACTS, H_FD, H_KE, H_KE_LF,
+                     H_PLATE_DISP, H_PLATE_FORCE, H_PW, H_SE, H_SEGMENT, H_STORED, H_TIME, H_VD, H_VD_LF, H_WALL, H_WF,
+                     H_WK, STATUS_ENERGY, STATUS_LEFT_BOX, STATUS_NAN, STATUS_OK, STATUS_PENETRATION, STATUS_RUNAWAY,
+                     STATUS_SPEED)
 from .model import Model
 from .state import State
-from .step_data import DriveArrays, Fixity, ModelArrays, PlaneArrays, SceneKernel, StepControl, StepState, WorkArrays
+from .step_data import DriveArrays, Fixity, ModelArrays, SceneKernel, StepControl, StepState, WorkArrays
+from .terms.base import SceneArrays, Term, no_forces
+from .terms.planes import CHECKPOINT_FIELDS as PLANE_CHECKPOINT_FIELDS
+from .terms.planes import plane_arrays, plane_check, plane_energy
 from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
                 "kinetic_leapfrog", "damping_leapfrog", "total", "residual")
 
 
-def m_(a, dtype=np.float64) -> np.ndarray:
+def contiguous(a, dtype=np.float64) -> np.ndarray:
     """A model array as the kernels take it: contiguous, of the given dtype (no copy if it is)."""
     return np.ascontiguousarray(a, dtype=dtype)
 
@@ -146,7 +149,7 @@ class SimulationResult:
     warnings: list = field(default_factory=list)
 
 
-def choose_time_step(model: Model, effects: Sequence[Effect], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
+def choose_time_step(model: Model, effects: Sequence[Term], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
     """The time step (s) the run will use and the stability report; refuses a user dt above the limit."""
     beta = max([getattr(e, "beta_s", 0.0) for e in effects if e.name == "damping"] or [0.0])
     rep = stable_time_step(model, beta_s=beta)
@@ -163,30 +166,17 @@ def choose_time_step(model: Model, effects: Sequence[Effect], settings: Simulati
     return float(settings.dt_s), rep
 
 
-def _modal_report(model: Model, effects: Sequence[Effect], rep: TimeStepReport, beta_s: float) -> TimeStepReport:
+def _modal_report(model: Model, effects: Sequence[Term], rep: TimeStepReport, beta_s: float) -> TimeStepReport:
     """``rep`` with the stable step of the constrained assembled system (``solver.stable_step: modes``):
     the fixity and the plane penalty factor of ``effects`` (set up on a probe; the contact hook's
     setup is not needed for them)."""
     probe = SceneArrays(model, 1.0)
-    for e in effects:
-        if not isinstance(e, ContactHook):
-            e.setup(model, probe)
+    for term in effects:
+        if term.kernels() is None:  # the folded terms: fixity and planes (not the per-step terms)
+            term.setup(model, probe)
     mt = modal_time_step(model, probe.fix_mask, beta_s=beta_s, penalty_factor=probe.penalty_factor)
     per_mode = dict(rep.per_mode_s, modes=mt.dt_stable_s)
     return TimeStepReport(mt.dt_stable_s, "assembled constrained", -1, per_mode, rep.rotary_inertia_scale, rep.beta_s)
-
-
-def _plane_energy(sc: SceneArrays, x: np.ndarray) -> float:
-    """The plane penalties' stored energy at positions ``x`` (planes at their start), from the
-    step loop's own plane kernel on scratch arrays."""
-    P = sc.pl_axis.size
-    if P == 0:
-        return 0.0
-    n = x.shape[0]
-    _, energy = plane_contacts(np.ascontiguousarray(x, dtype=np.float64), m_(sc.model.radius_node), sc.k_pen(),
-                               sc.pen_onset(), sc.pl_axis, sc.pl_sign, sc.pl_pos0, np.zeros((n, 3)), np.zeros(P),
-                               np.zeros(n * P, np.int64), np.zeros(n * P))
-    return float(energy)
 
 
 def _initial_energies(model: Model, state: State) -> tuple[float, float]:
@@ -211,42 +201,91 @@ def fixity_of(fix_mask: np.ndarray, n_nodes: int) -> Fixity:
                   np.flatnonzero(driven).astype(np.int64))
 
 
-class Integrator:
-    """Holds the model, the effects' kernel arrays and the work buffers for repeated :meth:`advance`."""
+class ScenePlan(NamedTuple):
+    """The scene's terms as the step loop takes them: the per-step terms' chain and their owner."""
 
-    def __init__(self, model: Model, effects: Sequence[Effect], dt: float, *, history_rows: int = 1,
+    terms: list        # (term, data, first energy column or -1) of each per-step term, in turn
+    chain: tuple       # ((data, column), rest) ... () (_kernels_integrate.terms_chain)
+    owner: object      # the data of the term whose force arrays the update applies (() when none)
+    owner_index: int   # that term's index in ``terms`` (-1: none)
+    loop: object       # the step loop specialised on them
+
+
+def _set_up_terms(model: Model, terms: Sequence[Term], scene: SceneArrays) -> list:
+    """Each term's setup in turn (the folded ones fill ``scene``); returns ``(term, data, kernels)`` of
+    the per-step terms."""
+    per_step = []
+    for term in terms:
+        data = term.setup(model, scene)
+        kernels = term.kernels()
+        if kernels is not None:
+            if kernels.eval is None:
+                raise FiberpipeError(f"term {term.name!r} has no eval kernel")
+            if term.energies and not hasattr(data, "energy"):
+                raise FiberpipeError(f"term {term.name!r} declares energies {list(term.energies)} but its data has no "
+                                     "'energy' array")
+            per_step.append((term, data, kernels))
+    return per_step
+
+
+def _scene_plan(per_step: list, first_column: int, threads: int) -> ScenePlan:
+    """The chain, the owner and the step loop of the per-step terms ``(term, data, kernels)``; the
+    terms' energy columns from ``first_column`` on."""
+    owners = [i for i, (_, _, k) in enumerate(per_step) if k.forces_of is not None or k.friction_of is not None]
+    if len(owners) > 1:
+        raise FiberpipeError(f"terms {[per_step[i][0].name for i in owners]} both hand their forces to the node "
+                             "update (forces_of / friction_of): one may, the others add theirs to f")
+    rows, column = [], first_column
+    for term, data, k in per_step:
+        rows.append((term, data, column if term.energies else -1))
+        column += len(term.energies)
+    evals = [k.eval_threads if threads > 1 and k.eval_threads is not None else k.eval for _, _, k in per_step]
+    records = [record_energy if term.energies else no_record for term, _, _ in per_step]
+    owner = per_step[owners[0]][2] if owners else None
+    loop = step_loop_for(evals, records, forces_of=getattr(owner, "forces_of", None) or no_forces,
+                         friction_of=getattr(owner, "friction_of", None) or no_forces, threads=threads,
+                         cache_names=[k.cache_name for _, _, k in per_step])
+    owner_index = owners[0] if owners else -1
+    return ScenePlan(rows, _chain_of(rows), rows[owner_index][1] if owners else (), owner_index, loop)
+
+
+def _chain_of(rows: list) -> tuple:
+    """The nested ``((data, column), rest)`` tuple of the per-step terms' rows, ending in ``()``."""
+    chain: tuple = ()
+    for _, data, column in reversed(rows):
+        chain = ((data, column), chain)
+    return chain
+
+
+class Integrator:
+    """Holds the model, the terms' kernel data and the work buffers for repeated :meth:`advance`."""
+
+    def __init__(self, model: Model, terms: Sequence[Term], dt: float, *, history_rows: int = 1,
                  history_every: int = 1, speed_limit_m_s: float | None = None,
                  runaway_m: float | None = None, e_ref_J: float = 1e-12, threads: int = 1):
-        names = [e.name for e in effects]
+        names = [e.name for e in terms]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
-            raise FiberpipeError(f"effect listed twice: {sorted(dup)}")
+            raise FiberpipeError(f"term listed twice: {sorted(dup)}")
         self.model = model
-        self.effects = list(effects)
+        self.effects = list(terms)
         self.dt = float(dt)
-        sc = SceneArrays(model, self.dt)
-        for e in self.effects:
-            e.setup(model, sc)
-        self.scene = sc
+        scene = SceneArrays(model, self.dt)
+        per_step = _set_up_terms(model, self.effects, scene)
+        self.scene = scene
         n = model.n_nodes
         self.f = np.zeros((n, 3))
         self.mom = np.zeros((n, 3))
-        self.strain_prev = np.zeros((model.n_elements, 6)) if sc.beta > 0 else np.zeros((0, 6))
-        self.k_pen = sc.k_pen()
-        self.pen_onset = sc.pen_onset()
-        P = sc.pl_axis.size
-        self.pl_pos = sc.pl_pos0.copy()
-        self.pl_force = np.zeros(P)
-        self.pen_idx = np.zeros(n * P, np.int64)
-        self.pen_f = np.zeros(n * P)
-        self.pl_cand_idx = np.zeros(n * P, np.int64)
-        self.pl_cand_off = np.zeros(P + 1, np.int64)
-        self.pl_cand_pos = np.zeros(P)
-        r_max = float(np.max(model.radius_node)) if n else 0.0
-        self.pl_cand_slack = np.array([-1.0, PLANE_LIST_MARGIN * r_max])
-        self.drive_v = np.zeros_like(sc.drive_vec)
+        self.strain_prev = np.zeros((model.n_elements, 6)) if scene.beta > 0 else np.zeros((0, 6))
+        self.planes = plane_arrays(scene)
+        self.drive_v = np.zeros_like(scene.drive_vec)
         self.history_every = int(history_every)
-        self.hist = np.zeros((history_rows, H_WALL + sc.n_walls))
+        # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
+        self.threads = max(1, int(threads))
+        self.plan = _scene_plan(per_step, H_WALL + scene.n_walls, self.threads)
+        self.energy_columns = {f"energy/{slot}": col + k for term, _, col in self.plan.terms
+                               for k, slot in enumerate(term.energies)}
+        self.hist = np.zeros((history_rows, H_WALL + scene.n_walls + len(self.energy_columns)))
         self.h_row = 0
         c = model.material.wave_speed_m_s
         self.v_limit = 0.2 * c if speed_limit_m_s is None else float(speed_limit_m_s)
@@ -256,47 +295,33 @@ class Integrator:
         self.x_limit = float(runaway_m)
         # floor of the blow-up check's energy scale: the kinetic energy one step of the constant loads
         # gives from rest (at the first history row the loads' work f·(x_n − x_0) is still 0)
-        one_step = float(np.sum(np.sum(sc.f_ext**2, axis=1) * self.dt**2 / model.mass)) if sc.f_ext.size else 0.0
+        one_step = (float(np.sum(np.sum(scene.f_ext**2, axis=1) * self.dt**2 / model.mass))
+                    if scene.f_ext.size else 0.0)
         self.e_ref = max(float(e_ref_J), one_step)
-        # the update gathers each node's beam resultants from the elements of its fiber: the CSR
-        # layout of build_model (fiber k owns nodes node_offsets[k] … and elements node − k …)
-        self.node_offsets = np.ascontiguousarray(model.node_offsets, dtype=np.int64)
-        k = np.repeat(np.arange(model.n_fibers), np.diff(self.node_offsets) - 1)
-        if (self.node_offsets[-1] != n or k.size != model.n_elements
-                or not np.array_equal(model.el_n1, np.arange(k.size) + k)):
-            raise FiberpipeError("the model's elements are not in the CSR order of build_model "
-                                 "(fiber k: nodes node_offsets[k]…, elements node − k)")
+        self.model_arrays = model_arrays(model)
         self.eb = np.zeros((model.n_elements, EB_SIZE))
         self.task_sums = np.zeros((PARALLEL_CHUNKS, 9))
         self.ef = new_element_forces(n)
-        # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
-        self.threads = max(1, int(threads))
-        hook = sc.contact_fn
-        if self.threads > 1 and sc.contact_fn_threads is not None:
-            hook = sc.contact_fn_threads
-        self._loop = step_loop_for(hook, sc.contact_forces_of, self.threads, sc.contact_cache_name,
-                                   sc.contact_friction_of)
-        self.model_arrays = ModelArrays(
-            m_(model.el_n1, np.int64), m_(model.el_invL0), m_(model.el_C), m_(model.el_Dk), m_(model.gamma_rest),
-            m_(model.theta_rest), m_(model.mass), m_(model.inv_mass), m_(model.J), m_(model.inv_J),
-            m_(model.radius_node), m_(model.nodes_m), self.node_offsets,
-            node_beams(model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest, n))
+        self.fixity = fixity_of(scene.fix_mask, n)
+
+    def term_data(self, name: str):
+        """The kernel data of the per-step term ``name`` (KeyError if the scene runs none)."""
+        for term, data, _ in self.plan.terms:
+            if term.name == name:
+                return data
+        raise KeyError(name)
 
     def _kernel_args(self):
         """The scene and work structures of the step loop (views of this integrator's arrays)."""
-        sc = self.scene
-        planes = PlaneArrays(sc.pl_axis, sc.pl_sign, sc.pl_pos0, sc.pl_move, sc.pl_T, sc.pl_ta, sc.pl_mode,
-                             sc.pl_hist_col, self.k_pen, self.pen_onset, self.pl_pos, self.pl_force, self.pen_idx, self.pen_f,
-                             self.pl_cand_idx, self.pl_cand_off, self.pl_cand_pos, self.pl_cand_slack)
-        drives = DriveArrays(sc.drive_vec, sc.drive_T, sc.drive_ta, sc.drive_mode, self.drive_v)
-        scene = SceneKernel(float(sc.alpha), float(sc.beta), sc.f_ext, sc.fix_mask, sc.node_drive, drives, planes,
-                            fixity_of(sc.fix_mask, self.model.n_nodes))
+        scene = self.scene
+        drives = DriveArrays(scene.drive_vec, scene.drive_T, scene.drive_ta, scene.drive_mode, self.drive_v)
+        scene_kernel = SceneKernel(float(scene.alpha), float(scene.beta), scene.f_ext, scene.fix_mask,
+                                   scene.node_drive, drives, self.planes, self.fixity)
         work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist, self.task_sums)
-        return scene, work
+        return scene_kernel, work
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
         """Run ``n_steps`` steps in one jitted call; returns ``(status, steps_done, bad_node)``."""
-        sc = self.scene
         # the step loop keeps |q| = 1 by one Newton step per step (exact for |q|² = 1 + O(1e-16)) and
         # the beam pass assumes unit quaternions: a state handed in with other norms is normalised here
         if state.acc.shape != (ACC_SIZE,):  # the kernels index it without bounds checks
@@ -309,12 +334,12 @@ class Integrator:
         if self.threads > 1:
             import numba
             numba.set_num_threads(_usable_threads(self.threads))
-        scene, work = self._kernel_args()
-        ctl = StepControl(self.dt, int(n_steps), float(state.t), int(state.step), int(self.h_row),
-                          self.history_every, float(self.v_limit), self.x_limit, float(self.e_ref))
-        status, done, self.h_row, bad = self._loop(
-            self.model_arrays, scene, StepState(state.x, state.q, state.v, state.w, state.acc), work, ctl,
-            sc.contact_data)
+        scene_kernel, work = self._kernel_args()
+        control = StepControl(self.dt, int(n_steps), float(state.t), int(state.step), int(self.h_row),
+                              self.history_every, float(self.v_limit), self.x_limit, float(self.e_ref))
+        status, done, self.h_row, bad = self.plan.loop(
+            self.model_arrays, scene_kernel, StepState(state.x, state.q, state.v, state.w, state.acc), work, control,
+            self.plan.chain, self.plan.owner)
         state.step += int(done)
         state.t = state.step * self.dt
         if status == STATUS_OK and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
@@ -324,21 +349,61 @@ class Integrator:
             return int(STATUS_NAN), int(done), int(bad_nodes[0])
         return int(status), int(done), int(bad)
 
+    def _mutable_arrays(self) -> dict:
+        """The integrator's arrays the step loop changes, by checkpoint name (the planes' by
+        ``planes.CHECKPOINT_FIELDS``)."""
+        arrays = {"strain_prev": self.strain_prev, "drive_v": self.drive_v}
+        arrays.update({name: getattr(self.planes, f) for f, name in PLANE_CHECKPOINT_FIELDS.items()})
+        return arrays
+
     def snapshot_arrays(self) -> dict:
         """Copies of the integrator's mutable arrays (for a checkpoint)."""
-        return {k: getattr(self, k).copy() for k in INTEG_ARRAYS}
+        return {k: a.copy() for k, a in self._mutable_arrays().items()}
 
     def restore_arrays(self, arrays: dict) -> None:
         """Copy saved mutable arrays back in place (shapes must agree)."""
-        for k in INTEG_ARRAYS:
-            cur, new = getattr(self, k), np.asarray(arrays[k])
+        for k, cur in self._mutable_arrays().items():
+            new = np.asarray(arrays[k])
             if cur.shape != new.shape:
                 raise FiberpipeError(f"checkpoint does not fit this scene: integrator array {k} has shape "
                                      f"{new.shape}, the scene needs {cur.shape}")
             cur[...] = new
 
+    def snapshot_terms(self) -> dict:
+        """Copies of the per-step terms' data, by term name (for a checkpoint)."""
+        return {term.name: _copy_tree(data) for term, data, _ in self.plan.terms}
 
-def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] = (), *, dt: float | None = None) -> State:
+    def restore_terms(self, saved: dict) -> None:
+        """The per-step terms' data from a checkpoint, copied in place (the step loop's chain keeps
+        the arrays it holds)."""
+        rows = []
+        for term, data, col in self.plan.terms:
+            if term.name in saved:
+                data = restore_into(data, saved[term.name])
+            rows.append((term, data, col))
+        index = self.plan.owner_index
+        self.plan = self.plan._replace(terms=rows, chain=_chain_of(rows), owner=rows[index][1] if index >= 0 else ())
+
+
+def model_arrays(model: Model) -> ModelArrays:
+    """The step loop's :class:`ModelArrays` of ``model`` (contiguous, typed; no copy where they are)."""
+    node_offsets = np.ascontiguousarray(model.node_offsets, dtype=np.int64)
+    # the update gathers each node's beam resultants from the elements of its fiber: the CSR
+    # layout of build_model (fiber k owns nodes node_offsets[k] … and elements node − k …)
+    n = model.n_nodes
+    k = np.repeat(np.arange(model.n_fibers), np.diff(node_offsets) - 1)
+    if node_offsets[-1] != n or k.size != model.n_elements or not np.array_equal(model.el_n1, np.arange(k.size) + k):
+        raise FiberpipeError("the model's elements are not in the CSR order of build_model "
+                             "(fiber k: nodes node_offsets[k]…, elements node − k)")
+    return ModelArrays(
+        contiguous(model.el_n1, np.int64), contiguous(model.el_invL0), contiguous(model.el_C),
+        contiguous(model.el_Dk), contiguous(model.gamma_rest), contiguous(model.theta_rest), contiguous(model.mass),
+        contiguous(model.inv_mass), contiguous(model.J), contiguous(model.inv_J), contiguous(model.radius_node),
+        contiguous(model.nodes_m), node_offsets,
+        node_beams(model.el_n1, model.el_invL0, model.el_C, model.el_Dk, model.gamma_rest, model.theta_rest, n))
+
+
+def advance(model: Model, state: State, n_steps: int, effects: Sequence[Term] = (), *, dt: float | None = None) -> State:
     """Advance ``state`` in place by ``n_steps`` steps (one jitted call) and return it.
 
     A convenience for scripts and tests; :func:`simulate` is the full run with output and checks.
@@ -346,15 +411,12 @@ def advance(model: Model, state: State, n_steps: int, effects: Sequence[Effect] 
     """
     if dt is None:
         dt, _ = choose_time_step(model, effects, SimulationSettings())
-    integ = Integrator(model, effects, dt, history_every=max(1, n_steps))
-    status, done, bad = integ.advance(state, n_steps)
+    integrator = Integrator(model, effects, dt, history_every=max(1, n_steps))
+    status, done, bad = integrator.advance(state, n_steps)
     if status != STATUS_OK:
         raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None))
     return state
 
-
-STATUS_PENETRATION = 5  # checked in Python between chunks
-STATUS_LEFT_BOX = 6
 
 _STATUS_TEXT = {
     STATUS_NAN: "NaN or inf in the state",
@@ -364,40 +426,6 @@ _STATUS_TEXT = {
     STATUS_PENETRATION: "runaway penetration into a plate or wall",
     STATUS_LEFT_BOX: "a fiber left the box (through a plate or wall)",
 }
-
-
-def _plane_name(sc: SceneArrays, p: int) -> str:
-    c = int(sc.pl_hist_col[p])
-    if c in (H_PLATE_FORCE, H_PLATE_FORCE + 1):
-        return ("lower", "upper")[c - H_PLATE_FORCE] + " plate"
-    k = c - H_WALL
-    return f"wall {sc.wall_names[k]}" if 0 <= k < len(sc.wall_names) else f"plane {p}"
-
-
-def _plane_check(model: Model, integ: "Integrator", state: State, limit: float) -> tuple[int, int, str]:
-    """Runaway penetration into (depth > ``limit`` radii) or escape through (centre beyond by more than a
-    radius) a plate or wall; returns ``(status, node, detail)``."""
-    sc = integ.scene
-    if sc.pl_axis.size == 0:
-        return STATUS_OK, -1, ""
-    r = model.radius_node
-    worst, node, plane = -np.inf, -1, -1
-    with np.errstate(invalid="ignore"):
-        for p in range(sc.pl_axis.size):
-            depth = (r - sc.pl_sign[p] * (state.x[:, sc.pl_axis[p]] - integ.pl_pos[p])) / r
-            i = int(np.nanargmax(depth)) if np.any(np.isfinite(depth)) else -1
-            if i >= 0 and depth[i] > worst:
-                worst, node, plane = float(depth[i]), i, p
-    if node < 0 or worst <= limit:
-        return STATUS_OK, -1, ""
-    name = _plane_name(sc, plane)
-    ax = "xyz"[int(sc.pl_axis[plane])]
-    where = f"{name} ({ax} = {integ.pl_pos[plane] * 1e3:.4g} mm)"
-    if worst > 2.0:
-        return (STATUS_LEFT_BOX, node,
-                f"its centre is {(worst - 1.0) * r[node] * 1e3:.3g} mm beyond the {where}")
-    return (STATUS_PENETRATION, node,
-            f"it is {worst:.2f} radii ({worst * r[node] * 1e3:.3g} mm) into the {where}")
 
 
 def _diagnose(model: Model, state: State, status: int, bad: int, dt: float, rep: TimeStepReport | None,
@@ -460,7 +488,7 @@ def state_energy(kinetic_lf, strain, stored, damping_lf, friction, external):
     return kinetic_lf + strain + stored + damping_lf + friction - external
 
 
-def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dict:
+def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float, energy_columns: dict) -> dict:
     h = hist[:n_rows]
     KE, SE, VD, WK, PW, FD, ST, KL, VL = (h[:, c] for c in (H_KE, H_SE, H_VD, H_WK, H_PW, H_FD, H_STORED, H_KE_LF,
                                                             H_VD_LF))
@@ -488,6 +516,7 @@ def _history_dict(hist: np.ndarray, n_rows: int, n_walls: int, e0: float) -> dic
         "energy/contact_stored": ST.copy(), "energy/kinetic_leapfrog": KL.copy(), "energy/damping_leapfrog": VL.copy(),
         "energy/total": total, "energy/residual": (state_total - e0) / scale,
     }
+    out.update({key: h[:, column].copy() for key, column in energy_columns.items()})  # the terms' own slots
     return out
 
 
@@ -527,7 +556,7 @@ class RunPlan(NamedTuple):
     checkpoint_every: int  # 0: none
 
 
-def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSettings, state: State | None,
+def _plan_run(model: Model, effects: Sequence[Term], settings: SimulationSettings, state: State | None,
               resume: Checkpoint | None) -> RunPlan:
     """The run's time step, initial state, end time and step grid (checked against ``resume``)."""
     dt, rep = choose_time_step(model, effects, settings)
@@ -544,9 +573,9 @@ def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSetti
         state = State.at_rest(model) if state is None else state
     # end time
     probe = SceneArrays(model, dt)
-    for e in effects:
-        if e.name in ("plates", "drives"):
-            e.setup(model, probe)
+    for term in effects:
+        if term.name in ("plates", "drives"):
+            term.setup(model, probe)
     end_time = settings.end_time_s if settings.end_time_s is not None else probe.end_time_hint
     if not end_time or end_time <= 0:
         raise FiberpipeError("no end time: set solver.end_time or a loading (moving plate) / drive")
@@ -559,13 +588,14 @@ def _plan_run(model: Model, effects: Sequence[Effect], settings: SimulationSetti
     every = settings.history_every or max(1, total_steps // 2000)
     rows = total_steps // every + 1
     chunk = default_chunk_steps(model, settings)
-    ce = int(settings.checkpoint_every or 0)
+    checkpoint_every = int(settings.checkpoint_every or 0)
     if resume is not None:
         got = (resume.total_steps, resume.history_every, resume.chunk_steps, resume.checkpoint_every)
-        if got != (total_steps, every, chunk, ce):
+        if got != (total_steps, every, chunk, checkpoint_every):
             raise FiberpipeError(f"checkpoint (total steps, history_every, chunk, checkpoint_every) = {got} does not "
-                                 f"match this run's {(total_steps, every, chunk, ce)}: it belongs to another config")
-    return RunPlan(dt, rep, state, end_time, total_steps, every, rows, chunk, ce)
+                                 f"match this run's {(total_steps, every, chunk, checkpoint_every)}: it belongs to "
+                                 "another config")
+    return RunPlan(dt, rep, state, end_time, total_steps, every, rows, chunk, checkpoint_every)
 
 
 def _usable_threads(threads: int) -> int:
@@ -587,40 +617,153 @@ def threads_warning(threads: int) -> str | None:
             "NUMBA_NUM_THREADS before fiberpipe starts)")
 
 
-def _restore(integ: Integrator, effects: Sequence[Effect], resume: Checkpoint, rows: int):
-    """Put a checkpoint's integrator arrays, history, contact data and effect arrays back; returns its
-    frames ``(times, positions, rotations)`` as lists."""
-    sc = integ.scene
-    integ.restore_arrays(resume.integ)
-    h = np.asarray(resume.hist)
-    if h.shape[0] > rows or h.shape[1] != integ.hist.shape[1]:
-        raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integ.hist.shape}")
-    integ.hist[:h.shape[0]] = h
-    integ.h_row = int(h.shape[0])
-    if sc.contact_on and resume.contact_data is not None:
-        sc.contact_data = restore_into(sc.contact_data, resume.contact_data)
-    for e in effects:
-        if e.name in resume.effect_arrays and hasattr(e, "restore_arrays"):
-            e.restore_arrays(resume.effect_arrays[e.name])
-    return ([float(t) for t in resume.frames_time], [np.array(a) for a in resume.frames_positions],
-            [np.array(a) for a in resume.frames_rotations])
+class _Run:
+    """One run of :func:`simulate`: the integrator, the frames so far, the energy reference and the
+    checkpoints' constants."""
+
+    def __init__(self, model: Model, effects: Sequence[Term], settings: SimulationSettings, plan: RunPlan,
+                 resume: Checkpoint | None):
+        self.model, self.effects, self.settings, self.plan, self.resume = model, list(effects), settings, plan, resume
+        self.t_wall = time.perf_counter()
+        state = plan.state
+        if resume is not None:
+            self.origin, self.ke0, self.se0 = resume.origin_step, resume.e0_ke, resume.e0_se
+            self.wall_before = resume.wall_time_s
+        else:
+            self.origin = state.step
+            self.ke0, self.se0 = _initial_energies(model, state)
+            self.wall_before = 0.0
+        self.integrator = Integrator(model, effects, plan.dt_s, history_rows=plan.history_rows,
+                                     history_every=plan.history_every, speed_limit_m_s=settings.speed_limit_m_s,
+                                     runaway_m=settings.runaway_m, e_ref_J=max(self.ke0 + self.se0, 1e-12),
+                                     threads=settings.threads)
+        if resume is None:
+            self.se0 += plane_energy(self.integrator.scene, state.x)  # the stored energy at t = 0, the residual's start
+            state.acc[ACC_STORED0] = -1.0  # the step loop records the terms' there (_residual_start)
+        self.frame_times: list = []
+        self.frame_positions: list = []
+        self.frame_rotations: list = []
+        if resume is not None:
+            self._restore(resume)
+        # the terms' own looks at the run between chunks (a stiffening contact law against the step)
+        watches = (term.make_watch(model, plan.dt_s, settings.dt_safety) for term in effects
+                   if hasattr(term, "make_watch"))
+        self.watches = [w for w in watches if w is not None]
+        self.warnings: list[str] = []
+        few_threads = threads_warning(settings.threads)
+        if few_threads:
+            self.warnings.append(few_threads)
+
+    def _restore(self, resume: Checkpoint) -> None:
+        """Put a checkpoint's integrator arrays, history, term data, term arrays and frames back."""
+        integrator = self.integrator
+        integrator.restore_arrays(resume.integrator_arrays)
+        h = np.asarray(resume.hist)
+        if h.shape[0] > self.plan.history_rows or h.shape[1] != integrator.hist.shape[1]:
+            raise FiberpipeError(f"checkpoint history has shape {h.shape}, this run records {integrator.hist.shape}")
+        integrator.hist[:h.shape[0]] = h
+        integrator.h_row = int(h.shape[0])
+        integrator.restore_terms(resume.term_data)
+        for term in self.effects:
+            if term.name in resume.effect_arrays and hasattr(term, "restore_arrays"):
+                term.restore_arrays(resume.effect_arrays[term.name])
+        self.frame_times = [float(t) for t in resume.frames_time]
+        self.frame_positions = [np.array(a) for a in resume.frames_positions]
+        self.frame_rotations = [np.array(a) for a in resume.frames_rotations]
+
+    def take_frame(self, state: State, on_frame: Callable | None) -> None:
+        self.frame_times.append(state.t)
+        self.frame_positions.append(state.x.copy())
+        self.frame_rotations.append(state.q.copy())
+        if on_frame is not None:
+            on_frame(len(self.frame_times) - 1, state.t, self.frame_positions[-1])
+
+    def _frames(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        k, n = len(self.frame_times), self.model.n_nodes
+        return (np.array(self.frame_times), np.array(self.frame_positions).reshape(k, n, 3),
+                np.array(self.frame_rotations).reshape(k, n, 4))
+
+    def capture(self, state: State) -> Checkpoint:
+        plan, integrator = self.plan, self.integrator
+        times, positions, rotations = self._frames()
+        return Checkpoint(
+            x=state.x.copy(), q=state.q.copy(), v=state.v.copy(), w=state.w.copy(), acc=state.acc.copy(),
+            t=state.t, step=state.step, origin_step=self.origin, total_steps=plan.total_steps, dt_s=plan.dt_s,
+            history_every=plan.history_every, chunk_steps=plan.chunk_steps, checkpoint_every=plan.checkpoint_every,
+            e0_ke=self.ke0, e0_se=self.se0, wall_time_s=self.wall_before + time.perf_counter() - self.t_wall,
+            effects=[term.name for term in self.effects], integrator_arrays=integrator.snapshot_arrays(),
+            hist=integrator.hist[:integrator.h_row].copy(), frames_time=times, frames_positions=positions,
+            frames_rotations=rotations, term_data=integrator.snapshot_terms(),
+            effect_arrays={term.name: dict(term.checkpoint_arrays()) for term in self.effects
+                           if hasattr(term, "checkpoint_arrays")},
+        )
+
+    def result(self, state: State, completed: bool) -> SimulationResult:
+        plan, integrator, model, rep = self.plan, self.integrator, self.model, self.plan.timestep
+        times, positions, rotations = self._frames()
+        notes = [rep.summary(), f"dt = {plan.dt_s:.4g} s ({plan.dt_s / rep.dt_stable_s:.3g} × stable)"]
+        if self.resume is not None:
+            notes.append(f"resumed from a checkpoint at t = {self.resume.t:.6g} s (step {self.resume.step})")
+        if model.rotary_inertia_scale != 1.0:
+            notes.append(f"rotary inertia scaled by {model.rotary_inertia_scale:g}: rotational dynamics are slowed "
+                         "(accuracy trade-off)")
+        return SimulationResult(
+            frames_time=times, frames_positions=positions, frames_rotations=rotations,
+            history=_history_dict(integrator.hist, integrator.h_row, integrator.scene.n_walls,
+                                  _residual_start(state, self.ke0, self.se0), integrator.energy_columns),
+            dt_s=plan.dt_s, steps=state.step, elements=model.n_elements,
+            wall_time_s=self.wall_before + time.perf_counter() - self.t_wall,
+            effects=[term.name for term in self.effects], timestep=rep, final_state=state, completed=completed,
+            wall_names=list(integrator.scene.wall_names), warnings=list(self.warnings), notes=notes)
+
+    def diverged(self, state: State, last_good: State, status: int, bad: int, detail: str) -> SimulationDiverged:
+        """The exception of a run that failed a check: its partial result ends at the last good state."""
+        integrator = self.integrator
+        row = integrator.hist[integrator.h_row - 1] if integrator.h_row > 0 else None
+        msg = _diagnose(self.model, state, status, bad, self.plan.dt_s, self.plan.timestep, detail, row)
+        # keep the last good state as the partial result's final state (and last frame)
+        state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
+        state.t, state.step, state.acc[:] = last_good.t, last_good.step, last_good.acc
+        if not self.frame_times or state.t > self.frame_times[-1]:
+            self.take_frame(state, None)
+        exc = SimulationDiverged(msg)
+        exc.partial_result = self.result(state, False)
+        exc.partial_result.notes.append(f"diverged; the last frame is the last good state (t = {state.t:.6g} s)")
+        exc.diagnosis = msg
+        exc.bad_node = bad
+        exc.status = status
+        return exc
+
+    def advance_chunk(self, state: State, n_steps: int) -> None:
+        """``n_steps`` steps in one call of the step loop, then the planes' check and the terms' looks;
+        raises :class:`SimulationDiverged` when a check fails."""
+        last_good = state.copy()
+        integrator = self.integrator
+        status, _, bad = integrator.advance(state, n_steps)
+        detail = ""
+        if status == STATUS_OK:
+            status, bad, detail = plane_check(integrator.scene, integrator.planes, state.x,
+                                              self.settings.penetration_limit)
+        if status != STATUS_OK:
+            raise self.diverged(state, last_good, status, bad, detail)
+        self.warnings += [m for m in (w(state.t) for w in self.watches) if m]
 
 
-def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettings | None = None, *,
+def simulate(model: Model, effects: Sequence[Term], settings: SimulationSettings | None = None, *,
              state: State | None = None, progress: Callable | None = None,
              on_frame: Callable | None = None, resume: Checkpoint | None = None,
              on_checkpoint: Callable | None = None, should_stop: Callable | None = None) -> SimulationResult:
-    """Run the explicit dynamics of ``model`` under ``effects``.
+    """Run the explicit dynamics of ``model`` under ``effects`` (the scene's terms).
 
     Parameters
     ----------
     model : Model
-    effects : sequence of Effect — only these are computed.
+    effects : sequence of Term — only these are computed.
     settings : SimulationSettings
     state : State, optional — initial state (default: at rest in the rest geometry).
     progress : callable ``progress(t_s, end_time_s, steps)``, optional — called between jitted chunks.
     on_frame : callable ``on_frame(k, t_s, positions (N,3))``, optional — called at each output frame.
-    resume : Checkpoint, optional — continue the run saved in this checkpoint (same model, effects
+    resume : Checkpoint, optional — continue the run saved in this checkpoint (same model, terms
         and settings); the result equals the uninterrupted run's bit for bit.
     on_checkpoint : callable ``on_checkpoint(Checkpoint)``, optional — called every
         ``settings.checkpoint_every`` steps and when ``should_stop`` asks to stop.
@@ -641,113 +784,33 @@ def simulate(model: Model, effects: Sequence[Effect], settings: SimulationSettin
     SimulationInterrupted — ``should_stop`` asked to stop (a checkpoint was passed to ``on_checkpoint``).
     """
     settings = settings or SimulationSettings()
-    t_wall = time.perf_counter()
-    dt, rep, state, end_time, total_steps, every, rows, chunk, ce = _plan_run(model, effects, settings, state, resume)
-    if resume is not None:
-        origin, ke0, se0 = resume.origin_step, resume.e0_ke, resume.e0_se
-        wall_before = resume.wall_time_s
-    else:
-        origin = state.step
-        ke0, se0 = _initial_energies(model, state)
-        wall_before = 0.0
-    integ = Integrator(model, effects, dt, history_rows=rows, history_every=every,
-                       speed_limit_m_s=settings.speed_limit_m_s, runaway_m=settings.runaway_m,
-                       e_ref_J=max(ke0 + se0, 1e-12), threads=settings.threads)
-    sc = integ.scene
-    if resume is None:
-        se0 += _plane_energy(sc, state.x)  # the stored energy at t = 0, for the residual's start
-        state.acc[ACC_STORED0] = -1.0  # the step loop records the hook's there (_residual_start)
-    frame_steps = np.unique(np.round(np.linspace(0, total_steps, settings.output_frames)).astype(np.int64))
+    plan = _plan_run(model, effects, settings, state, resume)
+    run = _Run(model, effects, settings, plan, resume)
+    state, total, every_checkpoint = plan.state, plan.total_steps, plan.checkpoint_every
+    frame_steps = np.unique(np.round(np.linspace(0, total, settings.output_frames)).astype(np.int64))
     frame_set = {int(k) for k in frame_steps}
-    ft, fx, fq = [], [], []
-    names = [e.name for e in effects]
-    if resume is not None:
-        ft, fx, fq = _restore(integ, effects, resume, rows)
-    # the effects' own looks at the run between chunks (a stiffening contact law against the step)
-    watches = [w for w in (e.make_watch(model, dt, settings.dt_safety) for e in effects if hasattr(e, "make_watch"))
-               if w is not None]
-    warnings: list[str] = []
-    few_threads = threads_warning(settings.threads)
-    if few_threads:
-        warnings.append(few_threads)
-
-    def take_frame():
-        ft.append(state.t)
-        fx.append(state.x.copy())
-        fq.append(state.q.copy())
-        if on_frame is not None:
-            on_frame(len(ft) - 1, state.t, fx[-1])
-
-    def capture() -> Checkpoint:
-        return Checkpoint(
-            x=state.x.copy(), q=state.q.copy(), v=state.v.copy(), w=state.w.copy(), acc=state.acc.copy(),
-            t=state.t, step=state.step, origin_step=origin, total_steps=total_steps, dt_s=dt,
-            history_every=every, chunk_steps=chunk, checkpoint_every=ce, e0_ke=ke0, e0_se=se0,
-            wall_time_s=wall_before + time.perf_counter() - t_wall, effects=names,
-            integ=integ.snapshot_arrays(), hist=integ.hist[:integ.h_row].copy(),
-            frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
-            frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
-            contact_data=_copy_tree(sc.contact_data) if sc.contact_on else None,
-            effect_arrays={e.name: dict(e.checkpoint_arrays()) for e in effects if hasattr(e, "checkpoint_arrays")},
-        )
-
-    def result(completed: bool) -> SimulationResult:
-        return SimulationResult(
-            frames_time=np.array(ft), frames_positions=np.array(fx).reshape(len(fx), model.n_nodes, 3),
-            frames_rotations=np.array(fq).reshape(len(fq), model.n_nodes, 4),
-            history=_history_dict(integ.hist, integ.h_row, sc.n_walls, _residual_start(state, ke0, se0)),
-            dt_s=dt, steps=state.step, elements=model.n_elements,
-            wall_time_s=wall_before + time.perf_counter() - t_wall,
-            effects=names, timestep=rep, final_state=state, completed=completed,
-            wall_names=list(sc.wall_names), warnings=list(warnings),
-            notes=[rep.summary(), f"dt = {dt:.4g} s ({dt / rep.dt_stable_s:.3g} × stable)"]
-            + ([f"resumed from a checkpoint at t = {resume.t:.6g} s (step {resume.step})"] if resume is not None else [])
-            + ([f"rotary inertia scaled by {model.rotary_inertia_scale:g}: rotational dynamics are slowed "
-                f"(accuracy trade-off)"] if model.rotary_inertia_scale != 1.0 else []),
-        )
-
     if resume is None and 0 in frame_set:
-        take_frame()
-    rel = state.step - origin
-    big = total_steps + 1
-    while rel < total_steps:
-        nxt = min(int(frame_steps[np.searchsorted(frame_steps, rel, side="right")]) if rel < frame_steps[-1] else big,
-                  (rel // chunk + 1) * chunk, (rel // ce + 1) * ce if ce else big, total_steps)
-        last_good = state.copy()
-        status, done, bad = integ.advance(state, nxt - rel)
-        detail = ""
-        if status == STATUS_OK:
-            status, bad, detail = _plane_check(model, integ, state, settings.penetration_limit)
-        if status != STATUS_OK:
-            row = integ.hist[integ.h_row - 1] if integ.h_row > 0 else None
-            msg = _diagnose(model, state, status, bad, dt, rep, detail, row)
-            # keep the last good state as the partial result's final state (and last frame)
-            state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
-            state.t, state.step, state.acc[:] = last_good.t, last_good.step, last_good.acc
-            if not ft or state.t > ft[-1]:
-                ft.append(state.t)
-                fx.append(state.x.copy())
-                fq.append(state.q.copy())
-            exc = SimulationDiverged(msg)
-            exc.partial_result = result(False)
-            exc.partial_result.notes.append(f"diverged; the last frame is the last good state (t = {state.t:.6g} s)")
-            exc.diagnosis = msg
-            exc.bad_node = bad
-            exc.status = status
-            raise exc
-        warnings += [m for m in (w(state.t) for w in watches) if m]
-        rel = state.step - origin
-        if rel in frame_set:
-            take_frame()
+        run.take_frame(state, on_frame)
+    done = state.step - run.origin
+    beyond = total + 1
+    while done < total:
+        next_frame = int(frame_steps[np.searchsorted(frame_steps, done, side="right")]) if done < frame_steps[-1] else beyond
+        next_checkpoint = (done // every_checkpoint + 1) * every_checkpoint if every_checkpoint else beyond
+        target = min(next_frame, (done // plan.chunk_steps + 1) * plan.chunk_steps, next_checkpoint, total)
+        run.advance_chunk(state, target - done)
+        done = state.step - run.origin
+        if done in frame_set:
+            run.take_frame(state, on_frame)
         if progress is not None:
-            progress(state.t, end_time, state.step)
+            progress(state.t, plan.end_time_s, state.step)
         stop = should_stop() if should_stop is not None else None
-        if rel < total_steps and (stop or (ce and rel % ce == 0)):
-            ck = capture()
+        if done < total and (stop or (every_checkpoint and done % every_checkpoint == 0)):
+            checkpoint = run.capture(state)
             if on_checkpoint is not None:
-                on_checkpoint(ck)
+                on_checkpoint(checkpoint)
             if stop:
                 raise SimulationInterrupted(f"interrupted at t = {state.t:.6g} s (step {state.step} of "
-                                            f"{origin + total_steps})", signum=int(stop) if not isinstance(stop, bool) else None,
-                                            checkpoint=ck)
-    return result(True)
+                                            f"{run.origin + total})",
+                                            signum=int(stop) if not isinstance(stop, bool) else None,
+                                            checkpoint=checkpoint)
+    return run.result(state, True)

@@ -683,7 +683,7 @@ class ContactLaw:
         return self._header()
 
     #: whether the law's slope grows with the penetration in steps the run can outgrow (the scaled
-    #: stiffness of the study's Eq. 1): then the run watches it (``contact_effect.ContactSlopeWatch``)
+    #: stiffness of the study's Eq. 1): then the run watches it (``terms.contact.ContactSlopeWatch``)
     stiffens = False
 
     #: the largest ratio of the law's tangent dF/dδ to its secant F/δ, for a law without a

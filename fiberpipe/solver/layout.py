@@ -54,4 +54,6 @@ STATUS_NAN = 1
 STATUS_SPEED = 2
 STATUS_RUNAWAY = 3
 STATUS_ENERGY = 4
+STATUS_PENETRATION = 5  # a node deep in a plate or wall (checked between the step loop's calls)
+STATUS_LEFT_BOX = 6     # a node beyond a plate or wall (checked between the step loop's calls)
 

@@ -111,23 +111,7 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     ne = seg_nodes.shape[0]
     if ne == 0:
         return 0
-    mid = np.empty((ne, 3))
-    lmax = 0.0
-    rmax = 0.0
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    for e in range(ne):
-        a = seg_nodes[e, 0]
-        b = seg_nodes[e, 1]
-        l2 = 0.0
-        for c in range(3):
-            m = 0.5 * (x[a, c] + x[b, c])
-            mid[e, c] = m
-            l2 += (x[b, c] - x[a, c]) ** 2
-            lo[c] = min(lo[c], m)
-            hi[c] = max(hi[c], m)
-        lmax = max(lmax, math.sqrt(l2))
-        rmax = max(rmax, seg_radius[e])
+    mid, lo, hi, lmax, rmax = _midpoints(x, seg_nodes, seg_radius)
     # A diverging step can leave non-finite positions: the cell indices below would then be
     # garbage (and the writes into the cell arrays out of bounds). Build no pairs; the step loop's
     # divergence check reports the run with its diagnosis. The test reads the bits: this function
@@ -135,34 +119,8 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     # float test (it did: the guard passed alone and failed inside the solver batch).
     if not _all_finite_bits(x):
         return 0
-    h = lmax + 2.0 * rmax + skin
-    nc = np.empty(3, np.int64)
-    while True:
-        tot = 1
-        for c in range(3):
-            nc[c] = max(1, int((hi[c] - lo[c]) / h) + 1)
-            tot *= nc[c]
-        if tot <= 4 * ne + 64:
-            break
-        h *= 1.26
-    # counting sort of segments into cells
-    cell_of = np.empty(ne, np.int64)
-    start = np.zeros(tot + 1, np.int64)
-    for e in range(ne):
-        ix = max(0, min(int((mid[e, 0] - lo[0]) / h), nc[0] - 1))
-        iy = max(0, min(int((mid[e, 1] - lo[1]) / h), nc[1] - 1))
-        iz = max(0, min(int((mid[e, 2] - lo[2]) / h), nc[2] - 1))
-        cid = (ix * nc[1] + iy) * nc[2] + iz
-        cell_of[e] = cid
-        start[cid + 1] += 1
-    for c in range(tot):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    items = np.empty(ne, np.int64)
-    for e in range(ne):
-        cid = cell_of[e]
-        items[fill[cid]] = e
-        fill[cid] += 1
+    h, nc, tot = _cell_grid(lo, hi, lmax + 2.0 * rmax + skin, ne)
+    cell_of, start, items = _bin_segments(mid, lo, h, nc, tot)
     cap = pairs_out.shape[0]
     n = 0
     ta = np.empty(3)
@@ -229,6 +187,71 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
         return -n
     _sort_by_key(pairs_out, keys_out, n, ne)
     return n
+
+
+@njit(cache=True, error_model="numpy")
+def _midpoints(x, seg_nodes, seg_radius):
+    """``(mid (E, 3), lo (3,), hi (3,), longest segment, largest radius)`` of the segments at ``x``."""
+    ne = seg_nodes.shape[0]
+    mid = np.empty((ne, 3))
+    lmax = 0.0
+    rmax = 0.0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for e in range(ne):
+        a = seg_nodes[e, 0]
+        b = seg_nodes[e, 1]
+        l2 = 0.0
+        for c in range(3):
+            m = 0.5 * (x[a, c] + x[b, c])
+            mid[e, c] = m
+            l2 += (x[b, c] - x[a, c]) ** 2
+            lo[c] = min(lo[c], m)
+            hi[c] = max(hi[c], m)
+        lmax = max(lmax, math.sqrt(l2))
+        rmax = max(rmax, seg_radius[e])
+    return mid, lo, hi, lmax, rmax
+
+
+@njit(cache=True, error_model="numpy")
+def _cell_grid(lo, hi, h, ne):
+    """``(cell size, cells per axis (3,), cells)``: cells of at least ``h`` over [lo, hi], grown by
+    1.26 until there are at most 4 E + 64."""
+    nc = np.empty(3, np.int64)
+    while True:
+        tot = 1
+        for c in range(3):
+            nc[c] = max(1, int((hi[c] - lo[c]) / h) + 1)
+            tot *= nc[c]
+        if tot <= 4 * ne + 64:
+            break
+        h *= 1.26
+    return h, nc, tot
+
+
+@njit(cache=True, error_model="numpy")
+def _bin_segments(mid, lo, h, nc, tot):
+    """Counting sort of the segments into the cells by midpoint: ``(cell of each segment, CSR
+    offsets of the cells (tot + 1,), the segments cell after cell)``."""
+    ne = mid.shape[0]
+    cell_of = np.empty(ne, np.int64)
+    start = np.zeros(tot + 1, np.int64)
+    for e in range(ne):
+        ix = max(0, min(int((mid[e, 0] - lo[0]) / h), nc[0] - 1))
+        iy = max(0, min(int((mid[e, 1] - lo[1]) / h), nc[1] - 1))
+        iz = max(0, min(int((mid[e, 2] - lo[2]) / h), nc[2] - 1))
+        cid = (ix * nc[1] + iy) * nc[2] + iz
+        cell_of[e] = cid
+        start[cid + 1] += 1
+    for c in range(tot):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(ne, np.int64)
+    for e in range(ne):
+        cid = cell_of[e]
+        items[fill[cid]] = e
+        fill[cid] += 1
+    return cell_of, start, items
 
 
 @njit(cache=True, error_model="numpy")

@@ -179,19 +179,19 @@ def scene_planes(cfg: Config) -> list[tuple[int, float, float]]:
     """The scene's rigid planes at t = 0 as ``(axis, position_m, sign)`` (sign +1: lower plane),
     for :func:`fiberpipe.model.mesh.resolve_overlaps`; plates without a set position are placed
     on the fibers by the solver, so they cannot overlap and are left out."""
-    sc = cfg.scene
-    effects = set(sc.effects or ())
+    scene_cfg = cfg.scene
+    effects = set(scene_cfg.effects or ())
     axes = {"x": 0, "y": 1, "z": 2}
     planes = []
-    if "plates" in effects and sc.plates is not None:
-        p = sc.plates
+    if "plates" in effects and scene_cfg.plates is not None:
+        p = scene_cfg.plates
         if p.lower != "none" and p.lower_position is not None:
             planes.append((axes[p.axis], float(p.lower_position), 1.0))
         if p.upper != "none" and p.upper_position is not None:
             planes.append((axes[p.axis], float(p.upper_position), -1.0))
-    if "walls" in effects and sc.walls is not None:
+    if "walls" in effects and scene_cfg.walls is not None:
         for name, ax in axes.items():
-            w = getattr(sc.walls, name)
+            w = getattr(scene_cfg.walls, name)
             if w is not None:
                 planes.append((ax, float(w[0]), 1.0))
                 planes.append((ax, float(w[1]), -1.0))
@@ -211,7 +211,7 @@ def clear_scene_planes(mesh, cfg: Config) -> float:
     it; the plane penalty would throw them off at the first step (paper-40: 65 nodes 0.28 µm inside
     the upper plate, 1.2e-5 J of kinetic energy, never lost at α = 0). Returns the largest initial
     penetration (m); nothing is moved when it is 0 or deeper than ``PLANE_CLEARANCE_MAX_FRACTION`` r
-    (then :func:`fiberpipe.solver.build.check_scene_geometry` names the plane that cuts the bundle).
+    (then :func:`fiberpipe.solver.terms.planes.check_scene_geometry` names the plane that cuts the bundle).
     """
     from fiberpipe.model.mesh import plane_penetration, resolve_overlaps
 
@@ -233,7 +233,7 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     bar (on a terminal only)."""
     from fiberpipe.solver.build import build_simulation
     from fiberpipe.solver.checkpoint import CHECKPOINT_NAME, SimulationInterrupted, write_checkpoint
-    from fiberpipe.solver.simulate import simulate
+    from fiberpipe.solver.integrator import simulate
 
     if resume not in ("auto", "require", "discard"):
         raise ValueError(f"resume must be auto, require or discard, got {resume!r}")
@@ -344,7 +344,7 @@ def settle_under_gravity(mesh, cfg: Config) -> dict:
     the wall time.
     """
     from fiberpipe.solver.build import build_simulation
-    from fiberpipe.solver.simulate import simulate
+    from fiberpipe.solver.integrator import simulate
 
     scfg = cfg.model_copy(deep=True)
     scfg.scene.effects = [e for e in scfg.scene.effects if e != "drives"]

@@ -239,13 +239,13 @@ def case_setup(name: str) -> CaseSetup:
 
 
 def contact_hook(model, **overrides):
-    """:func:`fiberpipe.solver.contact_effect.make_contact_hook` with the config schema's defaults
+    """:func:`fiberpipe.solver.terms.contact.make_contact_hook` with the config schema's defaults
     (``scene.contact`` and ``scene.friction`` as a config that lists them without a block would
     have them) for what ``overrides`` does not set; the default law is for the model's material."""
     from types import SimpleNamespace
 
     from ..config import ContactConfig, FrictionConfig
-    from ..solver.contact_effect import make_contact_hook
+    from ..solver.terms.contact import make_contact_hook
     from ..solver.laws import law_from_config
 
     if "law" not in overrides:
@@ -254,7 +254,6 @@ def contact_hook(model, **overrides):
     cc = ContactConfig()
     overrides.setdefault("mu", FrictionConfig().mu)
     overrides.setdefault("overlap_release_s", cc.overlap_release)
-    overrides.setdefault("formulation", cc.formulation)
     overrides.setdefault("onset_m", float(cc.onset))
     overrides.setdefault("n_gauss", int(cc.gauss_points))
     return make_contact_hook(model, **overrides)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..solver import Clamp, Clamps, Damping, Material, Plates, State, build_model
 from .case_config import CaseSetup, case_setup
-from .energy_residual import simulate
+from .energy_residual import recorded_simulate as simulate
 
 # The study's fiber (docs/verification.md), as its configs give it; the contact references (K_CROSSED_REF) hold for it.
 E_PA = 15e9

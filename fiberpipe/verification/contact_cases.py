@@ -1,7 +1,7 @@
 """Verification cases of docs/verification.md, cases 5–8 (fiber–fiber contact and friction), through the dynamics.
 
 Every case runs the real solver (``simulate``) with the contact hook of
-:mod:`fiberpipe.solver.contact_effect` on the scene of its config in ``configs/verify/``
+:mod:`fiberpipe.solver.terms.contact` on the scene of its config in ``configs/verify/``
 (:mod:`fiberpipe.verification.case_config`: material, radius, element length, fibers, loads, damping,
 gravity, friction, plates, walls, drives, contact law, end time) — the study's fiber (r = 0.25 mm,
 E = 15 GPa, ν = 0.3, ρ = 1380 kg/m³, 0.3 mm elements) at 0.9 × the stable step — and returns
@@ -34,7 +34,7 @@ from ..solver.laws import make_law
 from ..solver.neighbours import build_pairs
 from .case_config import CaseSetup, case_setup, contact_hook
 from .cases import E_PA, MATERIAL, NU, R_M, Row
-from .energy_residual import simulate
+from .energy_residual import recorded_simulate as simulate
 
 E_STAR = E_PA / (2 * (1 - NU**2))
 

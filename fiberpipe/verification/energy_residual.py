@@ -21,8 +21,8 @@ RESIDUAL_TOLERANCE = 1e-3
 _open: list[list[float]] = []
 
 
-def simulate(*args, **kwargs):
-    """:func:`fiberpipe.solver.simulate`; its run's largest |energy residual| goes to every open recorder."""
+def recorded_simulate(*args, **kwargs):
+    """:func:`fiberpipe.solver.integrator.simulate`; its run's largest |energy residual| goes to every open recorder."""
     res = _solver_simulate(*args, **kwargs)
     r = np.asarray(res.history.get("energy/residual", ()), dtype=float)
     if r.size:

@@ -16,8 +16,9 @@ import numpy as np
 
 from ..solver import Loads, Material, Plates, SimulationSettings, Walls, build_model, choose_time_step
 from ..solver._kernels_boundary import DEFAULT_ONSET_FRACTION
-from .energy_residual import simulate
-from ..solver.effects import DEFAULT_PENALTY_FACTOR, LineLoad
+from .energy_residual import recorded_simulate as simulate
+from ..solver.terms.base import DEFAULT_PENALTY_FACTOR
+from ..solver.terms.loads import LineLoad
 from .case_config import contact_hook
 
 RADIUS_M = 0.25e-3

@@ -108,8 +108,8 @@ def test_deck_holds_the_scene(write_yaml):
     # gravity as GRAV: magnitude and direction
     (dl,) = [k for k in _kw(kws, "DLOAD") if k.data[0][1][1] == "GRAV"]
     assert [float(x) for x in dl.data[0][1][2:]] == pytest.approx([9.81, 0, -1, 0])
-    # step: the solver's own loading time (fiberpipe.solver.effects.Plates)
-    from fiberpipe.solver.effects import Plates
+    # step: the solver's own loading time (fiberpipe.solver.terms.planes.Plates)
+    from fiberpipe.solver.terms import Plates
     T = Plates(axis="y", displacement_m=1e-4, velocity_m_s=1 / 60, ramp="smooth", ramp_fraction=0.02).loading_time_s
     (dyn,) = _kw(kws, "DYNAMIC")
     assert float(dyn.data[0][1][1]) == pytest.approx(T, rel=1e-9) and dyn.params["SCALE FACTOR"] == "0.95"
@@ -263,7 +263,7 @@ def test_simulate_rewrites_the_deck_with_the_scene_it_ran(write_yaml, tmp_path):
 def test_a_loading_path_is_the_plate_velocity_amplitude(write_yaml, ramp):
     """scene.loading.path: the deck's plate velocity reaches each entry in turn at the solver's times."""
     from fiberpipe.config import load_config
-    from fiberpipe.solver.effects import Plates
+    from fiberpipe.solver.terms import Plates
 
     cfg, mesh = _scene(write_yaml)
     path = ["0.1 mm", "0.04 mm", "0.115 mm"]

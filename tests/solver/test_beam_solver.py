@@ -214,10 +214,10 @@ def test_drive_moves_fiber_rigidly():
 
 def test_absent_effects_cost_no_memory():
     m = build_model(straight(10), [0, 11], R, MAT)
-    integ = Integrator(m, [], 1e-8)
-    sc = integ.scene
-    assert sc.f_ext.size == 0 and sc.fix_mask.size == 0 and sc.pl_axis.size == 0
-    assert integ.strain_prev.size == 0 and not sc.contact_on
+    integrator = Integrator(m, [], 1e-8)
+    scene = integrator.scene
+    assert scene.f_ext.size == 0 and scene.fix_mask.size == 0 and scene.pl_axis.size == 0
+    assert integrator.strain_prev.size == 0 and not integrator.plan.terms and integrator.plan.chain == ()
 
 
 def test_user_dt_above_limit_refused_and_forced_run_diagnosed():

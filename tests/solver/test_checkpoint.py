@@ -73,7 +73,7 @@ def test_resume_from_every_checkpoint_is_bit_for_bit(tmp_path):
     for k, ck in enumerate(saved):
         path = write_checkpoint(tmp_path / f"ck{k}.h5", ck, config_sha256="abc")
         back = read_checkpoint(path, config_sha256="abc")
-        assert back.contact_data[0].dtype == np.int64 and back.contact_data[0][0] == ck.step
+        assert back.term_data["contact"][0].dtype == np.int64 and back.term_data["contact"][0][0] == ck.step
         res = simulate(model, scene(), SimulationSettings(**SETTINGS), resume=back)
         assert_same(ref, res)
         assert any("resumed from a checkpoint" in n for n in res.notes)
@@ -144,7 +144,6 @@ def test_checkpoint_size_scales_with_the_model(tmp_path):
 def test_resume_with_the_real_contact_hook_is_bit_for_bit(tmp_path):
     """Fiber–fiber contact + friction + plates: the hook's data (neighbour list, friction history,
     typed-list buffers grown in the kernel) round-trips through the checkpoint."""
-    ce = pytest.importorskip("fiberpipe.solver.contact_effect")
     model = stack_model(n_fibers=3)
 
     def effects():

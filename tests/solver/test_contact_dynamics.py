@@ -1,4 +1,4 @@
-"""The contact hook in the step loop (fiberpipe.solver.contact_effect): config mapping, energy
+"""The contact hook in the step loop (fiberpipe.solver.terms.contact): config mapping, energy
 balance with ALLPW as work, buffer growth inside the kernel, Verlet rebuilds, friction accounting."""
 
 import math
@@ -9,10 +9,10 @@ import pytest
 
 from fiberpipe.solver import (Clamp, Clamps, Gravity, Plates, SimulationSettings, State, build_model, simulate,
                               Material)
-from fiberpipe.solver import contact_effect as ce
+from fiberpipe.solver.terms import contact as contact_term
 from fiberpipe.verification.case_config import contact_hook
 from fiberpipe.config import MaterialConfig, SceneConfig
-from fiberpipe.solver.contact_effect import ContactEffect
+from fiberpipe.solver.terms.contact import ContactEffect
 from fiberpipe.solver.laws import LAW_HERTZ_CROSSED, LAW_LINEAR, LAW_SCALED, LAW_HERTZ_ORIENTED
 
 R = 0.25e-3
@@ -49,10 +49,10 @@ def test_config_maps_to_law(cfg, law_id):
 
 
 def test_build_simulation_finds_the_hook():
-    from fiberpipe.solver.effects import EFFECTS
+    from fiberpipe.solver.terms import TERMS
     m = _model([((0, 0, 0), (3e-3, 0, 0), 10)])
     scene = SceneConfig(effects=["contact"])
-    hook = EFFECTS["contact"].from_config(scene, m, SimpleNamespace(material=MaterialConfig()))
+    hook = TERMS["contact"].from_config(scene, m, SimpleNamespace(material=MaterialConfig()))
     assert hook.name == "contact" and not hook.setup_info.friction_on
 
 
@@ -81,7 +81,7 @@ def test_buffers_grow_inside_the_kernel(monkeypatch):
     m = _hex_bundle()
     results = []
     for per_seg in (16, 0):
-        monkeypatch.setattr(ce, "DEFAULT_PAIRS_PER_SEGMENT", per_seg)
+        monkeypatch.setattr(contact_term, "DEFAULT_PAIRS_PER_SEGMENT", per_seg)
         hook = contact_hook(m, friction=True)
         st = State.at_rest(m)
         st.v[m.node_fiber == 0, 2] = 0.5  # the centre fiber pushes into its upper neighbours

@@ -293,7 +293,7 @@ def test_loading_ramp_fraction_reaches_the_plates(tmp_path):
     from fiberpipe.errors import FiberpipeError
     from fiberpipe.model.mesh import Mesh
     from fiberpipe.solver.build import build_simulation
-    from fiberpipe.solver.effects import Plates
+    from fiberpipe.solver.terms import Plates
 
     cfg_text = """
 name: ramp

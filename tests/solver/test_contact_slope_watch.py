@@ -6,7 +6,7 @@ import math
 import pytest
 
 from fiberpipe.config import ContactConfig
-from fiberpipe.solver.contact_effect import ContactSlopeWatch, penalty_step_bound
+from fiberpipe.solver.terms.contact import ContactSlopeWatch, penalty_step_bound
 from fiberpipe.solver.contact_state import new_stats
 from fiberpipe.solver.laws import make_law
 from fiberpipe.verification.six_fibers import six_fibers, six_fibers_run

@@ -38,7 +38,7 @@ def test_friction_dissipation_is_minus_the_forces_work_less_the_springs_energy_e
     dt, _ = choose_time_step(m, eff, settings)
     integ = Integrator(m, eff, dt, history_rows=10, history_every=10**9)
     st = State.at_rest(m)
-    stats = integ.scene.contact_data.stats
+    stats = integ.term_data("contact").stats
     prev = np.array([0.0, 0.0, 0.0])
     mismatch = []
     for _ in range(150):  # 150 chunks of 100 steps, 1.2 ms: the loading and the lower beams' slide

@@ -2,12 +2,14 @@
 
 import pytest
 
-from fiberpipe.solver import _jitcache, _kernels_integrate as K, contact_effect, contact_potential
+from fiberpipe.solver import _jitcache, _kernels_integrate as K, contact_potential
+from fiberpipe.solver.terms import contact as contact_term
 
 
 def test_solver_kernels_use_the_package_wide_cache_stamp():
     assert _jitcache.INSTALLED
-    for fn in (K.advance_plain, contact_potential.contact_forces_pot, contact_effect.contact_step):
+    # a kernel of the solver package and one of its subpackage terms
+    for fn in (K.advance_plain, contact_potential.contact_forces_pot, contact_term.contact_step):
         loc = fn._cache._impl._locator
         assert type(loc).__name__ == "SolverPackageLocator"
         assert loc.get_source_stamp()[1] == _jitcache.package_source_digest()
@@ -42,15 +44,17 @@ def test_an_index_naming_a_structure_gone_from_the_package_reads_as_stale(tmp_pa
 
 
 def test_step_loop_specialisations():
-    assert K.step_loop_for(K.no_contact) is K.advance_plain
-    args = (contact_effect.contact_step, contact_effect.contact_forces_of)
-    friction = dict(friction_of=contact_effect.contact_friction_of)
-    loop = K.step_loop_for(*args, cache_name="advance_contact", **friction)
-    assert loop is K.step_loop_for(*args, cache_name="advance_contact", **friction)
+    assert K.step_loop_for(()) is K.advance_plain
+    kernels, records = [contact_term.contact_step], [K.no_record]
+    friction = dict(forces_of=contact_term.contact_forces_of, friction_of=contact_term.contact_friction_of)
+    loop = K.step_loop_for(kernels, records, cache_names=["contact"], **friction)
+    assert loop is K.step_loop_for(kernels, records, cache_names=["contact"], **friction)
     assert loop._cache._impl is not None  # the built-in contact loop is cached on disk
     # without its friction array it is another loop, under another cache name
-    bare = K.step_loop_for(*args, cache_name="advance_contact")
+    bare = K.step_loop_for(kernels, records, cache_names=["contact"], forces_of=contact_term.contact_forces_of)
     assert bare is not loop and bare.py_func.__name__ != loop.py_func.__name__
+    # a term without a cache name: compiled per process
+    assert type(K.step_loop_for(kernels, records, cache_names=[None], **friction)._cache).__name__ == "NullCache"
 
 
 def test_threaded_loops_are_separate_and_cached_whole():
@@ -59,13 +63,14 @@ def test_threaded_loops_are_separate_and_cached_whole():
     from fiberpipe.solver import _kernels_beam as B
 
     assert type(B.beam_pass_fibers._cache).__name__ == "NullCache"
-    par = K.step_loop_for(K.no_contact, threads=2)
-    assert par is not K.advance_plain and par is K.step_loop_for(K.no_contact, threads=2)
+    par = K.step_loop_for((), threads=2)
+    assert par is not K.advance_plain and par is K.step_loop_for((), threads=2)
     assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_pass_all
     assert par.py_func.__globals__["_beam_pass"] is B.beam_pass_fibers
-    args = (contact_effect.contact_step, contact_effect.contact_forces_of)
-    loop = K.step_loop_for(*args, threads=2, cache_name="advance_contact", friction_of=contact_effect.contact_friction_of)
-    assert loop is not K.step_loop_for(*args, cache_name="advance_contact", friction_of=contact_effect.contact_friction_of)
+    args = ([contact_term.contact_step], [K.no_record])
+    friction = dict(forces_of=contact_term.contact_forces_of, friction_of=contact_term.contact_friction_of)
+    loop = K.step_loop_for(*args, threads=2, cache_names=["contact"], **friction)
+    assert loop is not K.step_loop_for(*args, cache_names=["contact"], **friction)
     assert loop._cache._impl is not None and loop.py_func.__name__.endswith("_threads")
 
 
@@ -112,3 +117,9 @@ def test_package_stamp_covers_the_shared_modules_the_cached_loops_link():
 
     names = {os.path.basename(p) for p in _jitcache._SHARED}
     assert {"_vectorise.py", "_prefetch.py", "_tasks.py"} <= names
+
+
+def test_package_stamp_covers_the_terms_subpackage():
+    """A term's module (``fiberpipe/solver/terms/``) is in the stamp of every cached solver kernel."""
+    assert "terms/contact.py" in _jitcache._solver_sources()
+    assert "terms/planes.py" in _jitcache._solver_sources()

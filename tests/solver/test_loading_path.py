@@ -6,7 +6,7 @@ import pytest
 from fiberpipe.errors import FiberpipeError
 from fiberpipe.solver._kernels_boundary import (RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP, path_delta, path_travel,
                                                 plane_position, ramp_fraction)
-from fiberpipe.solver.effects import Plates
+from fiberpipe.solver.terms import Plates
 
 from _scenes import cli, run_small, small_scene, write_cfg
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fiberpipe.solver import Loads, Material, Plates, SimulationSettings, build_model, simulate
-from fiberpipe.solver.effects import LineLoad, PointLoad
+from fiberpipe.solver.terms import LineLoad, PointLoad
 
 R = 0.25e-3
 MAT = Material(15e9, 1380.0, 0.3)
@@ -44,7 +44,7 @@ def test_fiber_pressed_on_a_plate_creates_no_energy(dt_safety, line_load, tip):
 def test_plane_penalty_holds_the_default_steps_stiffness_below_it():
     """k = c m (2/Δt_pen)², Δt_pen = max(Δt, 0.9 × the element stable step): the same stiffness at any
     smaller step, the step's own above it."""
-    from fiberpipe.solver.effects import SceneArrays
+    from fiberpipe.solver.terms import SceneArrays
     from fiberpipe.solver.timestep import DEFAULT_DT_SAFETY, stable_time_step
 
     m = _fiber_above_plate()
@@ -121,7 +121,7 @@ def test_a_fiber_falling_through_the_plane_lists_margin_meets_the_plate_as_with_
     for margin in (None, 0.0):
         integ = Integrator(m, eff, dt, history_rows=300, history_every=100)
         if margin is not None:
-            integ.pl_cand_slack[1] = margin
+            integ.planes.cand_slack[1] = margin
         st = State.at_rest(m)
         for _ in range(5):
             assert integ.advance(st, 5000)[0] == STATUS_OK

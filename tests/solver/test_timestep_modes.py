@@ -5,7 +5,7 @@ import pytest
 
 from fiberpipe.errors import FiberpipeError
 from fiberpipe.solver import Material, build_model
-from fiberpipe.solver.effects import AxialLock, Damping
+from fiberpipe.solver.terms import AxialLock, Damping
 from fiberpipe.solver.integrator import SimulationSettings, choose_time_step
 from fiberpipe.solver.layout import FIX_Z
 from fiberpipe.solver.timestep import modal_time_step, stable_time_step

@@ -1,26 +1,30 @@
-"""The fiber–fiber contact/friction hook of the step loop: ``contact_effect(model, scene_cfg, material)``.
+"""The contact term: fiber–fiber normal contact and friction, and the friction of the fibers on the
+plates and walls (``scene.effects`` entries ``contact`` and ``friction``, blocks ``scene.contact`` and
+``scene.friction``).
 
-Builds a :class:`fiberpipe.solver.effects.ContactHook` whose kernel :func:`contact_step` runs once per
-step on a :class:`fiberpipe.solver.contact_state.ContactData` (see ``docs/solver.md``, "Contact hook", and ``docs/contact.md`` §5):
+:class:`ContactEffect` builds a :class:`~fiberpipe.solver.terms.base.ContactHook` whose kernel
+:func:`contact_step` runs once per step on a :class:`fiberpipe.solver.contact_state.ContactData`
+(see ``docs/solver.md`` and ``docs/contact.md``):
 
 1. Verlet list: rebuilt when a node has moved more than skin/2 since the last build (or at the first
    call); the new list goes into the spare buffers, the friction history is remapped by pair key,
    then the buffers are swapped. Buffers live in numba typed lists inside ``data``, so the kernel
    grows them itself when :func:`fiberpipe.solver.neighbours.build_pairs` reports an overflow
    (no Python round trip, no lost contacts).
-2. Normal contact forces (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`) with the scene's law.
+2. Normal contact forces (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`) with the
+   scene's law (one class each in ``laws.LAWS``).
 3. Friction (if ``friction`` is in ``scene.effects``): fiber–fiber
    (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
    the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
-   rule as ``_kernels_boundary.plane_contacts``; plane positions recomputed from the same ramps).
-4. The normal contact forces stay in the hook's force array (``data.fc``, declared by the hook's
+   rule as ``_kernels_boundary.plane_contacts``, at the positions the plane pass wrote this step).
+4. The normal contact forces stay in the term's force array (``data.fc``, declared by its
    ``forces_of``), the friction forces in its friction array (``data.ff``, declared by its
    ``friction_of``): the step loop's update adds both to the nodes, books their work
    ``Δt f_n·v̄_n`` to ALLPW, and clears them, in the same pass over the nodes. The friction forces'
    work is also booked to the friction work (``energy/friction_work``, W_f) and, as a loss, to
    ALLFD, by halves over the displacement the friction springs' energy changes by:
    ``½Δt (f_{n−1} + f_n)·v_{n−½}`` at step n (``layout.ACC_WF_NEXT`` carries the second half). The
-   hook books the springs' energy change: ALLFD −= ΔE_springs and ALLPW −= ΔE_springs, so ALLFD =
+   term books the springs' energy change: ALLFD −= ΔE_springs and ALLPW −= ΔE_springs, so ALLFD =
    −W_f − ΔE_springs, and ALLPW = W_normal + W_f + ALLFD. With ETOTAL = KE + SE + VD + FD − WK − PW
    this keeps the balance (PW holds the elastic contact energy and the friction loss, as Abaqus'
    ALLPW includes penalty friction).
@@ -38,18 +42,18 @@ import numpy as np
 from numba import njit
 from numba.typed import List
 
-from ..errors import FiberpipeError
-from ._kernels_boundary import path_delta, plane_candidates, plane_position
-from .contact_pairs import gauss_points
-from .contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
-from .effects import ContactHook, register_effect
-from ._specialise import specialise
-from .contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
+from ...errors import FiberpipeError
+from .._kernels_boundary import path_delta
+from ..contact_pairs import gauss_points
+from ..contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
+from .base import ContactHook, register_term
+from .._specialise import specialise
+from ..contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
                             new_pair_list, new_records, new_stats)
-from .friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
-from .geometry import pair_gap
-from .layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
-from .neighbours import build_pairs, max_displacement2, max_displacement2_speed2
+from ..friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
+from ..geometry import pair_gap
+from ..layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
+from ..neighbours import build_pairs, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
@@ -65,10 +69,10 @@ _NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)  # see _step_forces_pass 
 def _rebuild(x, data):
     """Build the Verlet list into the spare buffers (growing them if needed), remap the friction
     history and the initial-overlap offsets, swap."""
-    prm, st, segs = data.params, data.stats, data.segs
+    params, st, segs = data.params, data.stats, data.segs
     while True:
         spare = data.lists[1]
-        n = build_pairs(x, segs.nodes, segs.radius, segs.fiber, segs.arc, prm.skin_m, prm.exclusion_m,
+        n = build_pairs(x, segs.nodes, segs.radius, segs.fiber, segs.arc, params.skin_m, params.exclusion_m,
                         spare.pairs, spare.keys)
         if n >= 0:
             break
@@ -77,7 +81,7 @@ def _rebuild(x, data):
     if data.records[0].fn.shape[0] < n:
         data.records[0] = new_records(spare.pairs.shape[0])
     cur = data.lists[0]
-    if prm.friction_on:
+    if params.friction_on:
         remap_history(cur.keys, st.n_pairs[0], cur.friction, spare.keys, n, spare.friction)
     if st.offset_max_m[0] > 0.0:
         remap_history(cur.keys, st.n_pairs[0], cur.offset, spare.keys, n, spare.offset)
@@ -103,19 +107,15 @@ def _rebuild(x, data):
 
 @njit(inline="always", **_FLAGS)
 def _move_planes(planes, t, dt):
-    """The planes' positions and velocities at t_n (for their friction); returns how far any plane
-    moved since its candidate nodes were listed."""
-    moved = 0.0
+    """The planes' velocities at t_n, for their friction (their positions ``planes.pos`` and the nodes
+    listed near them, ``planes.cand_idx``, are the plane pass's, which ran before this term in the
+    step)."""
     for p in range(planes.axis.shape[0]):
-        planes.pos[p] = plane_position(t, planes.pos0[p], planes.sign[p], planes.move[p], planes.T[p], planes.ta[p],
-                                       planes.mode[p])
         vel = planes.sign[p] * path_delta(t, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p]) / dt
         planes.vel[p, 0] = 0.0
         planes.vel[p, 1] = 0.0
         planes.vel[p, 2] = 0.0
         planes.vel[p, planes.axis[p]] = vel
-        moved = max(moved, abs(planes.pos[p] - planes.pos_cand[p]))
-    return moved
 
 
 @njit(inline="always", **_FLAGS)
@@ -155,16 +155,16 @@ def _normal_forces(x, data, plist, rec, off, reach):
     """The normal contact pass (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`: every
     force minus the gradient of the stored potential): forces into ``data.fc``, per-pair records into
     ``data.records[0]``; returns (energy, n_active)."""
-    prm, st, segs = data.params, data.stats, data.segs
-    return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], prm.law_id,
-                              prm.law_params, prm.gauss_xi, prm.gauss_w, prm.onset_m, data.fc, rec, off, reach)
+    params, st, segs = data.params, data.stats, data.segs
+    return contact_forces_pot(x, segs.nodes, segs.radius, segs.arc, plist.pairs, st.n_pairs[0], params.law_id,
+                              params.law_params, params.gauss_xi, params.gauss_w, params.onset_m, data.fc, rec, off, reach)
 
 
 @njit(**_FLAGS)
 def _record_initial_overlaps(x, data, reach):
     """First call: each pair's penetration at t = 0 becomes its offset (released over
     ``params.release_s``), so overlapping input is pushed apart gradually."""
-    prm, st, segs = data.params, data.stats, data.segs
+    st, segs = data.stats, data.segs
     plist, rec = data.lists[0], data.records[0]
     n_pairs = st.n_pairs[0]
     _normal_forces(x, data, plist, rec, np.zeros(0), reach)
@@ -216,15 +216,15 @@ def _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls):
     plane's candidates) leaves none of its work unbooked. ALLFD is then ``−W_f − ΔE_springs``. The
     contacts' own sums (the kernels' first return, module ``friction``) are not used for it; their
     negative parts are summed apart (``friction_returned_J``)."""
-    prm, st, ff = data.params, data.stats, data.ff
+    params, st, ff = data.params, data.stats, data.ff
     e_springs = 0.0
-    if prm.friction_on:
-        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, prm.mu,
-                                          prm.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
+    if params.friction_on:
+        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, params.mu,
+                                          params.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
         e_springs += esp
         st.friction_returned_J[0] += back
     if plane_fric:
-        _, espl, back = plane_friction(x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, ff, calls, True)
+        _, espl, back = plane_friction(x, v, data.planes, params.mu, params.kt_n_per_m, dt, ff, calls, True)
         e_springs += espl
         st.friction_returned_J[0] += back
     diss = -(e_springs - st.e_spring_J[0])
@@ -274,38 +274,29 @@ def contact_friction_of(data):
 
 @njit(**_FLAGS, **_NO_COUNTS)
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
-    """The ContactHook kernel (signature of ``effects.ContactHook``); see the module docstring.
+    """The contact term's eval (the signature every term's has, ``terms.base``); see the module docstring.
 
     It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`)
     and ``data.ff`` (:func:`contact_friction_of`), which the step loop applies (a hook that wraps
     this one must add those arrays to ``f`` itself).
     """
-    prm, st = data.params, data.stats
+    params, st = data.params, data.stats
     calls = st.calls[0]
     st.calls[0] = calls + 1
     P = data.planes.axis.shape[0]
-    plane_fric = prm.plane_friction_on and P > 0
-    plane_moved = _move_planes(data.planes, t, dt) if plane_fric else 0.0
-    rebuild = _update_neighbours(x, v, dt, acc, data)
-    # the nodes near each plane, for its friction: a node touching now was within 1.5 skin of the
-    # plane when the list was made (it moved < skin since: ≤ skin/2 since the neighbour-list build
-    # before it and ≤ skin/2 after; the plane moved ≤ skin/2), so the list is remade with every
-    # neighbour-list build and whenever a plane has moved skin/2 since
-    half_skin = 0.5 * prm.skin_m
-    if plane_fric and (rebuild or plane_moved > half_skin):
-        pl = data.planes
-        plane_candidates(x, pl.radius_node, pl.axis, pl.sign, pl.pos, 3.0 * half_skin, pl.cand_idx, pl.cand_off)
-        for p in range(P):
-            pl.pos_cand[p] = pl.pos[p]
+    plane_fric = params.plane_friction_on and P > 0
+    if plane_fric:
+        _move_planes(data.planes, t, dt)
+    _update_neighbours(x, v, dt, acc, data)
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
-    # (contact_forces_pot, records.gap): the path bound refreshes per pair, the displacement bound does not
+    # (contact_forces_ex, records.gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * st.path_m[0]
     if st.overlaps_done[0] == 0 or st.offset_max_m[0] > 0.0:
         return _first_steps_pass(x, v, acc, t, dt, data, calls, plane_fric, reach)
     # no offsets: an empty array (a view, not an allocation), as _overlap_offsets returns then; the
     # list in use and the records read without a reference (borrowed_item): the lists hold them
     return _step_forces_pass(x, v, acc, dt, data, borrowed_item(data.lists, 0), borrowed_item(data.records, 0),
-                             st.path_m[:0], 0.0, 0.0, reach, calls, plane_fric)
+                             (st.path_m[:0], 0.0, 0.0), reach, calls, plane_fric)
 
 
 def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
@@ -316,15 +307,17 @@ def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
         st.overlaps_done[0] = 1
         _record_initial_overlaps(x, data, reach)
     off, rel, rel_prev = _overlap_offsets(data, t, dt)
-    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], off, rel, rel_prev, reach, calls,
+    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], (off, rel, rel_prev), reach, calls,
                              plane_fric)
 
 
-def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, calls, plane_fric):
+def _step_forces(x, v, acc, dt, data, plist, rec, release, reach, calls, plane_fric):
     """Steps 3–5 of :func:`contact_step` (module docstring): the normal pass, the friction, the energies
-    and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; returns the number
-    of pairs in contact."""
-    prm, st = data.params, data.stats
+    and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; ``release``: the
+    initial overlaps' offsets and release factors ``(off, rel, rel_prev)`` (:func:`_overlap_offsets`);
+    returns the number of pairs in contact."""
+    params, st = data.params, data.stats
+    off, rel, rel_prev = release
     # fc is all zeros here: the step loop's update cleared it after applying it (fused loops)
     energy, n_active = _normal_forces(x, data, plist, rec, off, reach)
     # work of the release on the contacts (the offset shrinks at fixed positions: stored energy
@@ -337,7 +330,7 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
         acc[ACC_WK] += wrel * (rel_prev - rel)
     st.e_contact_J[0] = energy
     diss = 0.0
-    if prm.friction_on or plane_fric:
+    if params.friction_on or plane_fric:
         diss = _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls)
     # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
     acc[ACC_STORED] += energy + st.e_spring_J[0]
@@ -348,14 +341,14 @@ def _step_forces(x, v, acc, dt, data, plist, rec, off, rel, rel_prev, reach, cal
     return n_active
 
 
-# contact_step and the potential formulation's normal pass, friction and statistics (_step_forces)
-# run without reference counts (``_nrt=False``; numba takes and releases a reference, an atomic count,
-# to every array of a structure it binds or hands to an inlined function, and the hook's functions
-# take the whole ContactData, some fifty arrays). They allocate nothing and are called only from
-# jitted code (no Python wrapper, which would need the counts to unbox the typed lists). The
-# functions that allocate set ``_nrt=True`` (a function compiled from one without counts inherits
-# that unless it sets its own): _rebuild, _first_steps (the offsets) and the contact pass.
-_step_forces_pass = njit(**_FLAGS, _nrt=True)(_step_forces)
+# contact_step and its normal pass, friction and statistics (_step_forces) run without reference
+# counts (``_nrt=False``; numba takes and releases a reference, an atomic count, to every array of a
+# structure it binds or hands to an inlined function, and the term's functions take the whole
+# ContactData, some fifty arrays). They allocate nothing and are called only from jitted code (no
+# Python wrapper, which would need the counts to unbox the typed lists). The functions that allocate
+# set ``_nrt=True`` (a function compiled from one without counts inherits that unless it sets its
+# own): _rebuild, _first_steps (the offsets) and the potential pass.
+_step_forces_pass = njit(**_FLAGS, **_NO_COUNTS)(_step_forces)
 _first_steps_pass = njit(**_FLAGS, _nrt=True)(_first_steps)
 
 
@@ -425,7 +418,9 @@ def _segments(model) -> Segments:
 
 
 def _plane_friction_of(model, scene) -> PlaneFriction:
-    """The scene's planes as :class:`PlaneFriction` (their own copies of the ramp arrays)."""
+    """The scene's planes as :class:`PlaneFriction`: their own copies of the ramp arrays, and the positions
+    and candidate nodes the step loop's plane pass writes (``scene.plane_positions()``,
+    ``scene.plane_candidates()``: the same arrays)."""
     N = model.n_nodes
     P = scene.pl_axis.size
     k_pen = scene.k_pen() if P > 0 else np.zeros(0)
@@ -435,32 +430,12 @@ def _plane_friction_of(model, scene) -> PlaneFriction:
         np.ascontiguousarray(model.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
         np.ascontiguousarray(onset),
         scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), pos0, scene.pl_move.astype(np.float64),
-        scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64), pos0.copy(),
-        np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)), np.zeros(N * P, np.int64),
-        np.zeros(P + 1, np.int64), pos0.copy())
+        scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64),
+        scene.plane_positions(), np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)),
+        *scene.plane_candidates())
 
 
 _CUSTOM_KERNELS: dict = {}
-
-# the normal contact formulations (``scene.contact.formulation``), bound into contact_step and
-# _record_initial_overlaps by name
-FORMULATIONS = {"potential": _normal_forces}
-
-# the built-in laws: the cached copy of the hook kernel, without reference counts in its forces part
-_record_initial_overlaps_potential = specialise(
-    _record_initial_overlaps, "_record_initial_overlaps_potential", {"_normal_forces": _normal_forces},
-    cache=True, fastmath=True, error_model="numpy")
-_step_forces_potential = specialise(_step_forces, "_step_forces_potential",
-                                    {"_normal_forces": _normal_forces}, cache=True, fastmath=True,
-                                    error_model="numpy", **_NO_COUNTS)
-_first_steps_potential = specialise(
-    _first_steps, "_first_steps_potential",
-    {"_step_forces_pass": _step_forces_potential, "_record_initial_overlaps": _record_initial_overlaps_potential},
-    cache=True, fastmath=True, error_model="numpy", _nrt=True)
-contact_step_potential = specialise(
-    contact_step, "contact_step_potential",
-    {"_step_forces_pass": _step_forces_potential, "_first_steps_pass": _first_steps_potential},
-    cache=True, fastmath=True, error_model="numpy", **_NO_COUNTS)
 
 
 _SPEC = dict(fastmath=True, error_model="numpy")
@@ -485,7 +460,7 @@ def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass):
                       cache=False, **_NO_COUNTS, **_SPEC)
 
 
-# solver.threads > 1 with the built-in laws and the potential formulation: the pairs in prange tasks
+# solver.threads > 1 with the built-in laws: the pairs in prange tasks
 # (a parfor kernel, not cached: see _kernels_beam.beam_pass_fibers); the initial overlaps, recorded
 # once, by the serial pass
 # the fiber–fiber friction's pairs in prange tasks too (friction.friction_forces_tasks: the same forces)
@@ -493,26 +468,21 @@ _friction_pass_threads = specialise(_friction_pass, "_friction_pass_threads",
                                     {"friction_forces_ex": friction_forces_tasks}, cache=False, inline="always",
                                     **_SPEC)
 contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_threads, "potential_threads"),
-                                            "potential_threads", _record_initial_overlaps_potential,
+                                            "potential_threads", _record_initial_overlaps,
                                             friction_pass=_friction_pass_threads)
 
 
-def contact_kernel_for(law, formulation: str = "potential", threads: bool = False):
-    """``(contact_step kernel, cache name)`` for ``law`` and the normal-contact ``formulation``
-    (``potential``, the one there is): the built-in kernels (cached on disk) for a law without
-    ``kernels``; else copies of the contact kernels specialised on the law's own jitted
-    ``(line, point, weight_point)`` functions (compiled once per process and law class).
-    ``threads``: the variant for ``solver.threads`` > 1, whose normal pass evaluates its pairs in
-    parallel tasks (same result bit for bit; not cached)."""
-    if formulation not in FORMULATIONS:
-        raise FiberpipeError(f"contact.formulation must be one of {sorted(FORMULATIONS)}, got {formulation!r}")
+def contact_kernel_for(law, threads: bool = False):
+    """``(contact_step kernel, cache name)`` for ``law``: the built-in kernel (cached on disk) for a law
+    without ``kernels``; else copies of the contact kernels specialised on the law's own jitted
+    ``(line, point, weight_point)`` functions (compiled once per process and law class). ``threads``:
+    the variant for ``solver.threads`` > 1, whose normal pass evaluates its pairs in parallel tasks
+    (same result bit for bit; not cached)."""
     if law.kernels is None:
-        if threads:
-            return contact_step_potential_threads, None
-        return contact_step_potential, "advance_contact_potential"
-    key = (type(law), formulation, threads)
+        return (contact_step_potential_threads, None) if threads else (contact_step, "contact")
+    key = (type(law), threads)
     if key not in _CUSTOM_KERNELS:
-        tag = f"{type(law).__name__}_{formulation}"
+        tag = f"{type(law).__name__}_potential"
         nf = _potential_pass(potential_kernels_for(law), tag)
         # the initial overlaps, recorded once, by the law's serial pass (also with threads)
         overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
@@ -539,7 +509,7 @@ def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *
     step checked it) and does not couple. ``rep``: the model's
     :func:`~fiberpipe.solver.timestep.stable_time_step` report, when the caller holds it.
     """
-    from .timestep import stable_time_step
+    from ..timestep import stable_time_step
 
     rep = stable_time_step(model) if rep is None else rep
     m_min = float(np.min(model.mass))
@@ -592,7 +562,7 @@ class ContactSlopeWatch:
     """
 
     def __init__(self, model, dt: float, law, stats, onset_m: float, dt_safety: float = 1.0):
-        from .timestep import stable_time_step
+        from ..timestep import stable_time_step
 
         self.model, self.dt, self.law, self.stats, self.onset_m = model, float(dt), law, stats, float(onset_m)
         self.dt_safety = min(float(dt_safety), 1.0)
@@ -646,7 +616,7 @@ class ContactSlopeWatch:
 
 def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
                       k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
-                      plane_friction_on: bool = True, formulation: str = "potential", onset_m: float = 0.0):
+                      plane_friction_on: bool = True, onset_m: float = 0.0):
     """A :class:`ContactHook` for ``model`` (Python API; ``build.build_simulation`` maps a config onto it).
 
     law : ContactLaw. contact : fiber–fiber normal contact on. friction : Coulomb friction on
@@ -655,10 +625,10 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin (default 0.2 r_max).
     n_gauss : Gauss points per segment in the line part. overlap_release_s : s, the initial overlap
     of each segment pair (its penetration at the first step) is subtracted from its penetration and
-    released linearly to 0 over this time (0: no offset, the overlap acts at once). formulation :
-    the normal contact kernel, ``potential`` (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`,
-    every force minus the gradient of the stored potential). onset_m : m, the penetration over which
-    force and stiffness rise from zero (0: the laws as they are).
+    released linearly to 0 over this time (0: no offset, the overlap acts at once). onset_m : m, the
+    penetration over which force and stiffness rise from zero (0: the laws as they are). The normal
+    pass is :func:`fiberpipe.solver.contact_potential.contact_forces_pot` (every force minus the
+    gradient of the stored potential).
     """
     segs = _segments(model)
     E = model.n_elements
@@ -672,7 +642,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
         raise FiberpipeError(f"contact.overlap_release must be >= 0, got {overlap_release_s}")
     if not (onset_m >= 0 and math.isfinite(onset_m)):
         raise FiberpipeError(f"contact.onset must be >= 0, got {onset_m}")
-    kernel, cache_name = contact_kernel_for(law, formulation)
+    kernel, cache_name = contact_kernel_for(law)
     info = ContactSetup(law, contact, friction, mu, k_t, skin, n_gauss)
 
     def prepare(model_, scene):
@@ -696,7 +666,7 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
 
     hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, friction_of=contact_friction_of,
                        cache_name=cache_name,
-                       kernel_threads=contact_kernel_for(law, formulation, threads=True)[0])
+                       kernel_threads=contact_kernel_for(law, threads=True)[0])
     hook.setup_info = info
     hook.make_watch = lambda model_, dt, dt_safety=1.0: ContactSlopeWatch.for_hook(model_, dt, hook, dt_safety)
     if not contact:
@@ -704,22 +674,21 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     return hook
 
 
-@register_effect("contact", "friction")
+@register_term("contact", "friction")
 class ContactEffect:
     """``scene.effects`` entries ``contact`` and ``friction``: one :class:`ContactHook` for both."""
 
     @classmethod
-    def from_config(cls, sc, model, cfg):
-        """The hook of ``scene.contact`` (law, skin, overlap_release) and ``scene.friction`` (mu,
-        stiffness = k_t in N/m), for the material of ``cfg.material``."""
-        from .laws import law_from_config
+    def from_config(cls, scene_cfg, model, cfg):
+        """The term of ``scene.contact`` (law, skin, overlap_release, onset, gauss_points) and
+        ``scene.friction`` (mu, stiffness = k_t in N/m), for the material of ``cfg.material``."""
+        from ..laws import law_from_config
 
-        effects = list(sc.effects)
-        ccfg, fcfg = sc.contact, sc.friction
+        effects = list(scene_cfg.effects)
+        ccfg, fcfg = scene_cfg.contact, scene_cfg.friction
         return make_contact_hook(model, law=law_from_config(ccfg, cfg.material), contact="contact" in effects,
                                  friction="friction" in effects, mu=float(fcfg.mu),
                                  overlap_release_s=float(ccfg.overlap_release),
                                  k_t=None if fcfg.stiffness is None else float(fcfg.stiffness),
                                  skin_m=None if ccfg.skin is None else float(ccfg.skin),
-                                 n_gauss=int(ccfg.gauss_points), formulation=ccfg.formulation,
-                                 onset_m=float(ccfg.onset))
+                                 n_gauss=int(ccfg.gauss_points), onset_m=float(ccfg.onset))

@@ -1,0 +1,139 @@
+"""A new physical term is one class with its jitted eval plus one registry line: springs tying every
+node to its rest position, defined here, run from a YAML config through ``fiberpipe run``, and its
+force and its energy slot checked against their formulas (the worked example of docs/solver.md)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+import yaml
+from numba import njit
+
+from fiberpipe.artifacts import read_artifact
+from fiberpipe.config import Section
+from fiberpipe.solver import TERMS, Term, register_term
+from fiberpipe.solver.layout import ACC_PW, ACC_STORED
+
+G = 9.81        # m/s²
+RATE = 1.6e8    # 1/s², the springs' stiffness per kg of node mass (ω = 12.6e3 rad/s)
+
+
+class SpringsConfig(Section):
+    """``scene.springs``: the stiffness per kg of node mass [N/(m·kg) = 1/s²]."""
+
+    stiffness_per_kg: float = 1e6
+
+
+class SpringsData(NamedTuple):
+    stiffness: np.ndarray  # (N,) N/m per node, c m_i
+    x0: np.ndarray         # (N, 3) m, rest positions
+    energy: np.ndarray     # (1,) J, the springs' energy ½ Σ k_i |x_i − x0_i|² (the energy slot)
+
+
+@njit(cache=False)
+def _springs_eval(x, q, v, w, f, mom, acc, t, dt, data):
+    """f_i −= k_i (x_i − x0_i); the springs' energy to their slot and to the stored energy, their work
+    on the fibers (−ΔE) to ALLPW."""
+    e = 0.0
+    for i in range(x.shape[0]):
+        k = data.stiffness[i]
+        for c in range(3):
+            d = x[i, c] - data.x0[i, c]
+            f[i, c] -= k * d
+            e += 0.5 * k * d * d
+    acc[ACC_STORED] += e
+    acc[ACC_PW] -= e - data.energy[0]
+    data.energy[0] = e
+    return 0
+
+
+class Springs(Term):
+    """Springs of stiffness c m_i tying node i to its rest position (a foundation per unit mass)."""
+
+    name = "springs"
+    config_block = SpringsConfig
+    energies = ("springs",)
+    eval = staticmethod(_springs_eval)
+
+    def __init__(self, stiffness_per_kg: float):
+        if not stiffness_per_kg > 0:
+            raise ValueError(f"springs.stiffness_per_kg must be > 0, got {stiffness_per_kg}")
+        self.stiffness_per_kg = float(stiffness_per_kg)
+
+    @classmethod
+    def from_config(cls, scene_cfg, model, cfg):
+        return cls(scene_cfg.block("springs").stiffness_per_kg)
+
+    def setup(self, model, scene):
+        return SpringsData(self.stiffness_per_kg * np.asarray(model.mass, dtype=np.float64),
+                           np.array(model.nodes_m, dtype=np.float64), np.zeros(1))
+
+
+@pytest.fixture
+def springs_term():
+    register_term()(Springs)  # the one registry line
+    yield Springs
+    TERMS.pop(Springs.name)
+
+
+def _hanging_fiber(rate: float) -> dict:
+    """A free 3 mm fiber under gravity, held by the springs and damped critically."""
+    return {
+        "name": "springs",
+        "input": {"polylines": [[[0, 0, 0], ["3 mm", 0, 0]]]},
+        "mesh": {"element_length": "0.3 mm", "resolve_overlaps": False},
+        "material": {"youngs_modulus": "15 GPa", "poisson_ratio": 0.3, "density": "1380 kg/m^3"},
+        "fiber": {"radius": "0.25 mm"},
+        "scene": {"effects": ["springs", "gravity", "damping"],
+                  "springs": {"stiffness_per_kg": rate},
+                  "gravity": {"acceleration": [0, 0, -G]},
+                  "damping": {"alpha": f"{2 * rate ** 0.5} 1/s"}},
+        "solver": {"end_time": "2 ms", "output_frames": 2},
+        "post": {"plots": False},
+    }
+
+
+def test_registered_term_runs_from_yaml_and_gives_its_formula(springs_term, tmp_path):
+    from _scenes import cli
+
+    cfg = tmp_path / "springs.yaml"
+    cfg.write_text(yaml.safe_dump(_hanging_fiber(RATE)))
+    res = cli("--quiet", "run", cfg, "--out", tmp_path / "run", "--to", "simulate")
+    assert res.exit_code == 0, res.output
+    sim = read_artifact(tmp_path / "run" / "simulation.h5", "simulation")
+    x = np.asarray(sim["frames/positions"])
+    dz = x[-1, :, 2] - x[0, :, 2]
+    # the force: at rest k_i dz_i = m_i g with k_i = c m_i, so every node hangs by g/c (a rigid
+    # translation: the beam carries nothing)
+    assert dz == pytest.approx(np.full_like(dz, -G / RATE), rel=1e-6)
+    # the energy slot: ½ Σ c m_i dz² = ½ (g²/c) Σ m_i, the fiber's mass ρ A L
+    mass = 1380.0 * np.pi * 0.25e-3 ** 2 * 3e-3
+    energy = np.asarray(sim["history/energy/springs"])
+    assert energy[-1] == pytest.approx(0.5 * G * G / RATE * mass, rel=1e-6)
+    # and the books close: the springs' work is booked as contact work (ALLPW)
+    total = np.asarray(sim["history/energy/total"])
+    assert abs(total[-1]) < 1e-6 * energy[-1]
+
+
+def test_an_unregistered_term_is_refused_naming_the_key(tmp_path):
+    from _scenes import cli
+
+    cfg = tmp_path / "springs.yaml"
+    cfg.write_text(yaml.safe_dump(_hanging_fiber(RATE)))
+    res = cli("run", cfg, "--out", tmp_path / "run")
+    assert res.exit_code != 0
+    assert "scene.effects" in res.output and "springs" in res.output and "Traceback" not in res.output
+
+
+def test_a_term_block_is_validated_by_its_section(springs_term, tmp_path):
+    from _scenes import cli
+
+    bad = _hanging_fiber(RATE)
+    bad["scene"]["springs"] = {"stiffnes_per_kg": RATE}
+    cfg = tmp_path / "springs.yaml"
+    cfg.write_text(yaml.safe_dump(bad))
+    res = cli("run", cfg, "--out", tmp_path / "run")
+    assert res.exit_code != 0
+    assert "scene.springs.stiffnes_per_kg" in res.output and "Traceback" not in res.output
