@@ -257,3 +257,13 @@ def test_code_narration_check_flags_an_issue_number_and_passes_a_fixture_scope()
     assert not flags('@pytest.fixture(scope="session")')
     assert not flags("# small helpers shared by the stages")
     assert not flags("best of 12 rounds of 500 steps")
+
+
+# Reference pages stay readable at a sitting: what is measured and checked, not how it was found.
+PAGE_LINE_BUDGETS = {"benchmarks.md": 400, "contact.md": 500}
+
+
+@pytest.mark.parametrize("name", sorted(PAGE_LINE_BUDGETS))
+def test_reference_pages_keep_their_line_budget(name):
+    lines = (DOCS / name).read_text().count("\n")
+    assert lines <= PAGE_LINE_BUDGETS[name], f"docs/{name}: {lines} lines > {PAGE_LINE_BUDGETS[name]}"
