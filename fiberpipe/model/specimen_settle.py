@@ -68,22 +68,9 @@ def settle_pile(fibers: Polylines, raw: dict, *, width_m: float, alpha_per_s: fl
     the settled Polylines (the node positions of the last frame, per fiber) and the settling
     figures (time step, steps, displacements, kinetic energy per frame, contacts, wall time).
     ``progress``: the solver's ``progress(t_s, end_time_s, steps)``, called as it advances."""
-    import time as _time
-
-    from fiberpipe.config import validate_config
-    from fiberpipe.model.mesh import mesh_polylines
-    from fiberpipe.solver import simulate
-    from fiberpipe.solver.build import build_simulation
-
     sraw = settle_scene(raw, width_m=width_m, alpha_per_s=alpha_per_s, time_s=time_s, mu=mu, lock=lock,
                         frames=frames, mass_scaling=mass_scaling, gravity_scale=gravity_scale)
-    sraw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
-    cfg = validate_config(sraw, where=where)
-    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
-    model, effects, settings = build_simulation(mesh, cfg)
-    t0 = _time.perf_counter()
-    res = simulate(model, effects, settings, progress=progress)
-    wall = _time.perf_counter() - t0
+    cfg, mesh, res, wall = _run_scene(sraw, fibers, where, progress)
     X = np.asarray(res.frames_positions)
     off = np.asarray(mesh.node_offsets)
     r = float(cfg.fiber.radius)
@@ -173,23 +160,11 @@ def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settl
     run, whose rest shape is the closed pile, does not), the pile's top and its v_f. A pile whose
     top stays above the target height by more than ``close_cfg.tolerance`` (fibers held in the
     plate's penalty) cannot reach the target: a one-line error with the densest v_f it reached."""
-    import time as _time
-
-    from fiberpipe.config import validate_config
     from fiberpipe.errors import ConfigError
-    from fiberpipe.model.mesh import mesh_polylines
-    from fiberpipe.solver import simulate
-    from fiberpipe.solver.build import build_simulation
 
     scene = closing_scene(raw, plan, close_cfg, settle_cfg)
-    scene["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
-    cfg = validate_config(scene, where=where)
+    cfg, mesh, res, wall = _run_scene(scene, fibers, where, progress)
     radius = float(cfg.fiber.radius)
-    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=radius)
-    model, effects, settings = build_simulation(mesh, cfg)
-    t0 = _time.perf_counter()
-    res = simulate(model, effects, settings, progress=progress)
-    wall = _time.perf_counter() - t0
     X = np.asarray(res.frames_positions)
     off = np.asarray(mesh.node_offsets)
     tops = X[:, :, 1].max(axis=1) + radius
@@ -217,3 +192,22 @@ def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settl
                           where=where)
     closed = Polylines.from_list([X[-1][off[i]:off[i + 1]] for i in range(len(off) - 1)], radius)
     return closed, out
+
+
+def _run_scene(scene_raw: dict, fibers: Polylines, where: str, progress=None):
+    """Validate a settling or closing scene, mesh ``fibers`` and run it: (config, mesh, result,
+    solver wall time in s)."""
+    import time as _time
+
+    from fiberpipe.config import validate_config
+    from fiberpipe.model.mesh import mesh_polylines
+    from fiberpipe.solver import simulate
+    from fiberpipe.solver.build import build_simulation
+
+    scene_raw["input"] = {"polylines": [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]}  # the fibers are given directly
+    cfg = validate_config(scene_raw, where=where)
+    mesh = mesh_polylines(fibers, float(cfg.mesh.element_length), radius_m=float(cfg.fiber.radius))
+    model, effects, settings = build_simulation(mesh, cfg)
+    t0 = _time.perf_counter()
+    result = simulate(model, effects, settings, progress=progress)
+    return cfg, mesh, result, _time.perf_counter() - t0
