@@ -128,7 +128,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     (:func:`fiberpipe.progress.progress_bar`)."""
     from fiberpipe.artifacts import write_fibers, write_json_atomic, write_text_atomic
     from fiberpipe.model.specimen import cassette_specimen
-    from fiberpipe.model.specimen_settle import fiber_contacts, settle_pile
+    from fiberpipe.model.specimen_settle import fiber_contacts
     from fiberpipe.model.specimen_stats import neighbour_orientations, specimen_statistics
     from fiberpipe.progress import progress_bar
 
@@ -163,16 +163,7 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
             raise
     deposit = {k: v for k, v in info["deposit"].items() if k != "supports"}
     deposit["wall_time_s"] = time.perf_counter() - t0
-    settle = None
-    if specimen.settle.enabled:
-        settle_cfg = specimen.settle
-        with progress_bar("settle", progress) as bar:
-            settle_raw = raw if settle_cfg.contact is None else \
-                {**raw, "scene": {**(raw.get("scene") or {}), "contact": settle_cfg.contact}}  # its own law
-            fibers, settle = settle_pile(
-                fibers, settle_raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time, mu=settle_cfg.mu,
-                lock=None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial, frames=settle_cfg.frames,
-                mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale, where=where, progress=bar)
+    fibers, settle = _settle_deposit(fibers, raw, specimen, where, progress) if specimen.settle.enabled else (fibers, None)
     closing = close_cassette(fibers, raw, specimen, r, where=where, progress=progress) \
         if specimen.upper_plate == "close" else None
     fibers = closing[0] if closing else fibers
@@ -224,6 +215,23 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
     if settle:
         info["settle_wall_time_s"] = settle["wall_time_s"]
     return info
+
+
+def _settle_deposit(fibers, raw: dict, specimen, where: str, progress: bool):
+    """The deposited pile settled in the solver by ``specimen.settle`` (with its own contact law
+    where it gives one): (settled fibers, the settling's figures)."""
+    from fiberpipe.model.specimen_settle import settle_pile
+    from fiberpipe.progress import progress_bar
+
+    settle_cfg = specimen.settle
+    settle_raw = raw if settle_cfg.contact is None else \
+        {**raw, "scene": {**(raw.get("scene") or {}), "contact": settle_cfg.contact}}
+    with progress_bar("settle", progress) as bar:
+        return settle_pile(
+            fibers, settle_raw, width_m=specimen.width, alpha_per_s=settle_cfg.damping_alpha, time_s=settle_cfg.time,
+            mu=settle_cfg.mu, lock=None if settle_cfg.lock_axial == "none" else settle_cfg.lock_axial,
+            frames=settle_cfg.frames, mass_scaling=settle_cfg.mass_scaling, gravity_scale=settle_cfg.gravity_scale,
+            where=where, progress=bar)
 
 
 def ready_config_text(raw: dict, out: Path, height_m: float, width_m: float, where: str,
