@@ -185,11 +185,11 @@ def write_checkpoint(path: str | Path, ck: Checkpoint, *, config_sha256: str = "
              "frames/time": "s", "frames/positions": "m"}
     for k, a in ck.integrator_arrays.items():
         ds[f"integrator/{k}"] = a
-    specs: dict = {}
+    structures: dict = {}
     for name, data in ck.term_data.items():
-        spec: list = []
-        _flatten(data, f"terms/{name}", ds, spec)
-        specs[name] = spec[0]
+        structure: list = []
+        _flatten(data, f"terms/{name}", ds, structure)
+        structures[name] = structure[0]
     for ename, arrs in ck.effect_arrays.items():
         for k, a in arrs.items():
             ds[f"effects/{ename}/{k}"] = np.asarray(a)
@@ -199,7 +199,7 @@ def write_checkpoint(path: str | Path, ck: Checkpoint, *, config_sha256: str = "
         "chunk_steps": int(ck.chunk_steps), "checkpoint_every": int(ck.checkpoint_every),
         "e0_kinetic_J": float(ck.e0_ke), "e0_strain_J": float(ck.e0_se), "wall_time_s": float(ck.wall_time_s),
         "effects": list(ck.effects), "h_row": int(ck.h_row),
-        "term_specs": json.dumps(specs),
+        "term_structures": json.dumps(structures),
         "effect_arrays": json.dumps({k: sorted(v) for k, v in ck.effect_arrays.items()}),
     }
     return write_artifact(path, "checkpoint", ds, units=units, attrs=attrs, config_sha256=config_sha256,
@@ -223,7 +223,8 @@ def read_checkpoint(path: str | Path, *, config_sha256: str | None = None) -> Ch
             f"was written by a version of fiberpipe with {art['state/acc'].shape[0]} energy accumulators (this one "
             f"keeps {ACC_SIZE}), so the run cannot be resumed from it; rerun with --force to start over", where=str(path))
     try:
-        terms = {name: _unflatten(spec, art.data) for name, spec in json.loads(a.get("term_specs", "{}")).items()}
+        terms = {name: _unflatten(structure, art.data)
+                 for name, structure in json.loads(a.get("term_structures", "{}")).items()}
         eff = {}
         for ename, keys in json.loads(a.get("effect_arrays", "{}")).items():
             eff[ename] = {k: art[f"effects/{ename}/{k}"] for k in keys}

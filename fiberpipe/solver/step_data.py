@@ -147,10 +147,3 @@ class StepControl(NamedTuple):
     v_limit_m_s: float    # a node faster than this is a blow-up
     x_limit_m: float      # a node farther than this from its rest position is a run-away
     e_ref_J: float        # floor of the energy scale of the blow-up check
-
-
-def empty_planes(n_nodes: int) -> PlaneArrays:
-    """A :class:`PlaneArrays` with no plane."""
-    z, zi, z2 = np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 1))
-    return PlaneArrays(zi, z, z, z2, z2.copy(), z2.copy(), zi, zi, np.zeros(0), np.zeros(0), z.copy(), z.copy(),
-                       zi.copy(), z.copy(), zi.copy(), np.zeros(1, np.int64), z.copy(), np.zeros(2))

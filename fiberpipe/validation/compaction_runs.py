@@ -6,7 +6,6 @@ read: post's summary (its mesoscale-law fits), the curve p(v_f), the history and
 
 from __future__ import annotations
 
-import math
 import tempfile
 from pathlib import Path
 from typing import NamedTuple
@@ -131,11 +130,6 @@ SEEDS = {"seeds": (0, 1, 2)}
 def seeds_for(quick: bool) -> list[int]:
     """The specimen seeds of every case, three by default (the quick variants too, on smaller specimens)."""
     return list(SEEDS["seeds"])
-
-
-def finite_mean(values) -> float:
-    v = [x for x in values if x is not None and math.isfinite(x)]
-    return float(np.mean(v)) if v else float("nan")
 
 
 def validation_config(config_name: str):

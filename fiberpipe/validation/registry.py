@@ -7,7 +7,6 @@ of docs/validation.md with its table and figure."""
 from __future__ import annotations
 
 import importlib
-import json
 import math
 import time
 from pathlib import Path
@@ -205,7 +204,3 @@ def replace_section(page: Path, text: str) -> None:
     except StopIteration:
         raise FiberpipeError(f"markers '{BEGIN}' … '{END}' not found", where=str(page)) from None
     write_text_atomic(page, "".join(lines[: i + 1]) + "\n" + text.strip("\n") + "\n\n" + "".join(lines[j:]))
-
-
-def summary_json(summary: dict) -> str:
-    return json.dumps(summary, indent=1)
