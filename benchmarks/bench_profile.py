@@ -58,8 +58,8 @@ def step_variants(state_path, steps: int, warmup: int, repeats: int) -> list[dic
             integ = Integrator(model, effects, dt, history_rows=10, history_every=10**9)
             st = load_state(state_path)
             integ.advance(st, warmup)
-            contact_on = any(term.name in ("contact", "friction") for term, _, _ in integ.plan.terms)
-            hook = integ.plan.terms[-1][1] if contact_on else None
+            contact_on = any(term.name == "contact" for term, _, _ in integ.plan.terms)
+            hook = integ.term_data("contact") if contact_on else None
             b0 = int(hook.stats.n_builds[0]) if contact_on else 0
             t = time.process_time()
             integ.advance(st, steps)
@@ -100,7 +100,8 @@ def kernel_times(state_path) -> dict:
     f = np.zeros((n, 3))
     pf, pi, pv = np.zeros(P), np.zeros(n * P, np.int64), np.zeros(n * P)
     out["planes (plane_contacts, all nodes)"] = _best(lambda: plane_contacts(
-        x, m.radius_node, integ.planes.k_pen, integ.planes.onset, sc.pl_axis, sc.pl_sign, integ.planes.pos, f, pf, pi, pv), 2000)
+        x, m.radius_node, integ.planes.k_pen, integ.planes.onset, sc.pl_axis, sc.pl_sign, integ.planes.pos, f, pf, pi, pv,
+        (sc.pl_rect_half, sc.pl_rect_centre)), 2000)
     data = integ.term_data("contact")
     segs, prm = data.segs, data.params
     pl = data.lists[1]
@@ -125,8 +126,9 @@ def kernel_times(state_path) -> dict:
     rec, n_act, calls = data.records[0], int(data.stats.n_active[0]), int(data.stats.calls[0])
     out["friction, fiber–fiber (friction_forces_ex, pairs in contact)"] = _best(lambda: friction_forces_ex(
         v, segs.nodes, pairs, npairs, rec, prm.mu, prm.kt_n_per_m, dt, data.lists[0].friction, f, n_act, calls), 2000)
+    planes_friction = integ.term_data("plane_friction")
     out["friction, plates and walls (plane_friction, candidate nodes)"] = _best(lambda: plane_friction(
-        x, v, data.planes, prm.mu, prm.kt_n_per_m, dt, f, calls, True), 2000)
+        v, integ.planes, planes_friction, dt, int(planes_friction.calls[0])), 2000)
     out["_candidates"] = npairs
     out["_in_contact"] = int(res[1])
     out["_elements"] = model.n_elements

@@ -481,6 +481,26 @@ class PlatesConfig(Section):
     upper_position: Optional[Length] = None
     penalty_factor: float = Field(0.1, gt=0, le=0.25, description=PENALTY_FACTOR_HELP)
     onset_fraction: float = Field(0.02, gt=0, le=0.5, description=ONSET_FRACTION_HELP)
+    size: Optional[list[Length]] = Field(
+        None, description="[length, width]: finite rectangular plates, their extents along the two axes of "
+        "the plate plane in x, y, z order (axis y: along x, then z); a node whose centre lies outside the "
+        "rectangle feels no plate (default: infinite plates); each at least a fiber diameter")
+    centre: Optional[list[Length]] = Field(
+        None, description="with `size`: the rectangle's centre in the plate plane, in the same order "
+        "(default: the centre of the fibers' bounding box there)")
+
+    @model_validator(mode="after")
+    def _check_size(self):
+        for key in ("size", "centre"):
+            v = getattr(self, key)
+            if v is not None and (len(v) != 2 or not all(math.isfinite(c) for c in v)):
+                raise ValueError(f"scene.plates.{key} must be two finite lengths (along the plate plane's two "
+                                 f"axes in x, y, z order), got {v}")
+        if self.size is not None and not all(c > 0 for c in self.size):
+            raise ValueError(f"scene.plates.size must be > 0 along both axes, got {self.size}")
+        if self.centre is not None and self.size is None:
+            raise ValueError("scene.plates.centre places a finite plate: give scene.plates.size too")
+        return self
 
 
 class WallsConfig(Section):
@@ -489,9 +509,14 @@ class WallsConfig(Section):
     z: Optional[list[Length]] = None
     penalty_factor: float = Field(0.1, gt=0, le=0.25, description=PENALTY_FACTOR_HELP)
     onset_fraction: float = Field(0.02, gt=0, le=0.5, description=ONSET_FRACTION_HELP)
+    mu: Optional[float] = Field(
+        None, description="Coulomb coefficient of the walls' friction on the fibers, when scene.effects lists "
+        "friction (default: scene.friction.mu); 0: frictionless walls")
 
     @model_validator(mode="after")
     def _check(self):
+        if self.mu is not None and not (self.mu >= 0 and math.isfinite(self.mu)):
+            raise ValueError(f"scene.walls.mu must be ≥ 0, got {self.mu}")
         for axis in "xyz":
             v = getattr(self, axis)
             if v is not None and (len(v) != 2 or not v[0] < v[1]):
@@ -727,6 +752,8 @@ class SceneConfig(Section):
         for name in ("clamps", "loads", "drives"):
             if getattr(self, name) and name not in self.effects:
                 out.append(f"scene.{name} is configured but not listed in scene.effects: it is ignored")
+        if "walls" in self.effects and self.walls.mu is not None and "friction" not in self.effects:
+            out.append("scene.walls.mu is set but scene.effects lists no friction: the walls are frictionless")
         if "loading" in self.model_fields_set and not (
             "plates" in self.effects and "moving" in (self.plates.lower, self.plates.upper)
         ):

@@ -224,8 +224,8 @@ def test_fiber_pinched_between_a_plate_and_other_fibers():
     small, nothing escapes the walls."""
     m = _three_beams()
     # the plate travels 6 µm, past the planes' 5 µm penalty onset (2 % of r), so the pinch is a hard one
-    eff = [Plates(axis="z", lower="fixed", upper="moving", displacement_m=6e-6, velocity_m_s=0.05),
-           Walls({"y": (-2 * R, 2 * R)}), Damping(1e5), hook(m, friction=True)]
+    eff = [Plates(axis="z", lower="fixed", upper="moving", displacement_m=6e-6, velocity_m_s=0.05, mu=0.2),
+           Walls({"y": (-2 * R, 2 * R)}, mu=0.2), Damping(1e5), hook(m, friction=True)]
     res = simulate(m, eff, SimulationSettings(end_time_s=0.4e-3, output_frames=5))  # loading 130 us, then settle
     F = np.asarray(res.history["plate_force"])
     walls = np.asarray(res.history["wall_force"])[-1]
@@ -260,8 +260,8 @@ def test_dense_bundle_compacted_to_vf_07():
     h_final = 9 * math.pi * R**2 / (0.7 * w)
     U = y_top - h_final
     eff = [Plates(axis="y", lower="moving", upper="fixed", displacement_m=U, velocity_m_s=0.5,
-                  lower_position_m=0.0, upper_position_m=y_top),
-           Walls({"x": (-w / 2, w / 2)}), Damping(1e5), hook(m, friction=True)]
+                  lower_position_m=0.0, upper_position_m=y_top, mu=0.2),
+           Walls({"x": (-w / 2, w / 2)}, mu=0.2), Damping(1e5), hook(m, friction=True)]
     res = simulate(m, eff, SimulationSettings(output_frames=5))
     assert res.completed
     vf = 9 * math.pi * R**2 / (w * (y_top - U))
@@ -277,8 +277,8 @@ def test_high_loading_velocity_without_damping():
     y_top = float(m.nodes_m[:, 1].max() + R)
     U = 0.25e-3
     eff = [Plates(axis="y", lower="moving", upper="fixed", displacement_m=U, velocity_m_s=1.0,
-                  lower_position_m=0.0, upper_position_m=y_top),
-           Walls({"x": (-w / 2, w / 2)}), hook(m, friction=True)]
+                  lower_position_m=0.0, upper_position_m=y_top, mu=0.2),
+           Walls({"x": (-w / 2, w / 2)}, mu=0.2), hook(m, friction=True)]
     res = simulate(m, eff, SimulationSettings(output_frames=5))
     assert res.completed
     assert_bounded(res, m, box=([-w / 2, U, 0], [w / 2, y_top, 3e-3]), residual=0.05, pen=0.05)

@@ -148,7 +148,7 @@ PLANE_LIST_MARGIN = 0.2
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f):
+def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f, rect):
     """Penalty forces of rigid planes on the nodes.
 
     Parameters
@@ -164,6 +164,9 @@ def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, 
     pl_force : (P,) float64, N — out: reaction on each plane, positive when pressed.
     pen_idx : (M,) int64, pen_f : (M,) float64 — out: the touching nodes' indices and the force
         component along their plane's axis (signed), for the work bookkeeping; M ≥ N·P.
+    rect : ``(half, centre)``, (P, 2) float64 each, m — a finite plane's rectangle: its half extents
+        and centre along the plane's two axes in x, y, z order (:func:`in_plane_axes`); a node whose
+        centre lies outside it does not touch the plane. ``half[p, 0] = 0``: plane p is infinite.
 
     Returns
     -------
@@ -172,36 +175,45 @@ def plane_contacts(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, 
     (:func:`plane_onset`).
     """
     return _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
-                       pen_idx, pen_idx, False)
+                       pen_idx, pen_idx, pen_f, rect, False)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def plane_contacts_listed(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
-                          cand_idx, cand_off):
+                          cand_idx, cand_off, cand_fn, rect):
     """:func:`plane_contacts` over the nodes :func:`plane_candidates` listed near each plane (in node
-    order, so the sums are the same to the last bit), the caller keeping the list valid."""
+    order, so the sums are the same to the last bit), the caller keeping the list valid; each listed
+    node's normal force ``k g g'`` [N] into ``cand_fn`` (−1 where it does not touch), which the
+    planes' friction reads (:func:`fiberpipe.solver.friction.plane_friction`)."""
     return _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f,
-                       cand_idx, cand_off, True)
+                       cand_idx, cand_off, cand_fn, rect, True)
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_force, pen_idx, pen_f, cand_idx,
-                cand_off, listed):
+                cand_off, cand_fn, rect, listed):
     """The body of :func:`plane_contacts` (every node, ``listed`` False) and of
     :func:`plane_contacts_listed` (the nodes ``cand_idx[cand_off[p]:cand_off[p + 1]]`` of plane p)."""
     n_pen = 0
     energy = 0.0
+    half, centre = rect
     # plane outer, node inner: a tight loop over the nodes per plane (most nodes do not touch)
     for p in range(pl_axis.shape[0]):
         ax = pl_axis[p]
         sg = pl_sign[p]
         pos = pl_pos[p]
+        finite = half[p, 0] > 0.0
+        u, w = in_plane_axes(ax)
         fsum = 0.0
         lo = cand_off[p] if listed else 0
         hi = cand_off[p + 1] if listed else x.shape[0]
         for c in range(lo, hi):
             i = cand_idx[c] if listed else c
             d = radius_node[i] - sg * (x[i, ax] - pos)
+            if finite and d > 0.0:
+                # a finite plate: a node whose centre lies outside its rectangle does not touch it
+                if abs(x[i, u] - centre[p, 0]) > half[p, 0] or abs(x[i, w] - centre[p, 1]) > half[p, 1]:
+                    d = 0.0
             if d > 0.0:
                 g, gp = plane_onset(d, onset_m[i])
                 fn = k_pen[i] * g * gp
@@ -211,8 +223,18 @@ def _plane_pass(x, radius_node, k_pen, onset_m, pl_axis, pl_sign, pl_pos, f, pl_
                 pen_idx[n_pen] = i * 3 + ax
                 pen_f[n_pen] = sg * fn
                 n_pen += 1
+                if listed:
+                    cand_fn[c] = fn
+            elif listed:
+                cand_fn[c] = -1.0
         pl_force[p] = fsum
     return n_pen, energy
+
+
+@njit(cache=True, inline="always")
+def in_plane_axes(axis):
+    """The two axes of a plane normal to ``axis``, in x, y, z order (axis y: x, then z)."""
+    return (1 if axis == 0 else 0), (1 if axis == 2 else 2)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -222,8 +244,8 @@ def plane_candidates(x, radius_node, pl_axis, pl_sign, pl_pos, margin, cand_idx,
 
     A node can touch plane ``p`` later only if its gap closed by more than ``margin``, i.e. if the
     node and the plane moved by more than ``margin`` together since: while they have not,
-    :func:`plane_contacts_listed` and :func:`fiberpipe.solver.friction.plane_friction` may visit these
-    nodes only (a few hundred) instead of all N per plane.
+    :func:`plane_contacts_listed` and the planes' friction (:func:`fiberpipe.solver.friction.plane_friction`)
+    visit these nodes only (a few hundred) instead of all N per plane.
     cand_idx : (N·P,) int64, cand_off : (P + 1,) int64 — out. Returns the number of candidates.
     """
     n = 0

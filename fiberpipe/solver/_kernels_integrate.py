@@ -21,8 +21,8 @@ ALLWK = constant loads' work ``f_ext · (x_n − x_0)`` plus the reactions of pr
 being the whole force that imposes its motion, ``m (v_{n+½} − v_{n−½})/Δt − f_n + α m v̄`` (the
 damping force acts on the absolute velocity of every node, driven ones included, and its
 dissipation there is in ALLVD); ALLPW = work of the plane penalties
-on the fibers minus the plates' prescribed work (plus whatever the contact hook adds); ALLFD from
-the contact hook only. Works over a step use ``f_n · v̄ Δt`` (trapezoid, second order).
+on the fibers minus the plates' prescribed work (plus whatever the per-step terms add); ALLFD from
+the friction terms only (the contact term's fiber pairs, the planes' friction). Works over a step use ``f_n · v̄ Δt`` (trapezoid, second order).
 """
 
 from __future__ import annotations
@@ -451,10 +451,10 @@ def _advance_template(model, scene, state, work, control, terms, owner):
     N = x.shape[0]
     coef = damping_factors(scene.alpha_per_s, dt)  # the constant factors of the update, folded once per call
     acc_before = np.zeros(ACC_SIZE)
-    # the owner term's force array and friction force array, which the update adds to the nodes,
-    # books (Δt f_n·v̄_n; the friction's as friction work too) and clears ((0, 3): none)
+    # the owner term's force array and the scene's friction force array, which the update adds to the
+    # nodes, books (Δt f_n·v̄_n; the friction's as friction work too) and clears ((0, 3): none)
     fc, has_fc = _node_array(_owner_forces(owner), N)
-    ff, has_ff = _node_array(_owner_friction(owner), N)
+    ff, has_ff = _node_array(scene.friction_f, N)
     fixity = scene.fixity
     f_ext, _ = _node_array(scene.f_ext, N)  # the update resets f to it for every node
     # the forces of the first step; the update resets f and mom for each next one
@@ -500,7 +500,7 @@ def _advance_template(model, scene, state, work, control, terms, owner):
         acc[ACC_VD] += vd_scale * vd
         acc[ACC_WK] += wk_fix
         finish_planes(scene.planes, v, acc, dt, n_pen)
-        _book_owner_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1)
+        _book_update_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1)
         done = it + 1
         # ---- history and checks ----
         if record:
@@ -530,8 +530,9 @@ def _prescribe_drives(scene, fixity, t, dt):
 
 
 @njit(inline="always", **_FLAGS)
-def _book_owner_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1):
-    """The work of the owner term's forces the update applied (:func:`update_range`'s sums)."""
+def _book_update_work(acc, dt, has_fc, has_ff, pw_c, wf_0, wf_1):
+    """The work of the forces the update applied from the owner term's and the friction arrays
+    (:func:`update_range`'s sums)."""
     if has_fc:
         acc[ACC_PW] += dt * pw_c
     if has_ff:
@@ -608,10 +609,10 @@ def terms_chain(kernels, records, tag: str):
 # ---- specialisations of the step loop, one per tuple of per-step terms ----------------------------
 #
 # Each specialisation is a copy of ``_advance_template`` whose globals ``_terms_eval`` and
-# ``_terms_record`` are bound to the chain of the scene's terms and ``_owner_forces`` and
-# ``_owner_friction`` to the force arrays' accessors of the term that hands its forces to the update.
-# Scenes whose terms are all built in are cached on disk under a name made of the terms' cache names
-# and the accessors' names (so an entry is found only with what it was compiled with); their freshness
+# ``_terms_record`` are bound to the chain of the scene's terms and ``_owner_forces`` to the force
+# array's accessor of the term that hands its forces to the update. Scenes whose terms are all built
+# in are cached on disk under a name made of the terms' cache names and the accessor's name (so an
+# entry is found only with what it was compiled with); their freshness
 # covers every module of the package (``_jitcache``), so an edit of a term's module recompiles them.
 # Any other tuple gets an uncached specialisation, compiled once per process.
 
@@ -619,30 +620,28 @@ _terms_eval = _end_eval
 _terms_record = _end_record
 _beam_pass = beam_pass_all
 _owner_forces = no_forces
-_owner_friction = no_forces
 _update_pass = update_nodes
 
 
-def _specialise(name: str, chain, owner_accessors, cache: bool, parallel: bool = False):
-    (chain_eval, chain_record), (forces_of, friction_of) = chain, owner_accessors
+def _specialise(name: str, chain, forces_of, cache: bool, parallel: bool = False):
+    chain_eval, chain_record = chain
     return specialise(_advance_template, name, {
-        "_terms_eval": chain_eval, "_terms_record": chain_record,
-        "_owner_forces": forces_of, "_owner_friction": friction_of,
+        "_terms_eval": chain_eval, "_terms_record": chain_record, "_owner_forces": forces_of,
         "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
         "_update_pass": update_nodes_fibers if parallel else update_nodes,
     }, cache=cache, fastmath=True, error_model="numpy")
 
 
-advance_plain = _specialise("advance_plain", (_end_eval, _end_record), (no_forces, no_forces), True)
+advance_plain = _specialise("advance_plain", (_end_eval, _end_record), no_forces, True)
 _LOOPS: dict = {}
 
 
-def step_loop_for(kernels=(), records=(), *, forces_of=no_forces, friction_of=no_forces, threads: int = 1,
-                  cache_names=()):
+def step_loop_for(kernels=(), records=(), *, forces_of=no_forces, threads: int = 1, cache_names=()):
     """The jitted step loop calling the per-step terms' ``kernels`` in turn (none: ``advance_plain``).
 
     records : per kernel, :func:`record_energy` (the term declares energy slots) or :func:`no_record`.
-    forces_of, friction_of : the accessors of the owner term's force arrays (``no_forces``: none).
+    forces_of : the accessor of the owner term's force array (``no_forces``: none). The friction forces
+    come from the scene's array (``SceneKernel.friction_f``), whichever terms add to it.
     cache_names : per kernel, its built-in name for the on-disk cache; the loop is cached when every
     kernel has one (else compiled in every process). ``threads > 1``: the variant whose beam pass and
     update run as prange tasks of contiguous nodes; cached whole under its own name, its parallel
@@ -653,14 +652,14 @@ def step_loop_for(kernels=(), records=(), *, forces_of=no_forces, friction_of=no
     if not kernels and not parallel:
         return advance_plain
     cache = len(cache_names) == len(kernels) and all(cache_names)
-    key = (kernels, records, forces_of, friction_of, parallel, tuple(cache_names) if cache else None)
+    key = (kernels, records, forces_of, parallel, tuple(cache_names) if cache else None)
     loop = _LOOPS.get(key)
     if loop is None:
         name = "advance_" + ("_".join(cache_names) if cache else "terms") if kernels else "advance_plain"
         if cache and kernels:
-            name += f"_{forces_of.__name__}_{friction_of.__name__}"
+            name += f"_{forces_of.__name__}"
         tag = f"{name}{len(_LOOPS)}"
         loop = _specialise(name + ("_threads" if parallel else ""), terms_chain(kernels, records, tag),
-                           (forces_of, friction_of), cache, parallel)
+                           forces_of, cache, parallel)
         _LOOPS[key] = loop
     return loop

@@ -57,8 +57,9 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Term], SimulationSettings]:
 
 def terms_from_config(scene_cfg, model: Model, cfg) -> list[Term]:
     """The terms ``scene.effects`` lists, each from its class's ``from_config`` (``TERMS``); entries
-    sharing one class (contact and friction) give one term. The per-step terms come last, in the order
-    listed: the contact term reads the planes the others define."""
+    sharing one class (contact and friction) give one term, and an entry whose ``from_config``
+    returns None gives none (``friction`` without ``contact``: the plates and walls carry it). The
+    per-step terms come last, in the order listed."""
     folded: list[Term] = []
     per_step: list[Term] = []
     built = set()
@@ -68,5 +69,7 @@ def terms_from_config(scene_cfg, model: Model, cfg) -> list[Term]:
             continue
         built.add(cls)
         term = cls.from_config(scene_cfg, model, cfg)
+        if term is None:
+            continue
         (per_step if term.kernels() is not None else folded).append(term)
     return folded + per_step

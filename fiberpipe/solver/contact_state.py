@@ -11,8 +11,8 @@
   rebuild (friction springs, initial-overlap offsets);
 - ``records``: a typed list holding one :class:`PairRecords` — this step's per-pair results;
 - ``fc``: the hook's force array (the step loop adds it to the nodes and clears it);
-- ``planes`` (:class:`PlaneFriction`): the plates and walls, for their friction;
-- ``ff``: this step's friction forces, which the step loop's update applies and books.
+- ``ff``: the scene's friction force array (``SceneArrays.friction_forces``), which the step loop's
+  update applies and books.
 
 The kernel grows the buffers of ``lists`` and ``records`` itself when the neighbour list
 overflows (a new NamedTuple replaces the old one in its typed list).
@@ -33,7 +33,6 @@ class ContactParams(NamedTuple):
     law_id: int             # the law's kernel id (fiberpipe.solver.laws)
     law_params: np.ndarray  # float64, the law's parameter array
     friction_on: bool       # fiber–fiber friction
-    plane_friction_on: bool  # fiber–plane friction (plates, walls)
     skin_m: float           # Verlet skin
     exclusion_m: float      # segments of one fiber closer than this along the fiber are not paired
     mu: float               # Coulomb coefficient
@@ -56,12 +55,12 @@ class ContactStats(NamedTuple):
     fn_sum_n: np.ndarray      # Σ normal force of the pairs in contact at the last step, N
     delta_max_m: np.ndarray   # largest penetration at the last step, m
     e_contact_J: np.ndarray   # stored normal contact energy at the last step, J
-    e_spring_J: np.ndarray    # elastic energy of the friction springs (fiber pairs and planes), J
+    e_spring_J: np.ndarray    # elastic energy of the fiber–fiber friction springs, J
     offset_max_m: np.ndarray  # largest initial-overlap offset still applied, m
     path_m: np.ndarray        # bound on the path of any node since the last build, Σ Δt max|v|, m
     delta_peak_m: np.ndarray  # largest penetration since the caller last reset it (the run's slope watch), m
     secant_peak_n_per_m: np.ndarray  # largest F_n/δ of a pair in contact since the same reset, N/m
-    friction_returned_J: np.ndarray  # energy the friction gave back so far (its contacts' negative dissipations), J
+    friction_returned_J: np.ndarray  # energy the scene's friction gave back so far (its contacts' negative dissipations), J
 
 
 class Segments(NamedTuple):
@@ -95,27 +94,6 @@ class PairRecords(NamedTuple):
     active: np.ndarray  # (C,) int64, indices of the pairs in contact (size 0: not listed)
 
 
-class PlaneFriction(NamedTuple):
-    """The plates and walls (as the step loop's planes) for their friction, P planes."""
-
-    radius_node: np.ndarray  # (N,) m
-    k_pen: np.ndarray        # (N,) N/m, the plane penalty per node
-    onset: np.ndarray        # (N,) m, the plane penalty's onset length per node
-    axis: np.ndarray         # (P,) int64
-    sign: np.ndarray         # (P,)
-    pos0: np.ndarray         # (P,) m
-    move: np.ndarray         # (P, S) m, the travel table (step_data.PlaneArrays)
-    T: np.ndarray            # (P, S) s
-    ta: np.ndarray           # (P, S) s
-    mode: np.ndarray         # (P,) int64
-    pos: np.ndarray          # (P,) m, position at this step
-    vel: np.ndarray          # (P, 3) m/s, velocity at this step
-    hist: np.ndarray         # (N, max(P, 1), 4) tangential spring force (3) and step of last update
-    tforce: np.ndarray       # (max(P, 1), 3) N, tangential reaction on each plane
-    cand_idx: np.ndarray     # (N·P,) int64, the nodes near each plane (the plane pass's list, shared)
-    cand_off: np.ndarray     # (P + 1,) int64, CSR offsets into cand_idx
-
-
 class ContactData(NamedTuple):
     params: ContactParams
     stats: ContactStats
@@ -124,8 +102,7 @@ class ContactData(NamedTuple):
     lists: object      # numba typed List of 2 PairList: [in use, spare]
     records: object    # numba typed List of 1 PairRecords
     fc: np.ndarray     # (N, 3) N, this step's normal contact forces
-    planes: PlaneFriction
-    ff: np.ndarray     # (N, 3) N, this step's friction forces (fiber pairs, plates, walls)
+    ff: np.ndarray     # (N, 3) N, the scene's friction forces ((0, 3) without friction)
 
 
 def new_stats() -> ContactStats:

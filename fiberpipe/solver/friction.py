@@ -30,7 +30,8 @@ giving energy back; its sum is kept apart (``returned``).
 Fiber–fiber: one history per segment pair, keyed ``i·E + j`` (the Verlet list's sorted keys), applied
 at the pair's force-weighted contact point (``c_s``, ``c_t`` from the contact kernel) along its
 resultant normal ``c_n``; :func:`remap_history` carries it across neighbour-list rebuilds by
-``searchsorted`` on the sorted keys. Fiber–plane: one history per (node, plane), so it needs no remap.
+``searchsorted`` on the sorted keys. Fiber–plane (:func:`plane_friction`, the planes term's): one
+history per (node, plane), so it needs no remap; its normal force is the plane penalty's.
 """
 
 from __future__ import annotations
@@ -41,8 +42,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._tasks import task_count
-from ._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
-from .contact_state import PairRecords, PlaneFriction
+from .contact_state import PairRecords
 from .geometry import apply_pair_force, pair_nodes
 
 
@@ -333,27 +333,26 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=False):
-    """Friction of rigid planes on the nodes (same penetration rule as the plate normal penalty).
+def plane_friction(v, planes, friction, dt, step):
+    """Friction of rigid planes on the nodes touching them, from the plane pass of this step.
 
-    ``planes`` : :class:`fiberpipe.solver.contact_state.PlaneFriction` (its ``pos``, ``vel``,
-    ``hist``, ``tforce`` and the candidates ``cand_idx``, ``cand_off`` are read at this step).
-    Node ``i`` touches plane ``p`` (axis ``a``, sign ``σ``, position ``s_p``) when
-    ``δ = r_i − σ(x_{i,a} − s_p) > 0``; its normal force is ``k_pen[i]·g(δ)·g'(δ)`` (added by the plate kernel
-    ``_kernels_boundary.plane_contacts``, not here). Here only the tangential force, from the
-    node's velocity relative to the plane (``pl_vel`` (P, 3) m/s), with history ``hist`` (N, P, 3)
-    [N], or (N, P, 4) with the step of each entry's last update in column 3 and ``step`` ≥ 0, this
-    step's number (the default −1: no time stamps, open entries are cleared): then a node off the
-    plane is not visited again, and its history counts only if it
-    touched at ``step − 1``. ``pl_tforce`` (P, 3) receives the tangential reaction on each plane.
-    ``use_candidates`` (with time stamps): visit only the nodes ``cand_idx``, ``cand_off`` per plane
-    (:func:`fiberpipe.solver._kernels_boundary.plane_candidates`; the caller keeps them valid), not all N.
-    Returns (the dissipated energy [J], the elastic energy of the tangential springs [J], the energy
-    given back [J], as :func:`friction_forces_ex`).
+    ``planes`` : :class:`fiberpipe.solver.step_data.PlaneArrays` after the plane pass
+    (:func:`fiberpipe.solver._kernels_boundary.plane_contacts_listed`): its list of the nodes near
+    each plane (``cand_idx``, ``cand_off``) and each listed node's normal force ``cand_fn`` [N]
+    (``k_i g(δ) g'(δ)``, −1 where the node does not touch the plane). ``friction`` : the planes'
+    friction data (:class:`fiberpipe.solver.terms.planes.PlaneFrictionData`): ``mu`` (P,) and
+    ``kt_n_per_m`` (P,) per plane, the planes' velocities ``vel`` (P, 3) m/s, the history ``hist``
+    (N, P, 4) [N] of each (node, plane) entry with the step of its last update in column 3, the
+    tangential reaction ``tforce`` (P, 3) on each plane (out) and the friction force array ``ff``
+    (N, 3) the forces are added to. ``step`` ≥ 0: this step's number; an entry's history counts only
+    if it was updated at ``step − 1``, so a node that left the plane starts afresh when it comes
+    back. Here only the tangential force, from the node's velocity relative to the plane, returned
+    onto the cone ``μ f_n`` (the normal force is the plane pass's). Returns (the dissipated energy
+    [J], the elastic energy of the tangential springs [J], the energy given back [J], as
+    :func:`friction_forces_ex`).
     """
-    radius_node, k_pen, onset, pl_axis, pl_sign = planes.radius_node, planes.k_pen, planes.onset, planes.axis, planes.sign
-    pl_pos = planes.pos
-    pl_vel, hist, pl_tforce, cand_idx, cand_off = planes.vel, planes.hist, planes.tforce, planes.cand_idx, planes.cand_off
+    pl_axis, pl_sign, cand_idx, cand_off, cand_fn = planes.axis, planes.sign, planes.cand_idx, planes.cand_off, planes.cand_fn
+    pl_vel, hist, pl_tforce, f_out = friction.vel, friction.hist, friction.tforce, friction.ff
     diss = 0.0
     espring = 0.0
     returned = 0.0
@@ -362,13 +361,15 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
         pl_tforce[p, 0] = 0.0
         pl_tforce[p, 1] = 0.0
         pl_tforce[p, 2] = 0.0
-    lazy = hist.shape[2] > 3 and step >= 0
     hflat = hist.reshape(hist.shape[0] * npl, hist.shape[2])  # a view (C-contiguous): no per-node view
-    # plane outer, node inner (one axis per plane: a tight loop over the nodes, most not touching)
+    # plane outer, node inner (one axis per plane: a tight loop over the listed nodes)
     for p in range(npl):
+        mu = friction.mu[p]
+        if mu == 0.0:
+            continue
+        k_t = friction.kt_n_per_m[p]
         ax = pl_axis[p]
         sg = pl_sign[p]
-        pos = pl_pos[p]
         n0 = 0.0
         n1 = 0.0
         n2 = 0.0
@@ -378,31 +379,21 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
             n1 = sg
         else:
             n2 = sg
-        all_nodes = not (use_candidates and lazy)
-        if all_nodes:
-            c_lo = 0
-            c_hi = x.shape[0]
-        else:
-            c_lo = cand_off[p]
-            c_hi = cand_off[p + 1]
-        for c in range(c_lo, c_hi):
-            if all_nodes:
-                i = c
-            else:
-                i = cand_idx[c]
-            d = radius_node[i] - sg * (x[i, ax] - pos)
+        for c in range(cand_off[p], cand_off[p + 1]):
+            i = cand_idx[c]
+            fn = cand_fn[c]
             r = i * npl + p
-            touched = not lazy or hflat[r, 3] == step - 1  # the entry holds the force of the last step
+            touched = hflat[r, 3] == step - 1  # the entry holds the force of the last step
             p0 = hflat[r, 0] if touched else 0.0
             p1 = hflat[r, 1] if touched else 0.0
             p2 = hflat[r, 2] if touched else 0.0
-            if d <= 0.0 and p0 == 0.0 and p1 == 0.0 and p2 == 0.0:
+            if fn < 0.0 and p0 == 0.0 and p1 == 0.0 and p2 == 0.0:
                 continue
             du0 = (v[i, 0] - pl_vel[p, 0]) * dt
             du1 = (v[i, 1] - pl_vel[p, 1]) * dt
             du2 = (v[i, 2] - pl_vel[p, 2]) * dt
             e_prev = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2) / k_t
-            if d <= 0.0:
+            if fn < 0.0:
                 # off the plane: the entry forgets its force, whose energy is dissipated
                 hflat[r, 0] = 0.0
                 hflat[r, 1] = 0.0
@@ -415,10 +406,7 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
                 hflat[r, 0] = 0.0
                 hflat[r, 1] = 0.0
                 hflat[r, 2] = 0.0
-            if lazy:
-                hflat[r, 3] = step
-            g, gp = plane_onset(d, onset[i])
-            fn = k_pen[i] * g * gp  # the plane penalty's normal force (_kernels_boundary.plane_contacts)
+            hflat[r, 3] = step
             f0, f1, f2 = _return_map(hflat, r, n0, n1, n2, du0, du1, du2, fn, mu, k_t)
             e_new = 0.5 * (f0 * f0 + f1 * f1 + f2 * f2) / k_t
             dd = _dissipated(p0, p1, p2, du0, du1, du2, e_prev, f0, f1, f2, du0, du1, du2, e_new)
@@ -432,17 +420,3 @@ def plane_friction(x, v, planes, mu, k_t, dt, f_out, step=-1, use_candidates=Fal
             pl_tforce[p, 1] -= f1
             pl_tforce[p, 2] -= f2
     return diss, espring, returned
-
-
-def plane_friction_arrays(radius_node, k_pen, axis, sign, pos, vel, hist, tforce, cand_idx=None, cand_off=None,
-                          onset_fraction=DEFAULT_ONSET_FRACTION):
-    """A :class:`PlaneFriction` for calling :func:`plane_friction` directly (tests, scripts); the
-    ramp fields are those of fixed planes at ``pos``, the onset ``onset_fraction`` of each radius."""
-    P = len(axis)
-    z = np.zeros(P)
-    radius_node = np.asarray(radius_node, float)
-    return PlaneFriction(radius_node, np.asarray(k_pen, float), onset_fraction * radius_node, np.asarray(axis, np.int64),
-                         np.asarray(sign, float), np.asarray(pos, float).copy(), z, np.ones(P), z.copy(),
-                         np.zeros(P, np.int64), np.asarray(pos, float), np.asarray(vel, float), hist, tforce,
-                         np.zeros(0, np.int64) if cand_idx is None else np.asarray(cand_idx, np.int64),
-                         np.zeros(P + 1, np.int64) if cand_off is None else np.asarray(cand_off, np.int64))

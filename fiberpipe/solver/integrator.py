@@ -32,7 +32,7 @@ from .state import State
 from .step_data import DriveArrays, Fixity, ModelArrays, SceneKernel, StepControl, StepState, WorkArrays
 from .terms.base import SceneArrays, Term, no_forces
 from .terms.planes import CHECKPOINT_FIELDS as PLANE_CHECKPOINT_FIELDS
-from .terms.planes import plane_arrays, plane_check, plane_energy
+from .terms.planes import plane_check, plane_energy, set_up_planes
 from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
@@ -129,7 +129,9 @@ class SimulationResult:
     dt_s, steps, elements, wall_time_s, effects (names), timestep (TimeStepReport),
     final_state (State), completed (False for the partial result of a diverged run),
     wall_names (labels of the wall columns), warnings (what the effects' looks between chunks found,
-    e.g. a contact law whose slope outgrew the step: one line each).
+    e.g. a contact law whose slope outgrew the step: one line each), friction_returned_J (the energy
+    the scene's friction gave back, the sum of its contacts' negative dissipations, J; None without
+    friction).
     """
 
     frames_time: np.ndarray
@@ -147,6 +149,7 @@ class SimulationResult:
     wall_names: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    friction_returned_J: float | None = None
 
 
 def choose_time_step(model: Model, effects: Sequence[Term], settings: SimulationSettings) -> tuple[float, TimeStepReport]:
@@ -231,10 +234,10 @@ def _set_up_terms(model: Model, terms: Sequence[Term], scene: SceneArrays) -> li
 def _scene_plan(per_step: list, first_column: int, threads: int) -> ScenePlan:
     """The chain, the owner and the step loop of the per-step terms ``(term, data, kernels)``; the
     terms' energy columns from ``first_column`` on."""
-    owners = [i for i, (_, _, k) in enumerate(per_step) if k.forces_of is not None or k.friction_of is not None]
+    owners = [i for i, (_, _, k) in enumerate(per_step) if k.forces_of is not None]
     if len(owners) > 1:
         raise FiberpipeError(f"terms {[per_step[i][0].name for i in owners]} both hand their forces to the node "
-                             "update (forces_of / friction_of): one may, the others add theirs to f")
+                             "update (forces_of): one may, the others add theirs to f")
     rows, column = [], first_column
     for term, data, k in per_step:
         rows.append((term, data, column if term.energies else -1))
@@ -242,8 +245,7 @@ def _scene_plan(per_step: list, first_column: int, threads: int) -> ScenePlan:
     evals = [k.eval_threads if threads > 1 and k.eval_threads is not None else k.eval for _, _, k in per_step]
     records = [record_energy if term.energies else no_record for term, _, _ in per_step]
     owner = per_step[owners[0]][2] if owners else None
-    loop = step_loop_for(evals, records, forces_of=getattr(owner, "forces_of", None) or no_forces,
-                         friction_of=getattr(owner, "friction_of", None) or no_forces, threads=threads,
+    loop = step_loop_for(evals, records, forces_of=getattr(owner, "forces_of", None) or no_forces, threads=threads,
                          cache_names=[k.cache_name for _, _, k in per_step])
     owner_index = owners[0] if owners else -1
     return ScenePlan(rows, _chain_of(rows), rows[owner_index][1] if owners else (), owner_index, loop)
@@ -272,12 +274,15 @@ class Integrator:
         self.dt = float(dt)
         scene = SceneArrays(model, self.dt)
         per_step = _set_up_terms(model, self.effects, scene)
+        # the plane pass's arrays, and the planes' friction at the end of the chain (after the contact
+        # term's: the friction forces add up in that order)
+        self.planes, plane_terms = set_up_planes(model, scene)
+        per_step += plane_terms
         self.scene = scene
         n = model.n_nodes
         self.f = np.zeros((n, 3))
         self.mom = np.zeros((n, 3))
         self.strain_prev = np.zeros((model.n_elements, 6)) if scene.beta > 0 else np.zeros((0, 6))
-        self.planes = plane_arrays(scene)
         self.drive_v = np.zeros_like(scene.drive_vec)
         self.history_every = int(history_every)
         # solver.threads > 1: the beam pass and the update run as prange tasks of contiguous nodes
@@ -316,7 +321,7 @@ class Integrator:
         scene = self.scene
         drives = DriveArrays(scene.drive_vec, scene.drive_T, scene.drive_ta, scene.drive_mode, self.drive_v)
         scene_kernel = SceneKernel(float(scene.alpha), float(scene.beta), scene.f_ext, scene.fix_mask,
-                                   scene.node_drive, drives, self.planes, self.fixity)
+                                   scene.node_drive, drives, self.planes, self.fixity, scene.friction_f)
         work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist, self.task_sums)
         return scene_kernel, work
 
@@ -714,7 +719,9 @@ class _Run:
             dt_s=plan.dt_s, steps=state.step, elements=model.n_elements,
             wall_time_s=self.wall_before + time.perf_counter() - self.t_wall,
             effects=[term.name for term in self.effects], timestep=rep, final_state=state, completed=completed,
-            wall_names=list(integrator.scene.wall_names), warnings=list(self.warnings), notes=notes)
+            wall_names=list(integrator.scene.wall_names), warnings=list(self.warnings), notes=notes,
+            friction_returned_J=(float(integrator.scene.friction_returned()[0])
+                                 if integrator.scene.friction_f.shape[0] else None))
 
     def diverged(self, state: State, last_good: State, status: int, bad: int, detail: str) -> SimulationDiverged:
         """The exception of a run that failed a check: its partial result ends at the last good state."""

@@ -75,8 +75,12 @@ class PlaneArrays(NamedTuple):
     # no node and no plane can have moved by the list's margin since it was taken
     cand_idx: np.ndarray   # (N·P,) int64, the listed nodes, plane after plane
     cand_off: np.ndarray   # (P + 1,) int64, CSR offsets into cand_idx
+    cand_fn: np.ndarray    # (N·P,) N, out: each listed node's normal force (−1: not touching), for the friction
     cand_pos: np.ndarray   # (P,) m, plane positions when listed
     cand_slack: np.ndarray  # (2,) m: the margin left (Σ Δt max|v| subtracted each step), the list's margin
+    # a finite plate's rectangle along the plane's two axes in x, y, z order (_kernels_boundary.in_plane_axes)
+    rect_half: np.ndarray  # (P, 2) m, its half extents (0: the plane is infinite)
+    rect_centre: np.ndarray  # (P, 2) m, its centre
 
 
 class DriveArrays(NamedTuple):
@@ -111,6 +115,7 @@ class SceneKernel(NamedTuple):
     drives: DriveArrays
     planes: PlaneArrays
     fixity: Fixity
+    friction_f: np.ndarray    # (N, 3) N, the friction forces the terms leave for the update, or (0, 3)
 
 
 class StepState(NamedTuple):

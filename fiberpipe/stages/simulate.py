@@ -318,21 +318,19 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     hist = result.history
     if "plate_force" in hist and len(hist["plate_force"]):
         figures["final_plate_force_N"] = [float(v) for v in np.asarray(hist["plate_force"])[-1]]
-    figures.update(_friction_returned(effects, hist))
+    figures.update(_friction_returned(result.friction_returned_J, hist))
     return figures
 
 
-def _friction_returned(effects, hist) -> dict:
-    """The energy the friction gave back over the run (the sum of its contacts' negative
-    dissipations, solver.friction), in J and over ALLFD: friction only dissipates when it is ≈ 0."""
-    for e in effects:
-        data = getattr(getattr(e, "setup_info", None), "data", None)
-        if data is not None and getattr(e.setup_info, "friction_on", False):
-            back = float(data.stats.friction_returned_J[0])
-            fd = np.asarray(hist.get("energy/friction", []), float)
-            fd = float(fd[-1]) if fd.size else 0.0
-            return {"friction_returned_J": back, "friction_returned_over_dissipated": back / fd if fd > 0 else 0.0}
-    return {}
+def _friction_returned(back, hist) -> dict:
+    """The energy the friction gave back over the run (``back``, J: the sum of its contacts' negative
+    dissipations, solver.friction; None without friction), in J and over ALLFD: friction only
+    dissipates when it is ≈ 0."""
+    if back is None:
+        return {}
+    fd = np.asarray(hist.get("energy/friction", []), float)
+    fd = float(fd[-1]) if fd.size else 0.0
+    return {"friction_returned_J": back, "friction_returned_over_dissipated": back / fd if fd > 0 else 0.0}
 
 
 def settle_under_gravity(mesh, cfg: Config) -> dict:

@@ -387,7 +387,7 @@ def rearrangement_run(velocity_m_s=None, alpha=None, *, length_m=None, setup: Ca
     m = s.model(length_m)
     p = s.plates
     eff = [Gravity(s.gravity), Plates(axis=p.axis, lower=p.lower, upper=p.upper, lower_position_m=p.lower_position,
-                                      upper_position_m=p.upper_position, **s.plane_penalty("plates")),
+                                      upper_position_m=p.upper_position, mu=s.mu, **s.plane_penalty("plates")),
            Drives([Drive(d.fiber, [float(c) for c in d.displacement], v)]),
            contact_hook(m, law=s.law(), friction=True, mu=s.mu)]
     if alpha > 0:
@@ -522,7 +522,7 @@ def inclined_plate(case: str = "friction_inclined_slide", quick: bool = False) -
     d_s = plane_static_penetration(g * math.cos(th) / (plate.penalty_factor * (2.0 / dt) ** 2),
                                    plate.onset_fraction * float(probe.radius_node[0]))
     m = s.model(nodes_m=probe.nodes_m - np.array([0.0, 0.0, d_s]))
-    eff = [Gravity(gvec), Plates(**plates), contact_hook(m, contact=False, friction=True, mu=mu)]
+    eff = [Gravity(gvec), Plates(**plates, mu=mu)]
     T = s.end_time / 3 if quick else s.end_time
     res = simulate(m, eff, s.settings(end_time_s=T))
     t = res.frames_time

@@ -148,7 +148,7 @@ def test_resume_with_the_real_contact_hook_is_bit_for_bit(tmp_path):
 
     def effects():
         return [Damping(1e4), Gravity([0, 0, -9.81]),
-                Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.02e-3, velocity_m_s=0.1),
+                Plates(axis="z", lower="moving", upper="fixed", displacement_m=0.02e-3, velocity_m_s=0.1, mu=0.3),
                 contact_hook(model, friction=True, mu=0.3)]
 
     # default dt_safety (0.9): this scene once gained tens of m/s from the fiber–fiber friction (k_t per

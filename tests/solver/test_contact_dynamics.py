@@ -107,12 +107,13 @@ def test_verlet_rebuilds_only_when_needed():
 def test_friction_dissipation_and_plane_friction():
     """A fiber sliding on a plate under gravity stops; the kinetic energy ends in ALLFD."""
     m = _model([((0, 0, R), (3e-3, 0, R), 10)])
-    hook = contact_hook(m, contact=False, friction=True, mu=0.5)
     st = State.at_rest(m)
     v0 = 0.01
     st.v[:, 0] = v0
-    res = simulate(m, [Gravity([0, 0, -9.81]), Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0),
-                       hook], SimulationSettings(end_time_s=4e-3, output_frames=3), state=st)
+    res = simulate(m, [Gravity([0, 0, -9.81]),
+                       Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, mu=0.5)],
+                   SimulationSettings(end_time_s=4e-3, output_frames=3), state=st)
+    assert res.effects == ["gravity", "plates"]  # the plate's own friction: no contact term
     h = res.history
     assert abs(res.final_state.v[:, 0].mean()) < 1e-4 * v0
     ke0 = 0.5 * m.mass.sum() * v0**2

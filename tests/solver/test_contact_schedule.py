@@ -21,7 +21,7 @@ from fiberpipe.solver.contact_pairs import gauss_points
 from fiberpipe.solver.contact_potential import contact_forces_pot
 from fiberpipe.solver.contact_state import PairRecords
 from fiberpipe.solver.geometry import pair_gap
-from fiberpipe.solver.friction import friction_forces_ex, plane_friction, plane_friction_arrays
+from fiberpipe.solver.friction import friction_forces_ex
 
 
 def _bundle(rng):
@@ -224,68 +224,6 @@ def test_stamped_friction_history_equals_clearing_it():
         if na:
             assert np.array_equal(hist_clear[0, :4], hist_stamp[0, :4])
     assert np.any(hist_clear[0, :3] != 0)
-
-
-def test_stamped_plane_friction_equals_clearing_it():
-    x_on = np.array([[0.0, 0.0, R - 1e-6]])
-    v = np.array([[1.0, 0.0, 0.0]])
-    args = (np.array([R]), np.array([1e6]), np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
-    h3 = np.zeros((1, 1, 3))
-    h4 = np.zeros((1, 1, 4))
-    for step in range(30):
-        x = x_on if not (10 <= step < 13) else x_on + [0, 0, 1e-5]  # off the plane for 3 steps
-        vv = v * (1 + 0.2 * np.cos(step))
-        f3 = np.zeros((1, 3))
-        f4 = np.zeros((1, 3))
-        d3 = plane_friction(x, vv, plane_friction_arrays(*args, h3, np.zeros((1, 3))), 0.2, 1e5, 1e-7, f3)
-        d4 = plane_friction(x, vv, plane_friction_arrays(*args, h4, np.zeros((1, 3))), 0.2, 1e5, 1e-7, f4, step)
-        assert np.array_equal(f3, f4) and d3 == d4
-        if step < 10 or step >= 13:
-            assert np.array_equal(h3[0, 0], h4[0, 0, :3])
-    assert np.any(h3 != 0)
-
-
-def test_plane_friction_on_candidate_nodes_equals_scanning_all():
-    """Plane friction visiting only the nodes listed near each plane (``plane_candidates``, margin
-    M) equals scanning every node, as long as nodes and plane together moved < M since the list:
-    the hook's rule (remade at every neighbour-list build and when a plane moved skin/2)."""
-    from fiberpipe.solver._kernels_boundary import plane_candidates
-
-    rng = np.random.default_rng(11)
-    N = 400
-    x = rng.uniform(-1.6e-3, 1.6e-3, (N, 3))
-    x[:, 1] = rng.uniform(0.2e-3, 0.45e-3, N)  # near the lower plate (y = 0, pushing +y) and far from the upper
-    rad = np.full(N, R)
-    k_pen = np.full(N, 1e6)
-    axis = np.array([1, 1, 0, 0], np.int64)
-    sign = np.array([1.0, -1.0, 1.0, -1.0])
-    pos = np.array([0.0, 3e-3, -1.5e-3, 1.5e-3])
-    margin = 60e-6
-    cand_idx = np.zeros(N * 4, np.int64)
-    cand_off = np.zeros(5, np.int64)
-    n_cand = plane_candidates(x, rad, axis, sign, pos, margin, cand_idx, cand_off)
-    assert 0 < n_cand < N
-    h_all = np.zeros((N, 4, 4))
-    h_cand = np.zeros((N, 4, 4))
-    touched = 0
-    for step in range(200):
-        p_now = pos + np.array([1.0, 0.0, 0.0, 0.0]) * 0.1e-6 * step  # the lower plate rises 20 µm
-        x_now = x + (0.15e-6 * step) * rng.uniform(-1, 1, (N, 3))     # nodes wander < 30 µm
-        v = rng.normal(size=(N, 3)) * 0.01
-        vel = np.zeros((4, 3))
-        vel[0, 1] = 0.1e-6 / 1e-7
-        f1 = np.zeros((N, 3))
-        f2 = np.zeros((N, 3))
-        t1 = np.zeros((4, 3))
-        t2 = np.zeros((4, 3))
-        d1 = plane_friction(x_now, v, plane_friction_arrays(rad, k_pen, axis, sign, p_now, vel, h_all, t1), 0.2, 1e5,
-                            1e-7, f1, step)
-        d2 = plane_friction(x_now, v, plane_friction_arrays(rad, k_pen, axis, sign, p_now, vel, h_cand, t2, cand_idx,
-                                                            cand_off), 0.2, 1e5, 1e-7, f2, step, True)
-        assert np.array_equal(f1, f2) and d1 == d2 and np.array_equal(t1, t2)
-        touched += int(np.count_nonzero(f1.any(axis=1)))
-    assert np.array_equal(h_all[..., :3], h_cand[..., :3])
-    assert touched > 100  # nodes do reach the rising plate
 
 
 def test_loading_ramp_fraction_reaches_the_plates(tmp_path):

@@ -5,8 +5,12 @@ import pytest
 
 from fiberpipe.solver import laws as L
 from _contact_geometry import LE, R, all_pairs_between, assemble, contact_pass, fiber
+from fiberpipe.solver import Material, Plates, build_model
 from fiberpipe.solver._kernels_boundary import DEFAULT_ONSET_FRACTION, plane_onset
-from fiberpipe.solver.friction import friction_forces, plane_friction, plane_friction_arrays, remap_history
+from fiberpipe.solver.friction import friction_forces, plane_friction, remap_history
+from fiberpipe.solver.layout import ACC_SIZE, ACC_V2_MAX
+from fiberpipe.solver.terms import SceneArrays
+from fiberpipe.solver.terms.planes import eval_planes, set_up_planes
 
 MU, KT, DT = 0.2, 1e5, 1e-7
 
@@ -90,32 +94,72 @@ def test_history_rotated_into_tangent_plane():
     assert abs(hist[0] @ buf.normal[0]) < 1e-12 and np.linalg.norm(hist[0]) == pytest.approx(0.5)
 
 
+def _plate_under_fiber(n_el=2, mu=MU, kt=KT):
+    """A fiber along x resting 1 µm deep on a fixed plate at z = 0 (pushing +z) with friction μ, k_t:
+    ``(model, plane arrays, the planes' friction data)`` (terms.planes.set_up_planes)."""
+    s = np.linspace(0.0, 1.0, n_el + 1)[:, None]
+    m = build_model(np.array([0.0, 0.0, R - 1e-6]) + s * np.array([1e-3, 0.0, 0.0]), np.array([0, n_el + 1]), R,
+                    Material(15e9, 1380.0, 0.3))
+    scene = SceneArrays(m, DT)
+    Plates(axis="z", lower="fixed", upper="none", lower_position_m=0.0, mu=mu,
+           friction_stiffness_n_per_m=kt).setup(m, scene)
+    planes, terms = set_up_planes(m, scene)
+    assert [t.name for t, _, _ in terms] == ["plane_friction"]
+    return m, planes, terms[0][1]
+
+
+def _plane_pass(m, planes, x, v):
+    """The step loop's plane pass at positions ``x``: the listed nodes' normal forces into ``planes.cand_fn``."""
+    acc = np.zeros(ACC_SIZE)
+    acc[ACC_V2_MAX] = -1.0  # list the nodes anew
+    eval_planes(planes, x, v, m.radius_node, np.zeros_like(x), acc, 0.0, DT)
+
+
 def test_plane_friction_stick_and_slip():
-    """Node on a plane z = 0 pressed by k_pen δ; sticks below μF_n, slides at μF_n with dissipation μF_n·slip."""
-    x = np.array([[0.0, 0.0, R - 1e-6]])
-    v = np.array([[1.0, 0.0, 0.0]])
-    kpen = np.array([1e6])
-    g, gp = plane_onset(1e-6, DEFAULT_ONSET_FRACTION * R)  # the plane penalty's normal force k g g'
-    fn = 1e6 * g * gp
-    args = (np.array([R]), kpen, np.array([2], np.int64), np.array([1.0]), np.array([0.0]), np.zeros((1, 3)))
-    hist = np.zeros((1, 1, 3))
+    """Nodes on a plane z = 0 pressed by the plane pass's k g(δ) g'(δ); the friction takes that normal
+    force, slides at μF_n and dissipates μF_n·slip."""
+    m, planes, data = _plate_under_fiber()
+    x = m.nodes_m.copy()
+    v = np.zeros_like(x)
+    v[:, 0] = 1.0
+    _plane_pass(m, planes, x, v)
+    g, gp = plane_onset(1e-6, DEFAULT_ONSET_FRACTION * R)
+    fn = planes.k_pen * g * gp  # the plane penalty's normal force per node
+    listed = planes.cand_idx[:planes.cand_off[1]]
+    assert np.allclose(planes.cand_fn[:listed.size], fn[listed], rtol=1e-12)
     diss = 0.0
     n = 300
-    for _ in range(n):
-        f = np.zeros((1, 3))
-        tf = np.zeros((1, 3))
-        diss += plane_friction(x, v, plane_friction_arrays(*args, hist, tf), MU, KT, DT, f)[0]
-    assert f[0, 0] == pytest.approx(-MU * fn, rel=1e-12) and tf[0, 0] == pytest.approx(MU * fn)
-    # the stick length μF_n/k_t (7.5 nm) is shorter than a step's travel (100 nm): the force jumps from 0
-    # to μF_n in the first step, whose work the step loop books with the trapezoid, half of μF_n·Δu;
-    # the booked dissipation is that work less the spring's energy, so it misses
-    # ½μF_n(Δu − μF_n/k_t) of the continuous μF_n × slip
+    for step in range(n):
+        data.ff[:] = 0.0
+        diss += plane_friction(v, planes, data, DT, step)[0]
+    assert np.allclose(data.ff[:, 0], -MU * fn, rtol=1e-12) and data.tforce[0, 0] == pytest.approx(MU * fn.sum())
+    # the stick length μF_n/k_t is shorter than a step's travel (100 nm): the force jumps from 0 to
+    # μF_n in the first step, whose work the step loop books with the trapezoid, half of μF_n·Δu; the
+    # booked dissipation is that work less the spring's energy, so it misses ½μF_n(Δu − μF_n/k_t) of the
+    # continuous μF_n × slip
     lim, du = MU * fn, 1.0 * DT
-    assert diss == pytest.approx(lim * (du * n - lim / KT) - 0.5 * lim * (du - lim / KT), rel=1e-9)
-    # off the plane: history reset
-    f = np.zeros((1, 3))
-    plane_friction(x + [0, 0, 1e-5], v, plane_friction_arrays(*args, hist, np.zeros((1, 3))), MU, KT, DT, f)
-    assert np.all(hist == 0) and np.all(f == 0)
+    assert diss == pytest.approx(np.sum(lim * (du * n - lim / KT) - 0.5 * lim * (du - lim / KT)), rel=1e-9)
+
+
+def test_plane_friction_forgets_a_node_that_left_the_plane():
+    """A node lifted off the plane for a few steps loses its history (its entry cleared, no force);
+    back on the plane its spring starts afresh: the same force as at its first touch."""
+    m, planes, data = _plate_under_fiber(mu=10.0)  # sticks: the force is the spring's, −k_t Δu
+    x_on = m.nodes_m.copy()
+    v = np.zeros_like(x_on)
+    v[:, 0] = 1e-3
+    forces = []
+    for step in range(8):
+        x = x_on + [0.0, 0.0, 1e-5] if 3 <= step < 5 else x_on
+        _plane_pass(m, planes, x, v)
+        data.ff[:] = 0.0
+        plane_friction(v, planes, data, DT, step)
+        forces.append(data.ff[:, 0].copy())
+        if 3 <= step < 5:
+            assert np.all(data.ff == 0.0) and np.all(data.hist[:, 0, :3] == 0.0)
+    assert np.allclose(forces[0], -KT * 1e-3 * DT, rtol=1e-12)  # first touch: one step of stick
+    assert np.allclose(forces[1], 2 * forces[0], rtol=1e-12)    # the spring keeps its history
+    assert np.array_equal(forces[5], forces[0])                 # afresh after leaving the plane
 
 
 def _sliding_contact_point(n_steps=400, V=0.05, mu=100.0):

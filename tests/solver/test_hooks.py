@@ -70,7 +70,7 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     """solver.threads > 1 runs the hook's ``kernel_threads`` (the built-in hook's: the potential pass
     with its pairs in tasks); one thread, or a hook without one, its ``kernel``."""
     from fiberpipe.solver._kernels_integrate import no_record, step_loop_for
-    from fiberpipe.solver.terms.contact import (contact_forces_of, contact_friction_of, contact_step,
+    from fiberpipe.solver.terms.contact import (contact_forces_of, contact_step,
                                                 contact_step_potential_threads)
     from fiberpipe.solver.integrator import Integrator
     from fiberpipe.verification.case_config import contact_hook
@@ -80,8 +80,7 @@ def test_threads_pick_the_hooks_threaded_kernel(threads):
     assert hook.kernel is contact_step and hook.kernel_threads is contact_step_potential_threads
     integ = Integrator(m, [hook], 1e-8, threads=threads)
     expect = contact_step_potential_threads if threads > 1 else contact_step
-    assert integ.plan.loop is step_loop_for([expect], [no_record], forces_of=contact_forces_of,
-                                            friction_of=contact_friction_of, threads=threads,
+    assert integ.plan.loop is step_loop_for([expect], [no_record], forces_of=contact_forces_of, threads=threads,
                                             cache_names=[hook.cache_name])
     plain = Integrator(m, [ContactHook(lift, (np.array([1e-4, 1.0]),))], 1e-8, threads=threads)
     assert plain.plan.loop is step_loop_for([lift], [no_record], threads=threads, cache_names=[None])

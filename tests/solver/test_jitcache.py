@@ -46,15 +46,15 @@ def test_an_index_naming_a_structure_gone_from_the_package_reads_as_stale(tmp_pa
 def test_step_loop_specialisations():
     assert K.step_loop_for(()) is K.advance_plain
     kernels, records = [contact_term.contact_step], [K.no_record]
-    friction = dict(forces_of=contact_term.contact_forces_of, friction_of=contact_term.contact_friction_of)
-    loop = K.step_loop_for(kernels, records, cache_names=["contact"], **friction)
-    assert loop is K.step_loop_for(kernels, records, cache_names=["contact"], **friction)
+    owner = dict(forces_of=contact_term.contact_forces_of)
+    loop = K.step_loop_for(kernels, records, cache_names=["contact"], **owner)
+    assert loop is K.step_loop_for(kernels, records, cache_names=["contact"], **owner)
     assert loop._cache._impl is not None  # the built-in contact loop is cached on disk
-    # without its friction array it is another loop, under another cache name
-    bare = K.step_loop_for(kernels, records, cache_names=["contact"], forces_of=contact_term.contact_forces_of)
+    # without its force array it is another loop, under another cache name
+    bare = K.step_loop_for(kernels, records, cache_names=["contact"])
     assert bare is not loop and bare.py_func.__name__ != loop.py_func.__name__
     # a term without a cache name: compiled per process
-    assert type(K.step_loop_for(kernels, records, cache_names=[None], **friction)._cache).__name__ == "NullCache"
+    assert type(K.step_loop_for(kernels, records, cache_names=[None], **owner)._cache).__name__ == "NullCache"
 
 
 def test_threaded_loops_are_separate_and_cached_whole():
@@ -68,9 +68,9 @@ def test_threaded_loops_are_separate_and_cached_whole():
     assert K.advance_plain.py_func.__globals__["_beam_pass"] is B.beam_pass_all
     assert par.py_func.__globals__["_beam_pass"] is B.beam_pass_fibers
     args = ([contact_term.contact_step], [K.no_record])
-    friction = dict(forces_of=contact_term.contact_forces_of, friction_of=contact_term.contact_friction_of)
-    loop = K.step_loop_for(*args, threads=2, cache_names=["contact"], **friction)
-    assert loop is not K.step_loop_for(*args, cache_names=["contact"], **friction)
+    owner = dict(forces_of=contact_term.contact_forces_of)
+    loop = K.step_loop_for(*args, threads=2, cache_names=["contact"], **owner)
+    assert loop is not K.step_loop_for(*args, cache_names=["contact"], **owner)
     assert loop._cache._impl is not None and loop.py_func.__name__.endswith("_threads")
 
 

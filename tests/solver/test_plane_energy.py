@@ -99,7 +99,9 @@ def test_the_penalty_over_the_listed_nodes_equals_the_one_over_every_node():
     for listed in (False, True):
         f, fp, pi, pf = np.zeros((n, 3)), np.zeros(3), np.zeros(3 * n, np.int64), np.zeros(3 * n)
         args = (x, r, k, onset, axis, sign, pos, f, fp, pi, pf)
-        n_pen, e = plane_contacts_listed(*args, cand_idx, cand_off) if listed else plane_contacts(*args)
+        rect = (np.zeros((3, 2)), np.zeros((3, 2)))  # infinite planes
+        n_pen, e = (plane_contacts_listed(*args, cand_idx, cand_off, np.zeros(3 * n), rect) if listed
+                    else plane_contacts(*args, rect))
         out.append((f, fp, pi[:n_pen], pf[:n_pen], e))
         assert n_pen > 10
     for a, b in zip(*out):

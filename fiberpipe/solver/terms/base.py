@@ -27,6 +27,7 @@ term a scene does not list costs nothing. Adding a term is one module and one re
 from __future__ import annotations
 
 import inspect
+import math
 from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
@@ -36,11 +37,12 @@ from numba import njit
 from ...errors import FiberpipeError
 from .._kernels_boundary import DEFAULT_ONSET_FRACTION, RAMP_LINEAR, RAMP_SMOOTH, RAMP_SMOOTHSTEP
 from ..model import Model
-from ..timestep import penalty_time_step
+from ..timestep import penalty_time_step, stable_time_step
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _RAMPS = {"linear": RAMP_LINEAR, "smooth": RAMP_SMOOTH, "smoothstep": RAMP_SMOOTHSTEP}
 DEFAULT_PENALTY_FACTOR = 0.1
+DEFAULT_KT_FACTOR = 0.02           # the friction's tangential penalty k_t = 0.02 m_min (2/Δt)²
 
 
 def _vec3(v, what) -> np.ndarray:
@@ -115,9 +117,19 @@ def _append_rows(tables, rows):
 
 
 
+class PlaneSurface(NamedTuple):
+    """What a plane does to the nodes that touch it (:meth:`SceneArrays.add_plane`)."""
+
+    penalty_factor: float = DEFAULT_PENALTY_FACTOR    # normal penalty k_i = factor · m_i (2/Δt)²
+    onset_fraction: float = DEFAULT_ONSET_FRACTION    # the penalty's onset length, × the node's radius
+    mu: float = 0.0                                   # Coulomb coefficient of its friction (0: none)
+    friction_stiffness_n_per_m: float | None = None   # its tangential penalty k_t (None: the default)
+
+
 class SceneArrays:
     """The arrays the step loop's own passes read, which the folded terms fill in their ``setup`` (sizes 0
-    when a term is absent); ``dt`` and the planes are what a per-step term's ``setup`` may read."""
+    when a term is absent); ``dt``, the planes and the friction force array are what a per-step
+    term's ``setup`` may read."""
 
     def __init__(self, model: Model, dt: float):
         n = model.n_nodes
@@ -141,14 +153,19 @@ class SceneArrays:
         self.pl_ta = np.zeros((0, 1))
         self.pl_mode = np.zeros(0, np.int64)
         self.pl_hist_col = np.zeros(0, np.int64)
+        self.pl_mu = np.zeros(0)  # (P,) Coulomb coefficient of each plane's friction (0: none)
+        self.pl_kt = np.zeros(0)  # (P,) N/m, its tangential penalty (NaN: the scene's default)
+        self.pl_rect_half = np.zeros((0, 2))  # (P, 2) m, a finite plate's half extents (0: infinite)
+        self.pl_rect_centre = np.zeros((0, 2))  # (P, 2) m, its centre (_kernels_boundary.in_plane_axes)
         self.penalty_factor = 0.0
         self.onset_fraction = 0.0
         self.n_walls = 0
         self.wall_names: list[str] = []
         self.plate_axis = None
         self.end_time_hint = 0.0
-        self._plane_pos = None
-        self._plane_candidates = None
+        self.plane_arrays = None  # the step loop's PlaneArrays (terms.planes.plane_arrays, once every plane is added)
+        self.friction_f = np.zeros((0, 3))
+        self._friction_returned = np.zeros(1)
         self._n = n
 
     # helpers used by the effects
@@ -163,35 +180,50 @@ class SceneArrays:
             self.node_drive = np.full(self._n, -1, np.int64)
         return self.fix_mask
 
-    def add_plane(self, axis, sign, pos, move, T, ta, mode, hist_col, penalty_factor,
-                  onset_fraction=DEFAULT_ONSET_FRACTION):
-        """Add a plane; ``move``, ``T``, ``ta``: its travel table (scalars for one entry, or
-        equal-length sequences, :func:`_kernels_boundary.path_travel`). The penalty factor and the
-        onset fraction are the scene's (the largest of its planes')."""
+    def add_plane(self, axis, sign, pos, travel, hist_col, surface: "PlaneSurface" = None, rect=None):
+        """Add a plane normal to ``axis`` at ``pos`` [m], pushing towards ``sign``·axis; ``travel =
+        (move, T, ta, mode)``: its travel table (scalars for one entry, or equal-length sequences,
+        :func:`_kernels_boundary.path_travel`) and ramp code; ``hist_col``: the history column of its
+        reaction; ``surface``: its penalty and friction (:class:`PlaneSurface`); ``rect``: a finite
+        plate's rectangle ``(half extents, centre)`` [m] along the plane's two axes in x, y, z order
+        (None: infinite). The penalty factor and the onset fraction are the scene's (the largest of
+        its planes')."""
+        surface = PlaneSurface() if surface is None else surface
+        half, centre = ((0.0, 0.0), (0.0, 0.0)) if rect is None else rect
+        self.pl_rect_half = np.vstack([self.pl_rect_half, np.asarray(half, dtype=np.float64).reshape(1, 2)])
+        self.pl_rect_centre = np.vstack([self.pl_rect_centre, np.asarray(centre, dtype=np.float64).reshape(1, 2)])
+        move, T, ta, mode = travel
         self.pl_axis = np.append(self.pl_axis, axis).astype(np.int64)
         self.pl_sign = np.append(self.pl_sign, sign)
         self.pl_pos0 = np.append(self.pl_pos0, pos)
         self.pl_move, self.pl_T, self.pl_ta = _append_rows((self.pl_move, self.pl_T, self.pl_ta), (move, T, ta))
         self.pl_mode = np.append(self.pl_mode, mode).astype(np.int64)
         self.pl_hist_col = np.append(self.pl_hist_col, hist_col).astype(np.int64)
-        self.penalty_factor = max(self.penalty_factor, penalty_factor)
-        self.onset_fraction = max(self.onset_fraction, onset_fraction)
+        kt = surface.friction_stiffness_n_per_m
+        self.pl_mu = np.append(self.pl_mu, float(surface.mu))
+        self.pl_kt = np.append(self.pl_kt, np.nan if kt is None else float(kt))
+        self.penalty_factor = max(self.penalty_factor, surface.penalty_factor)
+        self.onset_fraction = max(self.onset_fraction, surface.onset_fraction)
 
-    def plane_positions(self) -> np.ndarray:
-        """The planes' positions at t_n [m], (P,): one array, which the step loop's plane pass writes
-        and the contact term's plane friction reads (made once, after every plane is added)."""
-        if self._plane_pos is None or self._plane_pos.size != self.pl_axis.size:
-            self._plane_pos = self.pl_pos0.astype(np.float64)
-        return self._plane_pos
+    def friction_forces(self) -> np.ndarray:
+        """The scene's friction force array (N, 3) [N]: every term with Coulomb friction adds its
+        friction forces there in its ``eval`` (the contact term's fiber pairs, the planes'); the node
+        update adds them to the nodes, books their work (ALLPW, ``energy/friction_work``, ALLFD; see
+        ``_kernels_integrate._book_friction_work``) and clears the array. Made by the first term that
+        asks; a scene without friction has a (0, 3) array, and its update books none."""
+        if self.friction_f.shape[0] == 0:
+            self.friction_f = np.zeros((self._n, 3))
+        return self.friction_f
 
-    def plane_candidates(self) -> tuple[np.ndarray, np.ndarray]:
-        """The nodes listed near each plane, ``(cand_idx (N·P,), cand_off (P + 1,))``: one pair of arrays,
-        which the step loop's plane pass keeps (``_kernels_boundary.plane_candidates``) and the contact
-        term's plane friction visits (made once, after every plane is added)."""
-        n, P = self.model.n_nodes, self.pl_axis.size
-        if self._plane_candidates is None or self._plane_candidates[1].size != P + 1:
-            self._plane_candidates = (np.zeros(n * P, np.int64), np.zeros(P + 1, np.int64))
-        return self._plane_candidates
+    def friction_returned(self) -> np.ndarray:
+        """(1,) J: the energy the scene's friction gave back so far (the sum of its contacts' negative
+        dissipations, :mod:`fiberpipe.solver.friction`), which every friction term adds to."""
+        return self._friction_returned
+
+    def default_friction_stiffness(self) -> float:
+        """The tangential penalty ``k_t`` [N/m] of a friction without ``scene.friction.stiffness``:
+        ``DEFAULT_KT_FACTOR m_min (2/Δt_pen)²`` (Δt_pen = :meth:`penalty_dt`)."""
+        return DEFAULT_KT_FACTOR * float(np.min(self.model.mass)) * (2.0 / self.penalty_dt()) ** 2
 
     def penalty_dt(self) -> float:
         """The step [s] the step-scaled penalties are chosen against
@@ -211,6 +243,37 @@ class SceneArrays:
         if self.pl_axis.size == 0:
             return np.zeros(0)
         return self.onset_fraction * np.asarray(self.model.radius_node, dtype=np.float64)
+
+
+def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *,
+                       rep=None) -> tuple[float, float, float]:
+    """``((ωΔt)², dt_ok [s], k_lim [N/m])`` of a penalty ``k`` [N/m] on the lightest node at step ``dt``.
+
+    A penalty k on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two bodies
+    of that mass); central differences stay stable while the beam's element modes it couples with
+    (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal contact,
+    and axial too for the tangential spring, which acts along the fiber) plus this stay below
+    (ωΔt)² = 4, i.e. while Δt ≤ dt_ok = 2/√(ω_beam² + 2k/m); ``k_lim`` is the penalty at that
+    bound. A mode whose element bound the step already exceeds is locked in the scene (the modal
+    step checked it) and does not couple. ``rep``: the model's
+    :func:`~fiberpipe.solver.timestep.stable_time_step` report, when the caller holds it.
+    """
+    rep = stable_time_step(model) if rep is None else rep
+    m_min = float(np.min(model.mass))
+    used = [(2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes]
+    beam = max([u for u in used if u < 4.0] or [0.0])
+    total = beam + 2.0 * k * dt * dt / m_min
+    return total, 2.0 * dt / math.sqrt(total) if total > 0 else math.inf, (4.0 - beam) * m_min / (2.0 * dt * dt)
+
+
+def check_friction_stiffness(model, dt: float, k_t: float) -> None:
+    """Refuse a friction's tangential penalty ``k_t`` [N/m] too stiff for the time step ``dt`` [s]
+    (:func:`penalty_step_bound`: it acts along the fiber too, so with the axial modes)."""
+    total, dt_ok, k_lim = penalty_step_bound(model, dt, k_t, ("axial", "shear", "bending"))
+    if total > 4.0:
+        raise FiberpipeError(f"friction.stiffness {k_t:.3g} N/m is too stiff for the time step: {k_t:.3g} N/m per "
+                             f"node needs dt ≤ {dt_ok:.3g} s, the run uses {dt:.3g} s; use friction.stiffness ≤ "
+                             f"{k_lim:.3g} N/m or a smaller solver.dt_safety")
 
 
 @njit(cache=True, error_model="numpy")
@@ -248,7 +311,6 @@ class TermKernels(NamedTuple):
     eval: Callable                  # eval(x, q, v, w, f, mom, acc, t, dt, data) -> int
     eval_threads: Callable | None   # the same with prange tasks inside, for solver.threads > 1 (None: eval)
     forces_of: Callable | None      # forces_of(data) -> (N, 3): forces the update applies (None: eval adds to f)
-    friction_of: Callable | None    # friction_of(data) -> (N, 3): friction forces the update applies and books
     cache_name: str | None          # a built-in term's name in the on-disk cache (None: compiled per process)
 
 
@@ -263,7 +325,8 @@ class Term:
     """Base class of every physical term (module docstring): parameters as dataclass fields (SI,
     names with units) checked in ``__post_init__``, ``from_config``, ``setup`` and, for a per-step
     term, the class attributes ``eval`` (and optionally ``eval_threads``, ``forces_of``,
-    ``friction_of``, ``cache_name``) and ``energies``."""
+    ``cache_name``) and ``energies``. A term with Coulomb friction adds its friction forces to the
+    scene's friction array (:meth:`SceneArrays.friction_forces`, held in its data)."""
 
     name = "term"
     config_block = None
@@ -271,7 +334,6 @@ class Term:
     eval = None
     eval_threads = None
     forces_of = None
-    friction_of = None
     cache_name = None
 
     @classmethod
@@ -289,7 +351,7 @@ class Term:
         if kernel is None:
             return None
         return TermKernels(kernel, _static(self, "eval_threads"), _static(self, "forces_of"),
-                           _static(self, "friction_of"), _static(self, "cache_name"))
+                           _static(self, "cache_name"))
 
     def describe(self) -> str:
         return repr(self)
@@ -316,9 +378,9 @@ class ContactHook(Term):
         and its moments into ``mom``. Otherwise a jitted ``forces_of(data) -> (N, 3) array``: the
         kernel leaves its forces there and the step loop's update adds them to the nodes, books their
         work ``Δt f_n·v̄_n`` to ALLPW and clears the array (one pass over the nodes instead of three).
-    friction_of : optional, a jitted ``friction_of(data) -> (N, 3) array`` of the friction forces the
-        kernel leaves there: the update adds them to the nodes, books their work ``Δt f_n·v̄_n`` to
-        ALLPW, the same work as ``½Δt (f_{n−1} + f_n)·v_{n−½}`` (in phase with the friction springs)
+    Friction forces go to the scene's friction array (:meth:`SceneArrays.friction_forces`, which
+        ``prepare`` puts in the data): the update adds them to the nodes, books their work ``Δt f_n·v̄_n``
+        to ALLPW, the same work as ``½Δt (f_{n−1} + f_n)·v_{n−½}`` (in phase with the friction springs)
         to the friction work (``energy/friction_work``) and minus it to ALLFD, and clears the array.
         The kernel books what its friction springs store: ALLFD and ALLPW −= their energy change.
     cache_name : a built-in hook's name for the on-disk compilation cache (None: the step loop
@@ -327,14 +389,13 @@ class ContactHook(Term):
         tasks inside; same signature and results). None: ``kernel`` runs with any number of threads.
 
     A scene runs any number of these, in the order listed; at most one of them may hand its forces
-    to the update (``forces_of`` / ``friction_of``).
+    to the update (``forces_of``).
     """
 
     kernel: Callable = no_eval
     data: tuple = (np.zeros(0),)
     prepare: Callable | None = None
     forces_of: Callable | None = None
-    friction_of: Callable | None = None
     cache_name: str | None = None
     kernel_threads: Callable | None = None
     name = "contact"
@@ -343,4 +404,4 @@ class ContactHook(Term):
         return self.prepare(model, scene) if self.prepare is not None else self.data
 
     def kernels(self) -> TermKernels:
-        return TermKernels(self.kernel, self.kernel_threads, self.forces_of, self.friction_of, self.cache_name)
+        return TermKernels(self.kernel, self.kernel_threads, self.forces_of, self.cache_name)

@@ -1,6 +1,6 @@
-"""The contact term: fiber–fiber normal contact and friction, and the friction of the fibers on the
-plates and walls (``scene.effects`` entries ``contact`` and ``friction``, blocks ``scene.contact`` and
-``scene.friction``).
+"""The contact term: fiber–fiber normal contact and friction (``scene.effects`` entries ``contact``
+and ``friction``, blocks ``scene.contact`` and ``scene.friction``; the fibers' friction on the plates
+and walls is the planes term's, :mod:`fiberpipe.solver.terms.planes`).
 
 :class:`ContactEffect` builds a :class:`~fiberpipe.solver.terms.base.ContactHook` whose kernel
 :func:`contact_step` runs once per step on a :class:`fiberpipe.solver.contact_state.ContactData`
@@ -14,12 +14,10 @@ plates and walls (``scene.effects`` entries ``contact`` and ``friction``, blocks
 2. Normal contact forces (:func:`fiberpipe.solver.contact_potential.contact_forces_pot`) with the
    scene's law (one class each in ``laws.LAWS``).
 3. Friction (if ``friction`` is in ``scene.effects``): fiber–fiber
-   (:func:`fiberpipe.solver.friction.friction_forces`) and fiber–plane for the plates and walls of
-   the scene (:func:`fiberpipe.solver.friction.plane_friction`, normal force from the same penalty
-   rule as ``_kernels_boundary.plane_contacts``, at the positions the plane pass wrote this step).
+   (:func:`fiberpipe.solver.friction.friction_forces`).
 4. The normal contact forces stay in the term's force array (``data.fc``, declared by its
-   ``forces_of``), the friction forces in its friction array (``data.ff``, declared by its
-   ``friction_of``): the step loop's update adds both to the nodes, books their work
+   ``forces_of``), the friction forces go to the scene's friction array (``data.ff``,
+   ``SceneArrays.friction_forces``): the step loop's update adds both to the nodes, books their work
    ``Δt f_n·v̄_n`` to ALLPW, and clears them, in the same pass over the nodes. The friction forces'
    work is also booked to the friction work (``energy/friction_work``, W_f) and, as a loss, to
    ALLFD, by halves over the displacement the friction springs' energy changes by:
@@ -43,20 +41,18 @@ from numba import njit
 from numba.typed import List
 
 from ...errors import FiberpipeError
-from .._kernels_boundary import path_delta
 from ..contact_pairs import gauss_points
 from ..contact_potential import contact_forces_pot, contact_forces_pot_threads, onset, potential_kernels_for
-from .base import ContactHook, register_term
+from .base import ContactHook, check_friction_stiffness, penalty_step_bound, register_term  # noqa: F401 (penalty_step_bound: this module's API)
 from .._specialise import specialise
-from ..contact_state import (ContactData, ContactParams, PlaneFriction, Segments, borrowed_item,
-                            new_pair_list, new_records, new_stats)
-from ..friction import friction_forces_ex, friction_forces_tasks, plane_friction, remap_history
+from ..contact_state import (ContactData, ContactParams, Segments, borrowed_item, new_pair_list, new_records,
+                            new_stats)
+from ..friction import friction_forces_ex, friction_forces_tasks, remap_history
 from ..geometry import pair_gap
 from ..layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
 from ..neighbours import build_pairs, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
-DEFAULT_KT_FACTOR = 0.02           # k_t = 0.02 m_min (2/Δt)²
 DEFAULT_PAIRS_PER_SEGMENT = 16     # initial capacity per segment (grown by the kernel if needed)
 OVERLAP_MIN_FRACTION = 0.05        # initial penetrations below 5 % of the smaller radius act at once
                                    # (pressed set-ups, verification cases): no offset
@@ -103,19 +99,6 @@ def _rebuild(x, data):
     for k in range(n):
         gap[k] = pair_gap(x, segs.nodes, segs.radius, spare.pairs, k)
         rec.fn[k] = 0.0
-
-
-@njit(inline="always", **_FLAGS)
-def _move_planes(planes, t, dt):
-    """The planes' velocities at t_n, for their friction (their positions ``planes.pos`` and the nodes
-    listed near them, ``planes.cand_idx``, are the plane pass's, which ran before this term in the
-    step)."""
-    for p in range(planes.axis.shape[0]):
-        vel = planes.sign[p] * path_delta(t, t - dt, planes.move[p], planes.T[p], planes.ta[p], planes.mode[p]) / dt
-        planes.vel[p, 0] = 0.0
-        planes.vel[p, 1] = 0.0
-        planes.vel[p, 2] = 0.0
-        planes.vel[p, planes.axis[p]] = vel
 
 
 @njit(inline="always", **_FLAGS)
@@ -207,26 +190,20 @@ def _overlap_offsets(data, t, dt):
 
 
 @njit(inline="always", **_FLAGS)
-def _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls):
-    """Fiber–fiber and fiber–plane friction into ``ff`` (step 3). Returns the springs' part of the
-    dissipation: minus the change of their energy (``stats.e_spring_J``, fiber pairs and planes).
+def _friction_pass(v, dt, data, plist, rec, n_active, calls):
+    """Fiber–fiber friction into ``ff`` (step 3). Returns the springs' part of the dissipation: minus
+    the change of their energy (``stats.e_spring_J``).
 
-    The friction forces' work is booked by the step loop's update, which applies ``ff``
-    (:func:`contact_friction_of`; module docstring, item 4), on every node the forces act on, so a contact that leaves (out of contact, out of the neighbour list, off a
-    plane's candidates) leaves none of its work unbooked. ALLFD is then ``−W_f − ΔE_springs``. The
-    contacts' own sums (the kernels' first return, module ``friction``) are not used for it; their
-    negative parts are summed apart (``friction_returned_J``)."""
-    params, st, ff = data.params, data.stats, data.ff
-    e_springs = 0.0
-    if params.friction_on:
-        _, esp, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, params.mu,
-                                          params.kt_n_per_m, dt, plist.friction, ff, n_active, calls)
-        e_springs += esp
-        st.friction_returned_J[0] += back
-    if plane_fric:
-        _, espl, back = plane_friction(x, v, data.planes, params.mu, params.kt_n_per_m, dt, ff, calls, True)
-        e_springs += espl
-        st.friction_returned_J[0] += back
+    The friction forces' work is booked by the step loop's update, which applies ``ff`` (the
+    scene's friction array; module docstring, item 4), on every node the forces act on, so a contact
+    that leaves (out of contact, out of the neighbour list) leaves none of its work unbooked. ALLFD
+    is then ``−W_f − ΔE_springs``. The contacts' own sums (the kernel's first return, module
+    ``friction``) are not used for it; their negative parts are summed apart
+    (``friction_returned_J``)."""
+    params, st = data.params, data.stats
+    _, e_springs, back = friction_forces_ex(v, data.segs.nodes, plist.pairs, st.n_pairs[0], rec, params.mu,
+                                            params.kt_n_per_m, dt, plist.friction, data.ff, n_active, calls)
+    st.friction_returned_J[0] += back
     diss = -(e_springs - st.e_spring_J[0])
     st.e_spring_J[0] = e_springs
     return diss
@@ -264,42 +241,30 @@ def contact_forces_of(data):
     return data.fc
 
 
-@njit(cache=True)
-def contact_friction_of(data):
-    """The friction force array (N, 3) [N] :func:`contact_step` leaves its friction forces in (the
-    hook's ``friction_of``): the step loop's update adds it to the nodes, books its work (module
-    docstring, item 4) and clears it."""
-    return data.ff
-
-
 @njit(**_FLAGS, **_NO_COUNTS)
 def contact_step(x, q, v, w, f, mom, acc, t, dt, data):
     """The contact term's eval (the signature every term's has, ``terms.base``); see the module docstring.
 
     It does not add its forces to ``f``: it leaves them in ``data.fc`` (:func:`contact_forces_of`)
-    and ``data.ff`` (:func:`contact_friction_of`), which the step loop applies (a hook that wraps
-    this one must add those arrays to ``f`` itself).
+    and ``data.ff`` (the scene's friction array), which the step loop applies (a hook that wraps
+    this one must add ``data.fc`` to ``f`` itself).
     """
     params, st = data.params, data.stats
     calls = st.calls[0]
     st.calls[0] = calls + 1
-    P = data.planes.axis.shape[0]
-    plane_fric = params.plane_friction_on and P > 0
-    if plane_fric:
-        _move_planes(data.planes, t, dt)
     _update_neighbours(x, v, dt, acc, data)
     # pairs are re-evaluated only when the nodes may have closed their gap since the last look
     # (contact_forces_ex, records.gap): the path bound refreshes per pair, the displacement bound does not
     reach = 2.0 * st.path_m[0]
     if st.overlaps_done[0] == 0 or st.offset_max_m[0] > 0.0:
-        return _first_steps_pass(x, v, acc, t, dt, data, calls, plane_fric, reach)
+        return _first_steps_pass(x, v, acc, t, dt, data, calls, reach)
     # no offsets: an empty array (a view, not an allocation), as _overlap_offsets returns then; the
     # list in use and the records read without a reference (borrowed_item): the lists hold them
     return _step_forces_pass(x, v, acc, dt, data, borrowed_item(data.lists, 0), borrowed_item(data.records, 0),
-                             (st.path_m[:0], 0.0, 0.0), reach, calls, plane_fric)
+                             (st.path_m[:0], 0.0, 0.0), reach, calls)
 
 
-def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
+def _first_steps(x, v, acc, t, dt, data, calls, reach):
     """The rest of :func:`contact_step` while the initial overlaps are recorded (first call) or
     released (offsets > 0): with reference counts, as it allocates the offsets."""
     st = data.stats
@@ -307,11 +272,10 @@ def _first_steps(x, v, acc, t, dt, data, calls, plane_fric, reach):
         st.overlaps_done[0] = 1
         _record_initial_overlaps(x, data, reach)
     off, rel, rel_prev = _overlap_offsets(data, t, dt)
-    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], (off, rel, rel_prev), reach, calls,
-                             plane_fric)
+    return _step_forces_pass(x, v, acc, dt, data, data.lists[0], data.records[0], (off, rel, rel_prev), reach, calls)
 
 
-def _step_forces(x, v, acc, dt, data, plist, rec, release, reach, calls, plane_fric):
+def _step_forces(x, v, acc, dt, data, plist, rec, release, reach, calls):
     """Steps 3–5 of :func:`contact_step` (module docstring): the normal pass, the friction, the energies
     and the statistics; ``plist``, ``rec``: the Verlet list in use and the records; ``release``: the
     initial overlaps' offsets and release factors ``(off, rel, rel_prev)`` (:func:`_overlap_offsets`);
@@ -330,8 +294,8 @@ def _step_forces(x, v, acc, dt, data, plist, rec, release, reach, calls, plane_f
         acc[ACC_WK] += wrel * (rel_prev - rel)
     st.e_contact_J[0] = energy
     diss = 0.0
-    if params.friction_on or plane_fric:
-        diss = _friction_pass(x, v, dt, data, plist, rec, n_active, plane_fric, calls)
+    if params.friction_on:
+        diss = _friction_pass(v, dt, data, plist, rec, n_active, calls)
     # the stored energy at x_n: the normal penalties' and the fiber–fiber tangential springs'
     acc[ACC_STORED] += energy + st.e_spring_J[0]
     # the forces stay in fc: the step loop's update applies them, books their work and clears fc
@@ -355,9 +319,8 @@ _first_steps_pass = njit(**_FLAGS, _nrt=True)(_first_steps)
 class ContactSetup:
     """Everything ``prepare`` builds, kept for inspection after a run (``hook.setup_info``)."""
 
-    def __init__(self, law, contact_on, friction_on, mu, k_t, skin, n_gauss):
+    def __init__(self, law, friction_on, mu, k_t, skin, n_gauss):
         self.law = law
-        self.contact_on = contact_on
         self.friction_on = friction_on
         self.mu = mu
         self.k_t = k_t
@@ -415,24 +378,6 @@ def _segments(model) -> Segments:
         acc += L0[e]
         arc[e, 1] = acc
     return Segments(nodes, np.ascontiguousarray(model.el_radius, dtype=np.float64), fiber, arc)
-
-
-def _plane_friction_of(model, scene) -> PlaneFriction:
-    """The scene's planes as :class:`PlaneFriction`: their own copies of the ramp arrays, and the positions
-    and candidate nodes the step loop's plane pass writes (``scene.plane_positions()``,
-    ``scene.plane_candidates()``: the same arrays)."""
-    N = model.n_nodes
-    P = scene.pl_axis.size
-    k_pen = scene.k_pen() if P > 0 else np.zeros(0)
-    onset = scene.pen_onset() if P > 0 else np.zeros(0)
-    pos0 = scene.pl_pos0.astype(np.float64)
-    return PlaneFriction(
-        np.ascontiguousarray(model.radius_node, dtype=np.float64), np.ascontiguousarray(k_pen),
-        np.ascontiguousarray(onset),
-        scene.pl_axis.astype(np.int64), scene.pl_sign.astype(np.float64), pos0, scene.pl_move.astype(np.float64),
-        scene.pl_T.astype(np.float64), scene.pl_ta.astype(np.float64), scene.pl_mode.astype(np.int64),
-        scene.plane_positions(), np.zeros((P, 3)), np.zeros((N, max(P, 1), 4)), np.zeros((max(P, 1), 3)),
-        *scene.plane_candidates())
 
 
 _CUSTOM_KERNELS: dict = {}
@@ -496,29 +441,6 @@ def contact_kernel_for(law, threads: bool = False):
     return _CUSTOM_KERNELS[key], None
 
 
-def penalty_step_bound(model, dt: float, k: float, modes=("shear", "bending"), *,
-                       rep=None) -> tuple[float, float, float]:
-    """``((ωΔt)², dt_ok [s], k_lim [N/m])`` of a penalty ``k`` [N/m] on the lightest node at step ``dt``.
-
-    A penalty k on a node of mass m adds (ωΔt)² = 2kΔt²/m to the node's relative mode (two bodies
-    of that mass); central differences stay stable while the beam's element modes it couples with
-    (:func:`fiberpipe.solver.timestep.stable_time_step`: shear and bending for the normal contact,
-    and axial too for the tangential spring, which acts along the fiber) plus this stay below
-    (ωΔt)² = 4, i.e. while Δt ≤ dt_ok = 2/√(ω_beam² + 2k/m); ``k_lim`` is the penalty at that
-    bound. A mode whose element bound the step already exceeds is locked in the scene (the modal
-    step checked it) and does not couple. ``rep``: the model's
-    :func:`~fiberpipe.solver.timestep.stable_time_step` report, when the caller holds it.
-    """
-    from ..timestep import stable_time_step
-
-    rep = stable_time_step(model) if rep is None else rep
-    m_min = float(np.min(model.mass))
-    used = [(2.0 * dt / rep.per_mode_s[mo]) ** 2 for mo in modes]
-    beam = max([u for u in used if u < 4.0] or [0.0])
-    total = beam + 2.0 * k * dt * dt / m_min
-    return total, 2.0 * dt / math.sqrt(total) if total > 0 else math.inf, (4.0 - beam) * m_min / (2.0 * dt * dt)
-
-
 def _max_element_length(model) -> float:
     return float(np.max(model.el_L0)) if model.n_elements else 0.0
 
@@ -544,8 +466,7 @@ def check_penalty_stiffness(model, dt: float, law, k_t: float | None, onset_m: f
             check(k, ("shear", "bending"), f"contact law {law.name!r}",
                   lambda k_lim: f"make its stiffness {k / k_lim:.3g}× smaller (contact.stiffness or k_def)")
     if k_t is not None:
-        check(k_t, ("axial", "shear", "bending"), f"friction.stiffness {k_t:.3g} N/m",
-              lambda k_lim: f"use friction.stiffness ≤ {k_lim:.3g} N/m")
+        check_friction_stiffness(model, dt, k_t)
 
 
 class ContactSlopeWatch:
@@ -579,7 +500,7 @@ class ContactSlopeWatch:
         info = getattr(hook, "setup_info", None)
         law = getattr(info, "law", None)
         data = getattr(info, "data", None)
-        if law is None or data is None or not ContactSlopeWatch.watched(law) or not info.contact_on:
+        if law is None or data is None or not ContactSlopeWatch.watched(law):
             return None
         return ContactSlopeWatch(model, dt, law, data.stats, data.params.onset_m, dt_safety)
 
@@ -614,21 +535,19 @@ class ContactSlopeWatch:
         return self.warning
 
 
-def make_contact_hook(model, *, law, contact: bool = True, friction: bool = False, mu: float, overlap_release_s: float,
-                      k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2,
-                      plane_friction_on: bool = True, onset_m: float = 0.0):
+def make_contact_hook(model, *, law, friction: bool = False, mu: float, overlap_release_s: float,
+                      k_t: float | None = None, skin_m: float | None = None, n_gauss: int = 2, onset_m: float = 0.0):
     """A :class:`ContactHook` for ``model`` (Python API; ``build.build_simulation`` maps a config onto it).
 
-    law : ContactLaw. contact : fiber–fiber normal contact on. friction : Coulomb friction on
-    (fiber–fiber if ``contact``, and fiber–plane for the scene's plates/walls if
-    ``plane_friction_on``). mu : coefficient. k_t : N/m, tangential penalty (default
-    0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin (default 0.2 r_max).
-    n_gauss : Gauss points per segment in the line part. overlap_release_s : s, the initial overlap
-    of each segment pair (its penetration at the first step) is subtracted from its penetration and
-    released linearly to 0 over this time (0: no offset, the overlap acts at once). onset_m : m, the
-    penetration over which force and stiffness rise from zero (0: the laws as they are). The normal
-    pass is :func:`fiberpipe.solver.contact_potential.contact_forces_pot` (every force minus the
-    gradient of the stored potential).
+    law : ContactLaw. friction : fiber–fiber Coulomb friction on (the fibers' friction on plates and
+    walls is theirs: ``Plates(mu=...)``, ``Walls(mu=...)``). mu : coefficient. k_t : N/m, tangential
+    penalty (default 0.02 m_min (2/Δt)², chosen against the time step). skin_m : Verlet skin
+    (default 0.2 r_max). n_gauss : Gauss points per segment in the line part. overlap_release_s : s,
+    the initial overlap of each segment pair (its penetration at the first step) is subtracted from
+    its penetration and released linearly to 0 over this time (0: no offset, the overlap acts at
+    once). onset_m : m, the penetration over which force and stiffness rise from zero (0: the laws as
+    they are). The normal pass is :func:`fiberpipe.solver.contact_potential.contact_forces_pot`
+    (every force minus the gradient of the stored potential).
     """
     segs = _segments(model)
     E = model.n_elements
@@ -643,52 +562,54 @@ def make_contact_hook(model, *, law, contact: bool = True, friction: bool = Fals
     if not (onset_m >= 0 and math.isfinite(onset_m)):
         raise FiberpipeError(f"contact.onset must be >= 0, got {onset_m}")
     kernel, cache_name = contact_kernel_for(law)
-    info = ContactSetup(law, contact, friction, mu, k_t, skin, n_gauss)
+    info = ContactSetup(law, friction, mu, k_t, skin, n_gauss)
 
     def prepare(model_, scene):
         dt = float(scene.dt)
-        kt = float(k_t) if k_t is not None else DEFAULT_KT_FACTOR * float(np.min(model_.mass)) * (2.0 / scene.penalty_dt()) ** 2
+        kt = float(k_t) if k_t is not None else scene.default_friction_stiffness()
         info.k_t = kt
-        check_penalty_stiffness(model_, dt, law if contact else None, kt if friction else None, float(onset_m))
+        check_penalty_stiffness(model_, dt, law, kt if friction else None, float(onset_m))
         N = model_.n_nodes
-        cap = max(DEFAULT_PAIRS_PER_SEGMENT * E, 64) if contact else 1
+        cap = max(DEFAULT_PAIRS_PER_SEGMENT * E, 64)
         gxi, gw = gauss_points(n_gauss)
-        P = scene.pl_axis.size
-        params = ContactParams(int(law.law_id), law.params(), bool(friction and contact),
-                               bool(friction and plane_friction_on and P > 0), skin, 2.0 * rmax, float(mu), kt,
+        params = ContactParams(int(law.law_id), law.params(), bool(friction), skin, 2.0 * rmax, float(mu), kt,
                                float(overlap_release_s), gxi, gw, float(onset_m))
-        used = segs if contact else Segments(*(a[:0] for a in segs))
-        data = ContactData(params, new_stats(), used, np.array(model_.nodes_m, dtype=np.float64),
+        stats = new_stats()
+        if friction:  # the scene's friction array and returned-energy sum, shared with the planes' friction
+            stats = stats._replace(friction_returned_J=scene.friction_returned())
+        data = ContactData(params, stats, segs, np.array(model_.nodes_m, dtype=np.float64),
                            List([new_pair_list(cap), new_pair_list(cap)]), List([new_records(cap)]), np.zeros((N, 3)),
-                           _plane_friction_of(model_, scene), np.zeros((N, 3)))
+                           scene.friction_forces() if friction else np.zeros((0, 3)))
         info.data = data
         return data
 
-    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, friction_of=contact_friction_of,
-                       cache_name=cache_name,
+    hook = ContactHook(kernel=kernel, prepare=prepare, forces_of=contact_forces_of, cache_name=cache_name,
                        kernel_threads=contact_kernel_for(law, threads=True)[0])
     hook.setup_info = info
     hook.make_watch = lambda model_, dt, dt_safety=1.0: ContactSlopeWatch.for_hook(model_, dt, hook, dt_safety)
-    if not contact:
-        hook.name = "friction"
     return hook
 
 
 @register_term("contact", "friction")
 class ContactEffect:
-    """``scene.effects`` entries ``contact`` and ``friction``: one :class:`ContactHook` for both."""
+    """``scene.effects`` entries ``contact`` and ``friction``: one :class:`ContactHook` for both, the
+    fiber–fiber contact with its friction if ``friction`` is listed too. ``friction`` without
+    ``contact`` builds no contact term: the plates and walls then carry the friction alone
+    (:class:`~fiberpipe.solver.terms.planes.Plates`, :class:`~fiberpipe.solver.terms.planes.Walls`)."""
 
     @classmethod
     def from_config(cls, scene_cfg, model, cfg):
         """The term of ``scene.contact`` (law, skin, overlap_release, onset, gauss_points) and
-        ``scene.friction`` (mu, stiffness = k_t in N/m), for the material of ``cfg.material``."""
+        ``scene.friction`` (mu, stiffness = k_t in N/m), for the material of ``cfg.material``; None
+        when ``scene.effects`` lists no ``contact``."""
         from ..laws import law_from_config
 
         effects = list(scene_cfg.effects)
+        if "contact" not in effects:
+            return None
         ccfg, fcfg = scene_cfg.contact, scene_cfg.friction
-        return make_contact_hook(model, law=law_from_config(ccfg, cfg.material), contact="contact" in effects,
-                                 friction="friction" in effects, mu=float(fcfg.mu),
-                                 overlap_release_s=float(ccfg.overlap_release),
+        return make_contact_hook(model, law=law_from_config(ccfg, cfg.material), friction="friction" in effects,
+                                 mu=float(fcfg.mu), overlap_release_s=float(ccfg.overlap_release),
                                  k_t=None if fcfg.stiffness is None else float(fcfg.stiffness),
                                  skin_m=None if ccfg.skin is None else float(ccfg.skin),
                                  n_gauss=int(ccfg.gauss_points), onset_m=float(ccfg.onset))
