@@ -275,7 +275,7 @@ class Plates(Term):
                    path_m=None if ld.path is None else [float(u) for u in ld.path], hold_s=float(ld.hold),
                    penalty_factor=float(p.penalty_factor), onset_fraction=float(p.onset_fraction),
                    size_m=getattr(p, "size", None), centre_m=getattr(p, "centre", None),
-                   **_friction_of_config(scene_cfg, scene_cfg.friction.mu))
+                   **_friction_of_config(scene_cfg))
 
     def setup(self, model, scene):
         ax = _AXES[self.axis]
@@ -328,12 +328,13 @@ def _check_friction(kind: str, mu: float, stiffness_n_per_m: float | None) -> No
         raise FiberpipeError(f"{kind} friction stiffness must be > 0 N/m, got {stiffness_n_per_m}")
 
 
-def _friction_of_config(scene_cfg, mu) -> dict:
-    """A plane term's friction arguments from the config: ``mu`` (its own coefficient, or
-    ``scene.friction.mu``) and ``scene.friction.stiffness`` when ``scene.effects`` lists
-    ``friction``; none (μ = 0) otherwise."""
+def _friction_of_config(scene_cfg, own_mu: float | None = None) -> dict:
+    """A plane term's friction arguments from the config when ``scene.effects`` lists ``friction``:
+    its own coefficient ``own_mu`` (the walls' ``scene.walls.mu``), else ``scene.friction.mu``, and
+    ``scene.friction.stiffness``; none (μ = 0) otherwise."""
     if "friction" not in scene_cfg.effects:
         return {}
+    mu = scene_cfg.friction.mu if own_mu is None else own_mu
     stiffness = scene_cfg.friction.stiffness
     return {"mu": float(mu), "friction_stiffness_n_per_m": None if stiffness is None else float(stiffness)}
 
@@ -388,10 +389,9 @@ class Walls(Term):
     @classmethod
     def from_config(cls, scene_cfg, model, cfg):
         w = scene_cfg.walls
-        mu = scene_cfg.friction.mu if getattr(w, "mu", None) is None else w.mu  # the walls' own, else the fibers'
         return cls({ax: tuple(getattr(w, ax)) for ax in ("x", "y", "z") if getattr(w, ax) is not None},
                    penalty_factor=float(w.penalty_factor), onset_fraction=float(w.onset_fraction),
-                   **_friction_of_config(scene_cfg, mu))
+                   **_friction_of_config(scene_cfg, getattr(w, "mu", None)))
 
     def setup(self, model, scene):
         surface = PlaneSurface(self.penalty_factor, self.onset_fraction, self.mu, self.friction_stiffness_n_per_m)
