@@ -2,7 +2,8 @@
 
 Reference: the friction forces' work on the nodes ``W_f`` (``energy/friction_work``, the same
 ``½Δt f_n·(v_{n−½} + v_{n+½})`` the step loop applies) and the springs' energy ``E_s``
-(``ContactStats.e_spring_J``, fiber pairs and planes) are state-side quantities; the dissipation
+(``ContactStats.e_spring_J`` of the fiber pairs, ``PlaneFrictionData.e_spring_J`` of the plate) are
+state-side quantities; the dissipation
 booked over a step must be ``−ΔW_f − ΔE_s`` to rounding. Scene: the study's rearrangement (beam 1
 driven down onto beams 2 and 3 on a plate, μ = 0.2), undamped, where the lower beams lose and regain
 contact with beam 1 while sliding: contacts leave with loaded springs and a last force whose second
@@ -39,11 +40,12 @@ def test_friction_dissipation_is_minus_the_forces_work_less_the_springs_energy_e
     integ = Integrator(m, eff, dt, history_rows=10, history_every=10**9)
     st = State.at_rest(m)
     stats = integ.term_data("contact").stats
+    plate = integ.term_data("plane_friction")  # the plate's friction: the planes term's
     prev = np.array([0.0, 0.0, 0.0])
     mismatch = []
     for _ in range(150):  # 150 chunks of 100 steps, 1.2 ms: the loading and the lower beams' slide
         integ.advance(st, 100)
-        cur = np.array([st.acc[ACC_FD], st.acc[ACC_WF], stats.e_spring_J[0]])
+        cur = np.array([st.acc[ACC_FD], st.acc[ACC_WF], stats.e_spring_J[0] + plate.e_spring_J[0]])
         mismatch.append(float(np.sum(cur - prev)))
         prev = cur
     fd = float(st.acc[ACC_FD])
