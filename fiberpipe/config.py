@@ -776,7 +776,21 @@ class SolverConfig(Section):
         _positive("solver.end_time", self.end_time)
         if self.rotational_inertia_scaling < 1 or self.mass_scaling < 1:
             raise ValueError("solver.rotational_inertia_scaling and solver.mass_scaling must be >= 1")
+        cores = usable_cores()
+        if self.threads > cores:
+            raise ValueError(f"solver.threads is {self.threads}, more than the {cores} cores this process may run on: "
+                             "a thread without a core of its own makes the run slower, not faster")
         return self
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it, else ``os.cpu_count``)."""
+    import os
+
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
 
 
 class ReferenceStageConfig(Section):
