@@ -760,13 +760,16 @@ class SolverConfig(Section):
                          "NUMBA_NUM_THREADS threads (read when it starts; fiberpipe study and fit set it to the largest "
                          "solver.threads of their runs unless it is set): a run asking for more warns")
     settle_time: Time = 0.0
-    stable_step: Literal["element", "modes"] = Field(
+    stable_step: Literal["element", "modes", "adaptive"] = Field(
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "
         "(every element mode, the axial one included); modes = 2/ω_max of the assembled beam system with the "
         "scene's fixed degrees of freedom removed, × √(1 − plane penalty factor) (larger with "
         "scene.constraints.lock_axial: all); the fiber–fiber contact stiffness is not in it, dt_safety must "
         "cover it (paper-40: 0.85, 1.165 × fewer steps, load-cell curve within 0.08 % of the element step's; "
-        "docs/benchmarks.md)")
+        "docs/benchmarks.md); adaptive = the element bound, each step split into as many equal sub-steps as the "
+        "contact law's tangent at the current penetrations and the plane penalty need, with the same dt_safety "
+        "margin, re-evaluated every 50 steps (deterministic: a resumed run is the same bit for bit; the "
+        "sub-step of each history row in its dt_s; docs/solver.md)")
 
     @model_validator(mode="after")
     def _check(self):
