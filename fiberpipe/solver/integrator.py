@@ -749,6 +749,9 @@ class _Run:
         plan, integrator, model, rep = self.plan, self.integrator, self.model, self.plan.timestep
         times, positions, rotations = self._frames()
         notes = [rep.summary(), f"dt = {plan.dt_s:.4g} s ({plan.dt_s / rep.dt_stable_s:.3g} × stable)"]
+        if self.adaptive is not None and integrator.substeps[0] > 1:
+            notes.append(f"adaptive step: {int(integrator.substeps[0])} sub-steps of {plan.dt_s / integrator.substeps[0]:.4g} s "
+                         "per step at the end (history dt_s)")
         if self.resume is not None:
             notes.append(f"resumed from a checkpoint at t = {self.resume.t:.6g} s (step {self.resume.step})")
         if model.rotary_inertia_scale != 1.0:

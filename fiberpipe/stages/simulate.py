@@ -38,6 +38,7 @@ log = logging.getLogger(__name__)
 #: Units of the history series the solver may record (anything else is stored as given).
 HISTORY_UNITS = {
     "time": "s",
+    "dt_s": "s",
     "plate_displacement": "m",
     "plate_force": "N",
     "wall_force": "N",
