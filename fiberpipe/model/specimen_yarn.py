@@ -195,11 +195,14 @@ def pack_cross_section(sp, radius_m: float, section: YarnSection, rng, where: st
     rho = np.sqrt(rng.uniform(0.0, 1.0, n))
     angle = rng.uniform(0.0, 2 * math.pi, n)
     x, y = a * rho * np.cos(angle), b * rho * np.sin(angle)
-    d_min = 2 * radius_m + sp.gap
+    # a fiber inclined by the helix angle α cuts the plane in an ellipse 2r/cos α long along the turn:
+    # the discs are spaced for the surface's α, so that the helices clear each other in 3D
+    tan_alpha = 2 * math.pi * section.turns_per_m * max(section.semi_width_m, section.semi_height_m)
+    d_min = (2 * radius_m + sp.gap) * math.sqrt(1 + tan_alpha**2)
     sweeps, worst = _relax_discs(x, y, a, b, d_min, 0.5 * sp.gap, MAX_DISC_SWEEPS)
     if worst > 0.5 * sp.gap:
         _, closest = _disc_sweep(x, y, a, b, d_min, False)
-        reached = sp.volume_fraction * min(closest / (2 * radius_m), 1.0) ** 2
+        reached = sp.volume_fraction * min(closest / d_min, 1.0) ** 2
         raise ConfigError(f"specimen.volume_fraction = {sp.volume_fraction:g} cannot be packed in the yarn's "
                           f"cross-section: the discs jam at v_f0 ≈ {reached:.3f} (the densest overlap-free state "
                           f"reached in {sweeps} sweeps); lower it", where=where)
@@ -311,13 +314,14 @@ def _smooth_lines(x, y, weight):
     n, points = x.shape
     for line in (x, y):
         for i in range(n):
+            last = line[i, points - 1] + weight * (2 * line[i, points - 2] - line[i, points - 3] - line[i, points - 1])
             previous = line[i, 0]
             line[i, 0] += weight * (2 * line[i, 1] - line[i, 2] - line[i, 0])
             for k in range(1, points - 1):
                 here = line[i, k]
                 line[i, k] = weight * previous + (1 - 2 * weight) * here + weight * line[i, k + 1]
                 previous = here
-            line[i, points - 1] += weight * (2 * line[i, points - 2] - previous - line[i, points - 1])
+            line[i, points - 1] = last
 
 
 @njit(cache=True)
