@@ -253,6 +253,24 @@ def write_json_atomic(path: str | Path, obj) -> None:
     write_text_atomic(path, json_text(obj))
 
 
+#: target size of one HDF5 chunk (bytes): h5py's advice is 10 KiB – 1 MiB
+CHUNK_BYTES = 1 << 20
+
+
+def chunk_shape(shape: tuple[int, ...], itemsize: int, target_bytes: int = CHUNK_BYTES) -> tuple[int, ...]:
+    """HDF5 chunks along the first axis (a frame, a history row): one row per chunk when a row
+    holds ``target_bytes`` or more (its later axes cut to fit), else as many rows as fit; so a
+    frame of a (frames, nodes, 3) series reads without decompressing the others."""
+    row = int(np.prod(shape[1:], dtype=np.int64)) * itemsize
+    if len(shape) == 1 or row < target_bytes:
+        rows = max(1, min(shape[0], target_bytes // max(row, itemsize)))
+        return (rows, *shape[1:])
+    rest = list(shape[1:])
+    while int(np.prod(rest, dtype=np.int64)) * itemsize > target_bytes and rest[0] > 1:
+        rest[0] = (rest[0] + 1) // 2
+    return (1, *rest)
+
+
 def write_artifact(
     path: str | Path,
     kind: str,
@@ -297,7 +315,7 @@ def write_artifact(
             arr = np.asarray(arr)
             kw = {}
             if compression and arr.size > 4096:
-                kw = {"compression": compression, "shuffle": True, "chunks": True}
+                kw = {"compression": compression, "shuffle": True, "chunks": chunk_shape(arr.shape, arr.itemsize)}
             ds = f.create_dataset(name, data=arr, **kw)
             ds.attrs["units"] = units.get(name) or DIMENSIONLESS
         for name, gattrs in (group_attrs or {}).items():
