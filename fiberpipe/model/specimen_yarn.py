@@ -425,6 +425,10 @@ def build_yarn_specimen(cfg, raw: dict, out: Path, *, where: str, seed: int, rea
                       "n_fibers": sp.n_fibers, "specimen": sp.model_dump(mode="json")},
     }
     ready = copy.deepcopy(raw)
+    # no scan to compare with: the position error (a one-to-one matching of the fibers, quadratic in
+    # their number) would compare the yarn with its own start at every frame
+    if isinstance(ready.get("post"), dict):
+        ready["post"].pop("reference_fibers", None)
     scene = ready.setdefault("scene", {})
     effects = scene.setdefault("effects", [])
     if sp.yarn.walls and "walls" not in effects:

@@ -65,10 +65,13 @@ def test_yarn_is_packed_at_its_volume_fraction_without_overlap(tmp_path):
     assert np.abs(line[..., 0]).max() + RADIUS_M <= half + 1e-12
 
 
-def test_yarn_without_walls_leaves_them_out(tmp_path):
-    build_specimen(yarn(n_fibers=20, volume_fraction=0.4), tmp_path, where="yarn.yaml", seed=0)
+def test_yarn_without_walls_leaves_them_out_and_compares_with_no_scan(tmp_path):
+    raw = yarn(n_fibers=20, volume_fraction=0.4)
+    raw["post"] = {"reference_fibers": "scan.h5"}
+    build_specimen(raw, tmp_path, where="yarn.yaml", seed=0)
     ready = yaml.safe_load((tmp_path / "config.yaml").read_text())
     assert "walls" not in ready["scene"]["effects"] and "walls" not in ready["scene"]
+    assert "reference_fibers" not in ready["post"]
 
 
 def test_yarn_is_the_same_for_the_same_seed_and_differs_for_another(tmp_path):
