@@ -34,6 +34,8 @@ from fiberpipe.errors import ConfigError
 
 #: Gauss–Seidel sweeps of the cross-section's disc packing before the v_f0 is refused
 MAX_DISC_SWEEPS = 20000
+#: sweeps at each 1 % smaller diameter while the densest packable v_f0 is sought (the error's figure)
+JAM_SWEEPS = 500
 #: sweeps of the 3D segment relaxation before the residual overlap is checked
 MAX_SEGMENT_SWEEPS = 400
 #: the first sweeps of the 3D relaxation are each followed by a smoothing along the fibers
@@ -184,6 +186,19 @@ def _relax_discs(x, y, a, b, d_min, tolerance, max_sweeps):
     return sweeps, worst
 
 
+def densest_reached(x, y, a, b, d_min: float, tolerance: float) -> float:
+    """The jammed discs (x, y) shrunk by 1 % steps, relaxed ``JAM_SWEEPS`` sweeps at each, until
+    they clear: the ratio of that packing's v_f0 to the asked one (decompression from the jam,
+    the reverse of Lubachevsky–Stillinger's growth)."""
+    diameter = d_min
+    for _ in range(60):
+        diameter *= 0.99
+        _, worst = _relax_discs(x, y, a, b, diameter, tolerance, JAM_SWEEPS)
+        if worst <= tolerance:
+            break
+    return (diameter / d_min) ** 2
+
+
 def pack_cross_section(sp, radius_m: float, section: YarnSection, rng, where: str) -> tuple[np.ndarray, int]:
     """The discs' centres on the unit disc (x/a', y/b') and the sweeps made; a one-line error naming
     specimen.volume_fraction, with the densest v_f0 reached, when the discs jam before they clear."""
@@ -201,11 +216,10 @@ def pack_cross_section(sp, radius_m: float, section: YarnSection, rng, where: st
     d_min = (2 * radius_m + sp.gap) * math.sqrt(1 + tan_alpha**2)
     sweeps, worst = _relax_discs(x, y, a, b, d_min, 0.5 * sp.gap, MAX_DISC_SWEEPS)
     if worst > 0.5 * sp.gap:
-        _, closest = _disc_sweep(x, y, a, b, d_min, False)
-        reached = sp.volume_fraction * min(closest / d_min, 1.0) ** 2
+        reached = densest_reached(x, y, a, b, d_min, 0.5 * sp.gap) * sp.volume_fraction
         raise ConfigError(f"specimen.volume_fraction = {sp.volume_fraction:g} cannot be packed in the yarn's "
-                          f"cross-section: the discs jam at v_f0 ≈ {reached:.3f} (the densest overlap-free state "
-                          f"reached in {sweeps} sweeps); lower it", where=where)
+                          f"cross-section: the discs jam, the densest overlap-free v_f0 reached is ≈ {reached:.3f} "
+                          f"({sweeps} sweeps at the asked one); lower it", where=where)
     return np.column_stack([x / a, y / b]), sweeps
 
 

@@ -110,8 +110,9 @@ def test_a_volume_fraction_beyond_jamming_is_refused_in_one_line_with_the_denses
     message = str(caught.value)
     assert message.startswith("yarn.yaml:") and "\n" not in message
     assert "specimen.volume_fraction = 0.9 cannot be packed" in message
-    reached = float(message.split("jam at v_f0 ≈ ")[1].split(" ")[0])
-    assert 0.5 < reached < 0.9
+    reached = float(message.split("v_f0 reached is ≈ ")[1].split(" ")[0])
+    # random discs jam near 0.82–0.85 in the bulk (O'Hern et al. 2003); 60 in a circle, below
+    assert 0.7 < reached < 0.86
     assert not (tmp_path / "x" / "fibers.h5").exists()
 
 
