@@ -61,7 +61,11 @@ def check_free_space(run_dir: Path, n_nodes: int, n_elements: int, frames: int, 
     if size.total > free_bytes:
         raise ConfigError(
             f"solver.output_frames = {frames}: the run's output (simulation.h5 /frames/positions and /frames/contact_force "
-            f"{size.simulation_h5 / 1e9:.3g} GB, frames/*.vtu {size.vtu_frames / 1e9:.3g} GB, the checkpoint "
-            f"{size.checkpoint / 1e9:.3g} GB, for {n_nodes} nodes) would exceed the free disk space in {run_dir} "
-            f"({free_bytes / 1e9:.3g} GB): lower solver.output_frames or free space", where=where)
+            f"{_size(size.simulation_h5)}, frames/*.vtu {_size(size.vtu_frames)}, the checkpoint "
+            f"{_size(size.checkpoint)}, for {n_nodes} nodes) would exceed the free disk space in {run_dir} "
+            f"({_size(free_bytes)}): lower solver.output_frames or free space", where=where)
     return size
+
+
+def _size(n_bytes: int) -> str:
+    return f"{n_bytes / 1e9:.3g} GB" if n_bytes >= 1e9 else f"{n_bytes / 1e6:.3g} MB"
