@@ -122,3 +122,15 @@ def test_yarn_specimen_json_records_the_twist_and_packing(tmp_path):
     assert info["kind"] == "yarn" and info["twist"]["turns_per_m"] == 20.0
     a, b = info["semi_axes_m"]
     assert math.tan(math.radians(info["twist"]["surface_helix_angle_deg"])) == pytest.approx(2 * math.pi * 20.0 * a)
+
+
+def test_elliptical_yarn_has_its_aspect_ratio_and_volume_fraction(tmp_path):
+    info = build_specimen(yarn(n_fibers=40, volume_fraction=0.5, aspect_ratio=2.5), tmp_path, where="yarn.yaml", seed=0)
+    a, b = info["semi_axes_m"]
+    assert a / b == pytest.approx(2.5)
+    line = lines(read_fibers(tmp_path / "fibers.h5"))
+    # every fiber surface inside the ellipse (a, b) centred between the plates
+    x, y = line[..., 0], line[..., 1] - 0.5 * info["height_m"]
+    assert np.max((x / (a - RADIUS_M)) ** 2 + (y / (b - RADIUS_M)) ** 2) <= 1 + 1e-9
+    volume = math.pi * RADIUS_M**2 * np.sum(np.linalg.norm(np.diff(line, axis=1), axis=2))
+    assert volume / (math.pi * a * b * LENGTH_M) == pytest.approx(0.5, rel=0.01)
