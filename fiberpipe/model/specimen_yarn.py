@@ -224,11 +224,18 @@ def pack_cross_section(sp, radius_m: float, section: YarnSection, rng, where: st
 
 
 @njit(cache=True)
-def _closest_on_segments(p0, p1, q0, q1):
-    """Parameters (s, t) of the closest points of segments p0–p1 and q0–q1 (Ericson 2005, §5.1.9)."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e, f = np.dot(d1, d1), np.dot(d2, d2), np.dot(d2, r)
-    c, b = np.dot(d1, r), np.dot(d1, d2)
+def _closest_on_segments(p0, p1, q0, q1, gap):
+    """Parameters (s, t) of the closest points of segments p0–p1 and q0–q1 (Ericson 2005, §5.1.9)
+    and their distance; ``gap`` (3,) receives q(t) − p(s). Scalar arithmetic: no allocation in the
+    sweeps' inner loop."""
+    a = e = f = c = b = 0.0
+    for m in range(3):
+        d1, d2, r = p1[m] - p0[m], q1[m] - q0[m], p0[m] - q0[m]
+        a += d1 * d1
+        e += d2 * d2
+        f += d2 * r
+        c += d1 * r
+        b += d1 * d2
     denom = a * e - b * b
     s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > 1e-30 * a * e else 0.0
     t = (b * s + f) / e
@@ -236,7 +243,11 @@ def _closest_on_segments(p0, p1, q0, q1):
         t, s = 0.0, min(max(-c / a, 0.0), 1.0)
     elif t > 1.0:
         t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
-    return s, t
+    distance = 0.0
+    for m in range(3):
+        gap[m] = (q0[m] + t * (q1[m] - q0[m])) - (p0[m] + s * (p1[m] - p0[m]))
+        distance += gap[m] * gap[m]
+    return s, t, math.sqrt(distance)
 
 
 @njit(cache=True)
@@ -277,7 +288,7 @@ def _segment_sweep(x, y, z, a, b, d_min, push):
             flat_y[i * layers + k] = my[i, k]
     order, starts = _grid_order(flat_x, flat_y, x0, y0, cell, nx * layers, ny)
     worst = 0.0
-    p0, p1, q0, q1 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    p0, p1, q0, q1, gap = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     n_xy = np.empty(2)
     for i in range(n):
         for k in range(layers):
@@ -295,9 +306,7 @@ def _segment_sweep(x, y, z, a, b, d_min, push):
                             p1[0], p1[1], p1[2] = x[i, k + 1], y[i, k + 1], z[k + 1]
                             q0[0], q0[1], q0[2] = x[j, kk], y[j, kk], z[kk]
                             q1[0], q1[1], q1[2] = x[j, kk + 1], y[j, kk + 1], z[kk + 1]
-                            s, t = _closest_on_segments(p0, p1, q0, q1)
-                            gap = (q0 + t * (q1 - q0)) - (p0 + s * (p1 - p0))
-                            d = math.sqrt(np.dot(gap, gap))
+                            s, t, d = _closest_on_segments(p0, p1, q0, q1, gap)
                             if d >= d_min:
                                 continue
                             worst = max(worst, d_min - d)
