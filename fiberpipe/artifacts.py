@@ -282,6 +282,7 @@ def write_artifact(
     config_sha256: str = "",
     inputs: dict[str, str] | None = None,
     compression: str | None = None,
+    chunks: str = "auto",
 ) -> Path:
     """Write an artifact atomically.
 
@@ -307,6 +308,9 @@ def write_artifact(
         ``{name: sha256}`` of the input artifacts.
     compression : str, optional
         h5py compression for large arrays (e.g. ``"gzip"``); None stores them raw.
+    chunks : {"auto", "rows"}
+        The compressed arrays' chunks: h5py's guess, or along the first axis (:func:`chunk_shape`:
+        a frame of a time series per chunk).
     """
     units = units or {}
     with artifact_writer(path, kind, attrs=attrs, config_sha256=config_sha256, inputs=inputs) as f:
@@ -315,7 +319,8 @@ def write_artifact(
             arr = np.asarray(arr)
             kw = {}
             if compression and arr.size > 4096:
-                kw = {"compression": compression, "shuffle": True, "chunks": chunk_shape(arr.shape, arr.itemsize)}
+                kw = {"compression": compression, "shuffle": True,
+                      "chunks": chunk_shape(arr.shape, arr.itemsize) if chunks == "rows" else True}
             ds = f.create_dataset(name, data=arr, **kw)
             ds.attrs["units"] = units.get(name) or DIMENSIONLESS
         for name, gattrs in (group_attrs or {}).items():

@@ -136,7 +136,7 @@ def test_compressed_frames_are_chunked_per_frame_and_read_back_identically(tmp_p
     history = np.cumsum(rng.normal(size=(3000, 2)), axis=0)
     small = np.arange(10.0)
     path = write_artifact(tmp_path / "s.h5", "simulation", {"frames/positions": frames, "history/plate_force": history,
-                                                            "frames/time": small}, compression="gzip")
+                                                            "frames/time": small}, compression="gzip", chunks="rows")
     with h5py.File(path, "r") as f:
         assert f["frames/positions"].compression == "gzip" and f["frames/positions"].chunks == (1, 40000, 3)
         assert f["history/plate_force"].compression == "gzip"

@@ -97,7 +97,7 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
     # frames and histories gzip-compressed in per-frame chunks (artifacts.chunk_shape): a 4000-fiber
     # run reads one frame without the others
     return write_artifact(path, "simulation", datasets, units=units, attrs=attrs, config_sha256=config_sha256, inputs=inputs,
-                          compression="gzip")
+                          compression="gzip", chunks="rows")
 
 
 def write_frames_vtk(out_dir: Path, mesh, frames_time, frames_positions, *, stem: str = "simulation",
