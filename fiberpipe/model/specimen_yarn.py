@@ -2,9 +2,9 @@
 cross-section at the target v_f0, with optional twist, orientation spread and waviness, for
 transverse compaction between the plates (along y), with or without the cassette's walls.
 
-# Strategy: packing by relaxation instead of fiber-by-fiber drops (the cassette kind's deposit
-# costs O(N²) and 422 s of CPU at 400 fibers). (1) The cross-section: N discs of diameter 2r + gap
-# start at uniform random positions in the ellipse of the fiber centres (semi-axes a − r, b − r)
+# Strategy: packing by relaxation instead of fiber-by-fiber drops and settling (the cassette kind's
+# cost grows faster than N). (1) The cross-section: N discs of diameter (2r + gap)/cos α (α the
+# surface's helix angle: an inclined fiber cuts the plane in an ellipse 2r/cos α long) start at uniform random positions in the ellipse of the fiber centres (semi-axes a − r, b − r)
 # and every overlap is pushed apart (each disc by half of it, Gauss–Seidel sweeps over a cell grid,
 # the discs kept inside the ellipse) until the smallest gap is ≥ half the clearance: the soft-disc
 # energy minimisation that jams near v = 0.84 in 2D (O'Hern et al., Phys. Rev. E 68, 011306, 2003;
