@@ -221,7 +221,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         ``join_gap_vox``, ``join_offset_vox``, ``join_angle_deg`` of :func:`fiberpipe.imaging.trace.trace`.
     **options
         The tracking fields of :class:`fiberpipe.imaging.trace.SliceOptions` (``max_jump_vox``,
-        ``max_skip``, ``momentum``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
+        ``max_skip``, ``gain``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
         ``spacing_vox``, ``peak_threshold``, ``refine``); fibers must run within ~45 degrees of
         ``axis`` (one slicing axis: no region split).
 
@@ -254,7 +254,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         merge_gap_vox=int(max(6, 3 * r)) if o.merge_gap_vox is None else o.merge_gap_vox,
         smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox)
     params = dict(min_distance=min_distance, peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox,
-                  max_skip=o.max_skip, momentum=o.momentum, refine=o.refine)
+                  max_skip=o.max_skip, gain=o.gain, refine=o.refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
     levels = None
@@ -273,7 +273,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     out.meta.update(method="slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,
-                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, momentum=o.momentum,
+                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, gain=o.gain,
                                 min_length_vox=o.min_length_vox, merge_gap_vox=o.merge_gap_vox,
                                 smooth_sigma_vox=o.smooth_sigma_vox, spacing_vox=o.spacing_vox,
                                 peak_threshold=o.peak_threshold, min_distance_vox=min_distance))
