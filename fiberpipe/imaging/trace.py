@@ -736,7 +736,7 @@ class SliceOptions(NamedTuple):
 
     max_jump_vox: float | None = None     # max(2, 0.6 r)
     max_skip: int = 3
-    gain: float = 0.5                     # alpha-beta filter of the track motion
+    gain: float | None = None             # the tracks' alpha-beta filter: 0.5 on grey, 1 on the mask
     min_length_vox: float | None = None   # max(10, 3 r)
     merge_gap_vox: int | None = None      # max(6, 3 r)
     smooth_sigma_vox: float | None = None  # max(1, r / 2)
@@ -746,6 +746,17 @@ class SliceOptions(NamedTuple):
     off_axis: str = "trace"
     off_axis_min_fraction: float = 0.02
     radius_from: str = "mask"             # "grey": the dense tracer's radius (dense.estimate_radius_grey)
+
+
+def track_gain(on_grey: bool) -> float:
+    """The default position gain of the tracks' alpha-beta filter (:meth:`_Track.update`): 0.5 on
+    the grey volume, 1 (each track predicted from its last detection) on the mask alone.
+
+    Why two: on the mask the predictions seed the detection and each centre is refined from its
+    seed, so a filtered prediction would make the centres depend on the track's history (a block
+    of the chunked tracer starts without one); on grey the centres come from the image alone, and
+    the filter only keeps a track on its fiber through a slice where its detection is off."""
+    return 0.5 if on_grey else 1.0
 
 
 def slice_options(options: dict) -> SliceOptions:
@@ -789,7 +800,8 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
         max_jump_vox=float(o.max_jump_vox) if o.max_jump_vox is not None else max(2.0, 0.6 * r),
         min_length_vox=o.min_length_vox if o.min_length_vox is not None else max(10.0, 3.0 * r),
         merge_gap_vox=o.merge_gap_vox if o.merge_gap_vox is not None else int(max(6, 3 * r)),
-        smooth_sigma_vox=o.smooth_sigma_vox if o.smooth_sigma_vox is not None else max(1.0, 0.5 * r))
+        smooth_sigma_vox=o.smooth_sigma_vox if o.smooth_sigma_vox is not None else max(1.0, 0.5 * r),
+        gain=o.gain if o.gain is not None else track_gain(grey is not None))
     min_distance = max(1, int(round(0.5 * r)))
     grey_t = None
     if grey is not None:

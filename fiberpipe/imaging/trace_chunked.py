@@ -21,7 +21,8 @@ from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
-from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_slices
+from .trace import (_GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_gain,
+                    track_slices)
 
 
 class SliceSource:
@@ -252,7 +253,8 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         max_jump_vox=float(o.max_jump_vox) if o.max_jump_vox is not None else max(2.0, 0.6 * r),
         min_length_vox=max(10.0, 3.0 * r) if o.min_length_vox is None else o.min_length_vox,
         merge_gap_vox=int(max(6, 3 * r)) if o.merge_gap_vox is None else o.merge_gap_vox,
-        smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox)
+        smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox,
+        gain=track_gain(grey is not None) if o.gain is None else o.gain)
     params = dict(min_distance=min_distance, peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox,
                   max_skip=o.max_skip, gain=o.gain, refine=o.refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
