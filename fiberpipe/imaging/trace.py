@@ -535,6 +535,22 @@ class _GreySlices:
         return acc
 
 
+#: Gaussian smoothing of the grey volume along the slicing axis while tracing, in fiber radii (at
+#: least one slice).
+SIGMA_ALONG_RADII = 0.5
+
+
+def grey_sigma_along(r_vox: float) -> float:
+    """The smoothing (slices) of the grey slices along the fibers while tracing: half a radius, at
+    least one slice.
+
+    Why: a fiber is straight over a few diameters, so averaging the slices over half a radius each
+    side adds signal and averages the noise (on the dense family's noisiest seed, CNR 2.1 at
+    r = 3.6, it gives 0.99 precision where one slice gives 0.95), while a fiber tilted by 10
+    degrees moves only 0.1 radius across that depth."""
+    return max(1.0, SIGMA_ALONG_RADII * float(r_vox))
+
+
 def grey_levels(grey_t, mask_t) -> tuple[float, float]:
     """The background and fiber grey levels: the medians of the grey values outside and inside the
     mask on 16 slices spread along axis 0."""
@@ -807,7 +823,7 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
     if grey is not None:
         if grey.shape != mask.shape:
             raise InputError(f"trace: the grey volume's shape {grey.shape} differs from the mask's {mask.shape}")
-        grey_t = _GreySlices(grey.transpose(perm), mask_t, samp)
+        grey_t = _GreySlices(grey.transpose(perm), mask_t, samp, sigma_along=grey_sigma_along(r))
         min_distance = max(1, int(round(0.75 * r)))
     raw, n_det = track_slices(mask_t, r, samp, min_distance=min_distance,
                               peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox, max_skip=o.max_skip,

@@ -22,7 +22,7 @@ from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
 from .trace import (_GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_gain,
-                    track_slices)
+                    grey_sigma_along, track_slices)
 
 
 class SliceSource:
@@ -171,8 +171,10 @@ def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, 
     if grey_src is not None:
         g = grey_src.open() if hasattr(grey_src, "open") else grey_src
         n = int(arr.shape[axis])
-        grey_t = _GreySlices(_Block(g, w0, b1, dtype=None, axis=axis, halo=GREY_HALO), block, samp, levels=levels,
-                             k_range=(-w0, n - 1 - w0))
+        sigma = grey_sigma_along(r)
+        halo = max(GREY_HALO, int(np.ceil(3 * sigma)) + 2)
+        grey_t = _GreySlices(_Block(g, w0, b1, dtype=None, axis=axis, halo=halo), block, samp, levels=levels,
+                             k_range=(-w0, n - 1 - w0), sigma_along=sigma)
     tracks, n_det = track_slices(block, r, samp, grey_t=grey_t, **params)
     out = []
     for t in tracks:
@@ -187,8 +189,9 @@ def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, 
 WARM_UP = 16
 
 
-#: Slices a block's grey reads reach beyond its faces: the half-width of the smoothing along the
-#: slices (3 sigma of :class:`fiberpipe.imaging.trace._GreySlices`, plus its read-back window).
+#: Slices a block's grey reads reach beyond its faces, at least: the half-width of the smoothing along
+#: the slices (3 sigma of :class:`fiberpipe.imaging.trace._GreySlices`, plus its read-back window;
+#: more for thicker fibers, :func:`fiberpipe.imaging.trace.grey_sigma_along`).
 GREY_HALO = 8
 
 
