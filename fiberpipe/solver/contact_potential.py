@@ -196,31 +196,13 @@ def _line_half_points(x, nodes, rr, gxi, gw, off, gbuf, n0):
     b_next, a_ends, b_ends)``: the segments' nodes, the far nodes of the segments before and after B
     on its fiber (−1: B ends there, its clamped point is the end cap) and both segments' end flags
     (:func:`_segment_ends`)."""
-    # Strategy: most pairs lie away from every fiber end (m = 1, λ = ½): their loop is the body with
-    # the end weights compiled out (a constant False, which LLVM folds); the pairs near an end call a
-    # copy of their own, so the end weights' projections and smoothsteps do not weigh on the common
-    # loop's registers and code. The same arithmetic either way.
-    if nodes[6] != 0 or nodes[7] != 0:
-        return _line_half_points_ends(x, nodes, rr, gxi, gw, off, gbuf, n0)
-    return _line_half_body(x, nodes, rr, gxi, gw, off, gbuf, n0, False)
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _line_half_points_ends(x, nodes, rr, gxi, gw, off, gbuf, n0):
-    """:func:`_line_half_points` of a pair near a fiber end (its end weights on)."""
-    return _line_half_body(x, nodes, rr, gxi, gw, off, gbuf, n0, True)
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _line_half_body(x, nodes, rr, gxi, gw, off, gbuf, n0, ends):
-    """The loop of :func:`_line_half_points`; ``ends``: a segment's end flags are set (the end weights
-    are computed)."""
     na0, na1, nb0, nb1, b_prev, b_next, a_ends, b_ends = nodes
     tb0 = x[nb1, 0] - x[nb0, 0]
     tb1 = x[nb1, 1] - x[nb0, 1]
     tb2 = x[nb1, 2] - x[nb0, 2]
     inv_lb2 = 1.0 / (tb0 * tb0 + tb1 * tb1 + tb2 * tb2)
     reach2 = (rr - off) * (rr - off) if rr > off else 0.0
+    ends = a_ends != 0 or b_ends != 0
     n = n0
     for g in range(gxi.shape[0]):
         xi = gxi[g]
