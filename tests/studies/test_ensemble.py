@@ -101,6 +101,27 @@ def test_variants_that_differ_only_in_their_compaction_share_specimens():
     assert specimen_key(other_law) == specimen_key(own) != specimen_key(TINY)
 
 
+def _unreachable_at_seed_1(raw, run_dir, where, specimen_store):
+    """The member's task, but seed 1's input is refused as a pile that cannot be closed is."""
+    from fiberpipe.studies import ensemble
+
+    if raw["specimen"]["seed"] == 1:
+        raise ConfigError("specimen.volume_fraction = 0.9: closing the cassette does not reach it", where=where)
+    return ensemble.run_member(raw, run_dir, where, specimen_store)
+
+
+def test_keep_going_reports_a_refused_ensemble_and_finishes_the_others(tmp_path):
+    results = run_ensembles({"good": (TINY, [0], tmp_path / "good"), "bad": (TINY, [0, 1], tmp_path / "bad")},
+                            workers=1, echo=lambda *_: None, member=_unreachable_at_seed_1, keep_going=True)
+    assert results["bad"]["seeds"] == [0, 1]
+    assert results["bad"]["error"].startswith("seed 1: ") and "volume_fraction = 0.9" in results["bad"]["error"]
+    assert not (tmp_path / "bad" / "ensemble.json").exists()
+    assert results["good"]["seeds"] == [0] and (tmp_path / "good" / "ensemble.json").is_file()
+    with pytest.raises(ConfigError, match="does not reach it"):  # without keep_going the error ends the pass
+        run_ensembles({"bad": (TINY, [1], tmp_path / "bad2")}, workers=1, echo=lambda *_: None,
+                      member=_unreachable_at_seed_1)
+
+
 def _killed_once(raw, run_dir, where, specimen_store, marker):
     """The member's task, but the first attempt at seed 1 builds its specimen and then dies as a
     worker process does under kill -9 (SIGKILL: no clean-up, no reply to the scheduler)."""
