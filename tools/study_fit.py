@@ -57,6 +57,17 @@ def parse_grid(texts: list[str]) -> dict[str, list[float]]:
     return grid
 
 
+def parse_point(text: str, keys: list[str]) -> dict[str, float]:
+    """``KEY=v,KEY=v``: one point of the grid's unknowns, each value inside the study's range."""
+    point = {}
+    for part in text.split(","):
+        key, _, value = part.partition("=")
+        point.update(parse_grid([f"{key.strip()}={value}"]))
+    if sorted(point) != sorted(keys):
+        raise SystemExit(f"--point {text}: give a value for each of {', '.join(keys)}")
+    return {k: point[k][0] for k in keys}
+
+
 def changed_values(point: dict, base: dict) -> dict:
     """The point's values that differ from the base config's (in SI, after units): the others stay
     as the base gives them, so that the point shares the base's specimens (their key hashes the raw
@@ -173,6 +184,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default=str(ROOT / "configs" / "specimens" / "study-prediction.yaml"))
     ap.add_argument("--grid", action="append", default=None, help="KEY=v1,v2,... (SI), one per unknown")
+    ap.add_argument("--point", action="append", default=None,
+                    help="KEY=v,KEY=v (SI): one point; given, the points are these instead of the grid's product")
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--prediction", default=str(ROOT / "runs" / "study-prediction"))
@@ -188,6 +201,8 @@ def main(argv=None) -> int:
     out, prediction = Path(args.out), Path(args.prediction)
     keys = list(grid)
     points = [dict(zip(keys, values)) for values in itertools.product(*(grid[k] for k in keys))]
+    if args.point:
+        points = [parse_point(text, keys) for text in args.point]
     folders = point_folders(points, raw, seeds, prediction, Path(args.sensitivity), out)
     ensembles = {str(folder): (_with(raw, changed_values(point, raw)), seeds, folder) for point, folder in zip(points, folders)}
     results = run_ensembles(ensembles, workers=args.workers, specimen_store=prediction / "specimens",

@@ -32,6 +32,8 @@ VARIANTS = [  # in the order they run (the fit's unknowns first)
     ("vf-35", "v_f0", "v_f0 35 %", {"specimen.volume_fraction": 0.35}),
     ("law-parallel", "contact law", "the parallel model (Table 1, Φ = 0)",
      {"scene.contact": {"law": "scaled_stiffness", "preset": "table1_parallel"}}),
+    ("bow-41mm", "bow radius", "bow radius 41 mm (Table 4 in 1/cm as the curvature itself)",
+     {"specimen.bow.spool_radius": 0.0409}),
     ("mu-0", "wall friction (the global μ)", "μ = 0, fiber–fiber and walls", {"scene.friction.mu": 0.0}),
     ("mu-0.3", "wall friction (the global μ)", "μ = 0.3, fiber–fiber and walls", {"scene.friction.mu": 0.3}),
     ("phi-10", "Φ_mean", "Φ_mean 10°", {"specimen.phi_mean": "10 deg"}),
@@ -40,8 +42,6 @@ VARIANTS = [  # in the order they run (the fit's unknowns first)
     ("waviness", "short-wave waviness", "Table 4 in 1/mm (267 1/m, 1.8–2.5 mm waves)",
      {"specimen.waviness.curvature_per_m": 267.0}),
     ("vf-40", "v_f0", "v_f0 40 %", {"specimen.volume_fraction": 0.40}),
-    ("bow-41mm", "bow radius", "bow radius 41 mm (Table 4 in 1/cm as the curvature itself)",
-     {"specimen.bow.spool_radius": 0.0409}),
     ("law-hertz", "contact law", "Hertz, orientation-aware", {"scene.contact": {"law": "hertz_oriented"}}),
 ]
 BEGIN, END = "<!-- sensitivity: begin", "<!-- sensitivity: end -->"
