@@ -178,7 +178,7 @@ def plot(rows: list[dict], best: dict, figure: Path) -> None:
 def main(argv=None) -> int:
     from fiberpipe.artifacts import write_json_atomic, write_text_atomic
     from fiberpipe.config import load_raw
-    from fiberpipe.studies.ensemble import run_ensembles
+    from fiberpipe.studies.ensemble import collect_ensemble, run_ensembles
     from study_prediction import FAST, _with
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -191,6 +191,8 @@ def main(argv=None) -> int:
     ap.add_argument("--prediction", default=str(ROOT / "runs" / "study-prediction"))
     ap.add_argument("--sensitivity", default=str(ROOT / "runs" / "study-sensitivity"))
     ap.add_argument("--out", default=str(ROOT / "runs" / "study-fit"))
+    ap.add_argument("--collect", action="store_true",
+                    help="tables from the finished runs alone, running nothing (a point without them: not run)")
     ap.add_argument("--no-laws", action="store_true", help="skip the parallel model on the best point")
     ap.add_argument("--doc")
     ap.add_argument("--figure")
@@ -205,8 +207,11 @@ def main(argv=None) -> int:
         points = [parse_point(text, keys) for text in args.point]
     folders = point_folders(points, raw, seeds, prediction, Path(args.sensitivity), out)
     ensembles = {str(folder): (_with(raw, changed_values(point, raw)), seeds, folder) for point, folder in zip(points, folders)}
-    results = run_ensembles(ensembles, workers=args.workers, specimen_store=prediction / "specimens",
-                            where=args.config, keep_going=True)
+    if args.collect:  # the finished runs alone, nothing run
+        results = {name: collect_ensemble(folder, seeds) for name, (_, _, folder) in ensembles.items()}
+    else:
+        results = run_ensembles(ensembles, workers=args.workers, specimen_store=prediction / "specimens",
+                                where=args.config, keep_going=True)
     rows = []
     for point, folder in zip(points, folders):
         result = results[str(folder)]
@@ -219,11 +224,16 @@ def main(argv=None) -> int:
                      **objective(folder)})
     done = [r for r in rows if "error" not in r]
     best = min(done, key=lambda r: r["rms_N"])
-    laws = None
+    laws, parallel = None, {"error": "not run (--no-laws)"}
     if not args.no_laws:
         folder = Path(best["folder"]).with_name(Path(best["folder"]).name + "-parallel")
-        parallel = run_ensembles({"parallel": (_with(_with(raw, changed_values(best["point"], raw)), PARALLEL), seeds, folder)},
-                                 workers=args.workers, specimen_store=prediction / "specimens", where=args.config)["parallel"]
+        if args.collect:
+            parallel = collect_ensemble(folder, seeds)
+        else:
+            parallel = run_ensembles({"parallel": (_with(_with(raw, changed_values(best["point"], raw)), PARALLEL), seeds,
+                                                   folder)}, workers=args.workers, specimen_store=prediction / "specimens",
+                                     where=args.config)["parallel"]
+    if laws is None and "error" not in parallel:
         laws = {"seeds": seeds, "oblique_N": best["final_load_N"], "parallel_N": parallel["final_load_N"],
                 "ratio": [p / o for p, o in zip(parallel["final_load_N"], best["final_load_N"])],
                 "oblique_penetration_m": penetrations(best["runs"]), "parallel_penetration_m": penetrations(parallel["runs"]),

@@ -119,15 +119,21 @@ def rms_of_runs(runs: list[str]) -> float:
 
 
 def run_variants(raw: dict, chosen: list, seeds: list[int], out: Path, prediction: Path, workers: int,
-                 where: str) -> list[dict]:
+                 where: str, collect: bool = False) -> list[dict]:
     """Every variant an ensemble, all in one pass of the Dask cluster (their members side by side);
-    a variant whose member stops on bad input (a v_f0 the pile cannot reach) gets its row's error."""
+    a variant whose member stops on bad input (a v_f0 the pile cannot reach) gets its row's error.
+    ``collect``: the variants' finished runs alone (a variant without them: its row's error)."""
     from fiberpipe.studies.ensemble import run_ensembles
     from study_prediction import _with
 
-    ensembles = {name: (_with(raw, overrides), seeds, out / name) for name, _, _, overrides in chosen}
-    results = run_ensembles(ensembles, workers=workers, specimen_store=prediction / "specimens", where=where,
-                            keep_going=True)
+    if collect:  # the finished runs alone, nothing run
+        from fiberpipe.studies.ensemble import collect_ensemble
+
+        results = {name: collect_ensemble(out / name, seeds) for name, _, _, _ in chosen}
+    else:
+        ensembles = {name: (_with(raw, overrides), seeds, out / name) for name, _, _, overrides in chosen}
+        results = run_ensembles(ensembles, workers=workers, specimen_store=prediction / "specimens", where=where,
+                                keep_going=True)
     rows = []
     for name, unknown, label, overrides in chosen:
         row = {"name": name, "unknown": unknown, "label": label, "overrides": overrides}
@@ -150,6 +156,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", nargs="*", help="variant names (default: all)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "runs" / "study-sensitivity"))
+    ap.add_argument("--collect", action="store_true",
+                    help="tables from the finished runs alone, running nothing (a variant without them: not run)")
     ap.add_argument("--doc")
     ap.add_argument("--figure")
     args = ap.parse_args(argv)
@@ -157,7 +165,7 @@ def main(argv=None) -> int:
     seeds = list(raw["specimen"]["seeds"])[: args.seeds]
     out, prediction_dir = Path(args.out), Path(args.prediction)
     chosen = [v for v in VARIANTS if not args.only or v[0] in args.only]
-    rows = run_variants(raw, chosen, seeds, out, prediction_dir, args.workers, args.config)
+    rows = run_variants(raw, chosen, seeds, out, prediction_dir, args.workers, args.config, args.collect)
     prediction = json.loads((prediction_dir / "ensemble.json").read_text())  # the baseline: its first seeds
     missing = [s for s in seeds if s not in prediction["seeds"]]
     if missing:

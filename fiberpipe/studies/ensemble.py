@@ -211,6 +211,28 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
     return summaries
 
 
+def collect_ensemble(out: Path, seeds: list[int], echo=print) -> dict:
+    """An ensemble's outputs (:func:`write_ensemble`) from the member runs ``out/seed-<s>/`` an earlier
+    pass finished, running nothing (a pass killed part way, or runs whose cache keys a change of the
+    package's code has made stale); ``{"error": ...}`` naming the first seed without a finished run.
+    Each member's specimen is the one its run's ``config.yaml`` reads."""
+    members = {}
+    for seed in seeds:
+        run = Path(out) / f"seed-{seed}"
+        if not (run / "post" / "force_displacement.csv").is_file():
+            return {"error": f"seed {seed}: no finished run in {run}", "seeds": [int(s) for s in seeds]}
+        fibers = (yaml.safe_load((run / "config.yaml").read_text()).get("input") or {}).get("fibers")
+        specimen_dir = Path(fibers).parent
+        info = json.loads((specimen_dir / "specimen.json").read_text())
+        summary_path = run / "summary.json"
+        simulate = (json.loads(summary_path.read_text()).get("stages") or {}).get("simulate", {}) \
+            if summary_path.is_file() else {}
+        members[f"seed-{seed}"] = {"v_f0": float(info["volume_fraction"]), "specimen_dir": str(specimen_dir),
+                                   "closing_residual_load_N": (info.get("closing") or {}).get("residual_load_N"),
+                                   "solver_wall_time_s": simulate.get("solver_wall_time_s")}
+    return write_ensemble(Path(out), seeds, members, echo)
+
+
 def run_ensemble(raw: dict, seeds: list[int], out: Path, **kwargs) -> dict:
     """One ensemble (:func:`run_ensembles`); returns its ``ensemble.json``."""
     return run_ensembles({"ensemble": (raw, seeds, Path(out))}, **kwargs)["ensemble"]

@@ -16,8 +16,8 @@ from click.testing import CliRunner
 
 from fiberpipe.cli import main
 from fiberpipe.errors import ConfigError
-from fiberpipe.studies.ensemble import (ensemble_seeds, parse_seeds_option, run_ensemble, run_ensembles, run_member,
-                                        specimen_key)
+from fiberpipe.studies.ensemble import (collect_ensemble, ensemble_seeds, parse_seeds_option, run_ensemble, run_ensembles,
+                                        run_member, specimen_key)
 
 # four fibers of 4 mm on 1 mm elements, deposited without settling, compacted by 0.05 mm: ≈ 1 s a run
 TINY = {
@@ -79,6 +79,20 @@ def test_ensemble_reports_the_members_mean_and_band_and_reuses_finished_runs(ser
     again = run_ensemble(TINY, [2, 0], out, workers=1, echo=lambda *_: None)
     assert again["final_load_N"] == pytest.approx([summary["final_load_N"][2], summary["final_load_N"][0]], rel=1e-9)
     assert all(p.stat().st_mtime_ns == t for p, t in stamps.items())
+
+
+def test_collecting_finished_runs_gives_the_ensemble_they_ran_and_names_a_missing_seed(serial, tmp_path):
+    import shutil
+
+    out, summary = serial
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("ensemble*", "summary.json"))
+    collected = collect_ensemble(copy, [0, 1, 2], echo=lambda *_: None)
+    for key in ("seeds", "v_f0", "final_load_N", "final_load_mean_N", "final_load_sd_N", "specimens"):
+        assert collected[key] == summary[key], key
+    assert (copy / "ensemble.csv").is_file()
+    assert collect_ensemble(copy, [0, 5], echo=lambda *_: None) == {
+        "error": f"seed 5: no finished run in {copy / 'seed-5'}", "seeds": [0, 5]}
 
 
 def test_variants_that_differ_only_in_their_compaction_share_specimens():
