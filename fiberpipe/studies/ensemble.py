@@ -201,7 +201,7 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
     summaries = {}
     for name in names:
         raw, seeds, out = ensembles[name]
-        members = {job_id.split("/", 1)[1]: res for job_id, res in results.items() if owner[job_id] == name}
+        members = {job_id.rsplit("/", 1)[1]: res for job_id, res in results.items() if owner[job_id] == name}
         errors = [f"seed {job_id.split('-', 1)[1]}: {res['error']}" for job_id, res in members.items() if "error" in res]
         if errors:
             echo(f"  {out}: not run ({errors[0]})")

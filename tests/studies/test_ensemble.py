@@ -125,12 +125,14 @@ def _unreachable_at_seed_1(raw, run_dir, where, specimen_store):
 
 
 def test_keep_going_reports_a_refused_ensemble_and_finishes_the_others(tmp_path):
-    results = run_ensembles({"good": (TINY, [0], tmp_path / "good"), "bad": (TINY, [0, 1], tmp_path / "bad")},
+    # ensembles named by their folders (names with slashes)
+    good, bad = str(tmp_path / "good"), str(tmp_path / "bad")
+    results = run_ensembles({good: (TINY, [0], tmp_path / "good"), bad: (TINY, [0, 1], tmp_path / "bad")},
                             workers=1, echo=lambda *_: None, member=_unreachable_at_seed_1, keep_going=True)
-    assert results["bad"]["seeds"] == [0, 1]
-    assert results["bad"]["error"].startswith("seed 1: ") and "volume_fraction = 0.9" in results["bad"]["error"]
+    assert results[bad]["seeds"] == [0, 1]
+    assert results[bad]["error"].startswith("seed 1: ") and "volume_fraction = 0.9" in results[bad]["error"]
     assert not (tmp_path / "bad" / "ensemble.json").exists()
-    assert results["good"]["seeds"] == [0] and (tmp_path / "good" / "ensemble.json").is_file()
+    assert results[good]["seeds"] == [0] and (tmp_path / "good" / "ensemble.json").is_file()
     with pytest.raises(ConfigError, match="does not reach it"):  # without keep_going the error ends the pass
         run_ensembles({"bad": (TINY, [1], tmp_path / "bad2")}, workers=1, echo=lambda *_: None,
                       member=_unreachable_at_seed_1)
