@@ -264,4 +264,4 @@ study-sensitivity: study-prediction
 study-fit-ensemble: study-sensitivity
 	$(PY) tools/study_fit.py --prediction runs/study-prediction --sensitivity runs/study-sensitivity \
 	    --out runs/study-fit --seeds $(or $(SEEDS),4) --doc docs/results.md --figure docs/img/study_fit.png \
-	    $(foreach g,$(GRID),--grid $(g))
+	    $(foreach g,$(GRID),--grid $(g)) $(if $(COLLECT),--collect)

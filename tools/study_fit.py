@@ -1,11 +1,12 @@
 """The study's two most sensitive unknowns fitted to its curve with an ensemble objective, then the
 parallel and oblique-6° models on the fitted family (``make study-fit-ensemble``).
 
-    .venv/bin/python tools/study_fit.py [--grid specimen.bow.spool_radius=0.02604,0.05,0.1]
-        [--grid specimen.volume_fraction=0.35,0.377] [--seeds 4] [--workers 2] [--out runs/study-fit]
+    .venv/bin/python tools/study_fit.py [--grid specimen.bow.spool_radius=0.02604,0.05,0.1
+        --grid specimen.volume_fraction=0.35,0.377 | --point KEY=v,KEY=v ...] [--seeds 4] [--workers 2]
+        [--collect] [--laws-at KEY=v,KEY=v] [--out runs/study-fit]
         [--doc docs/results.md] [--figure docs/img/study_fit.png]
 
-Each grid point is an ensemble (:mod:`fiberpipe.studies.ensemble`) of the prediction's config
+Without ``--grid`` or ``--point`` the points are ``DEFAULT_POINTS``. Each point is an ensemble (:mod:`fiberpipe.studies.ensemble`) of the prediction's config
 (``configs/specimens/study-prediction.yaml``) at the fast settings with the point's values; all
 points run in one pass of a local Dask cluster, their members side by side. The objective of a point
 is the RMS difference of its ensemble-mean curve from the study's curve points
@@ -38,6 +39,11 @@ sys.path.insert(0, str(ROOT / "tools"))
 # v_f0 37.7 % as the study measures it, ± the 2.5 points of a 15 µm voxel's edge over the pile
 RANGES = {"specimen.bow.spool_radius": (0.02604, 4.0), "specimen.volume_fraction": (0.35, 0.40)}
 PARALLEL = {"scene.contact": {"law": "scaled_stiffness", "preset": "table1_parallel"}}
+# the default evaluations: the bow radius over the study's range at v_f0 37.7 %, and v_f0 35 % at
+# the two radii whose loads bracket the study's 12 N closest from either side
+DEFAULT_POINTS = [f"specimen.bow.spool_radius={r},specimen.volume_fraction={v}" for r, v in
+                  [(0.02604, 0.377), (0.032, 0.377), (0.0409, 0.377), (0.05, 0.377), (0.1, 0.377), (4.0, 0.377),
+                   (0.02604, 0.35), (0.05, 0.35)]]
 BEGIN, END = "<!-- study-fit: begin", "<!-- study-fit: end -->"
 
 
@@ -136,7 +142,8 @@ def table_markdown(rows: list[dict], grid: dict, best: dict, laws: dict | None, 
                      f"{row['mean_N']:.3g} ± {row['sd_N']:.2g} | {row['mean_at_0.55mm_N']:.3g} | {row['rms_N']:.3g} | "
                      f"{100 * row['rms_N'] / 12:.0f} % |")
     if laws is not None:
-        lines += ["", "| seed | oblique 6° (N) | parallel (N) | parallel / oblique | largest fiber–fiber penetration, "
+        where = ", ".join(f"{k.rsplit('.', 1)[1]} = {v:.4g}" for k, v in laws["point"].items())
+        lines += ["", f"The study's two contact models on the family at {where}:", "", "| seed | oblique 6° (N) | parallel (N) | parallel / oblique | largest fiber–fiber penetration, "
                   "oblique / parallel (µm) |", "| --- | --- | --- | --- | --- |"]
         for k, seed in enumerate(laws["seeds"]):
             lines.append(f"| {seed} | {laws['oblique_N'][k]:.3g} | {laws['parallel_N'][k]:.3g} | {laws['ratio'][k]:.3f} | "
@@ -193,11 +200,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "runs" / "study-fit"))
     ap.add_argument("--collect", action="store_true",
                     help="tables from the finished runs alone, running nothing (a point without them: not run)")
+    ap.add_argument("--laws-at", help="KEY=v,KEY=v: the point the laws compact (default: the best)")
     ap.add_argument("--no-laws", action="store_true", help="skip the parallel model on the best point")
     ap.add_argument("--doc")
     ap.add_argument("--figure")
     args = ap.parse_args(argv)
-    grid = parse_grid(args.grid or ["specimen.bow.spool_radius=0.02604,0.05,0.1", "specimen.volume_fraction=0.35,0.377"])
+    grid = parse_grid(args.grid or ["specimen.bow.spool_radius=0.02604,0.032,0.0409,0.05,0.1,4",
+                                    "specimen.volume_fraction=0.35,0.377"])
+    if not args.grid and not args.point:
+        args.point = DEFAULT_POINTS
     raw = _with(load_raw(args.config), FAST)
     seeds = list(raw["specimen"]["seeds"])[: args.seeds]
     out, prediction = Path(args.out), Path(args.prediction)
@@ -225,18 +236,23 @@ def main(argv=None) -> int:
     done = [r for r in rows if "error" not in r]
     best = min(done, key=lambda r: r["rms_N"])
     laws, parallel = None, {"error": "not run (--no-laws)"}
+    family = best
+    if args.laws_at:  # the laws on another evaluated point than the best
+        wanted = parse_point(args.laws_at, keys)
+        family = next(r for r in done if all(np.isclose(r["point"][k], wanted[k]) for k in keys))
     if not args.no_laws:
-        folder = Path(best["folder"]).with_name(Path(best["folder"]).name + "-parallel")
+        folder = Path(family["folder"]).with_name(Path(family["folder"]).name + "-parallel")
         if args.collect:
             parallel = collect_ensemble(folder, seeds)
         else:
-            parallel = run_ensembles({"parallel": (_with(_with(raw, changed_values(best["point"], raw)), PARALLEL), seeds,
+            parallel = run_ensembles({"parallel": (_with(_with(raw, changed_values(family["point"], raw)), PARALLEL), seeds,
                                                    folder)}, workers=args.workers, specimen_store=prediction / "specimens",
                                      where=args.config)["parallel"]
     if laws is None and "error" not in parallel:
-        laws = {"seeds": seeds, "oblique_N": best["final_load_N"], "parallel_N": parallel["final_load_N"],
-                "ratio": [p / o for p, o in zip(parallel["final_load_N"], best["final_load_N"])],
-                "oblique_penetration_m": penetrations(best["runs"]), "parallel_penetration_m": penetrations(parallel["runs"]),
+        laws = {"seeds": seeds, "point": family["point"], "oblique_N": family["final_load_N"],
+                "parallel_N": parallel["final_load_N"],
+                "ratio": [p / o for p, o in zip(parallel["final_load_N"], family["final_load_N"])],
+                "oblique_penetration_m": penetrations(family["runs"]), "parallel_penetration_m": penetrations(parallel["runs"]),
                 "parallel_runs": parallel["runs"]}
     summary = {"grid": grid, "seeds": seeds, "evaluations": len(rows), "settings": "fast: " + ", ".join(f"{k} = {v}" for k, v in FAST.items()),
                "points": rows, "best": best, "laws": laws}

@@ -62,7 +62,8 @@ def table_markdown(rows: list[dict], baseline: dict) -> str:
              f"{baseline['rms_N']:.3g} | {', '.join(f'{v:.3f}' for v in baseline['v_f0'])} |"]
     for row in rows:
         if "error" in row:
-            lines.append(f"| {row['unknown']} | {row['label']} | — | not run: {row['error']} | | | | |")
+            why = "not run" if "no finished run" in row["error"] else f"stopped: {row['error'].split(';')[0]}"
+            lines.append(f"| {row['unknown']} | {row['label']} | — | {why} | | | | |")
             continue
         lines.append(f"| {row['unknown']} | {row['label']} | {len(row['final_load_N'])} | {_loads(row['final_load_N'])} | "
                      f"{row['mean_N']:.3g} ± {row['sd_N']:.2g} | {row['change_N']:+.3g} | {row['rms_N']:.3g} | "
