@@ -83,7 +83,7 @@ def tornado(rows: list[dict], baseline: dict, figure: Path) -> None:
 
     rows = sorted([r for r in rows if "error" not in r], key=lambda r: abs(r["change_N"]))
     base_mean = baseline["mean_N"]
-    fig, ax = plt.subplots(figsize=(7.5, 0.42 * len(rows) + 1.4))
+    fig, ax = plt.subplots(figsize=(8.5, 0.42 * len(rows) + 1.6))
     ax.axvspan(-baseline["sd_N"], baseline["sd_N"], color="0.85", label="the prediction's seed sd")
     for k, row in enumerate(rows):
         ax.barh(k, row["change_N"], color="C3" if row["change_N"] < 0 else "C0", alpha=0.75)
@@ -92,9 +92,10 @@ def tornado(rows: list[dict], baseline: dict, figure: Path) -> None:
     ax.axvline(0, color="k", lw=0.8)
     ax.axvline(12.0 - base_mean, color="C2", ls="--", lw=1, label="the study's 12 N")
     ax.set_yticks(range(len(rows)), [f"{r['unknown']}: {r['label']}" for r in rows], fontsize=7)
-    ax.set_xlabel(f"change of the ensemble-mean load at U = 1.15 mm from the prediction's {base_mean:.1f} N [N]")
+    ax.set_xlabel(f"change of the mean F(U = 1.15 mm) from the prediction's {base_mean:.1f} N [N]", fontsize=8)
     ax.grid(alpha=0.3, axis="x")
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
     _save(fig, figure)
 
 
