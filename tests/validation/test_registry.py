@@ -49,3 +49,33 @@ def test_outputs_written_and_docs_section_replaced(tmp_path):
 def test_bad_seeds_are_a_one_line_error():
     result = CliRunner().invoke(main, ["validate", "--seeds", "0,x", "wavy_fiber"])
     assert result.exit_code != 0 and result.output.count("\n") == 1 and "--seeds must be integers" in result.output
+
+
+def test_quick_row_passes_inside_its_bounds_and_fails_outside_or_when_not_finite():
+    inside = ValidationRow("c", "n", 3.0, [12.0], 1 / 3, "src", bounds=(1.0, 20.0))
+    assert inside.passed and inside.status == "PASS" and not inside.spread_exceeds_tolerance
+    assert not ValidationRow("c", "n", 3.0, [-2.0], 1 / 3, "src", bounds=(1.0, 20.0)).passed  # wrong sign
+    assert not ValidationRow("c", "n", 3.0, [25.0], 1 / 3, "src", bounds=(1.0, 20.0)).passed
+    assert not ValidationRow("c", "n", 3.0, [float("nan")], 1 / 3, "src", bounds=(1.0, 20.0)).passed
+    assert "1 to 20 (quick)" in table_markdown({"cases": {"x": {"rows": [inside.as_dict()]}}})
+
+
+def test_quick_variants_run_one_seed_and_full_cases_three_unless_seeds_are_given():
+    from fiberpipe.validation.compaction_runs import SEEDS, seeds_for
+
+    saved = SEEDS["seeds"]
+    try:
+        SEEDS["seeds"] = None
+        assert seeds_for(quick=True) == [0] and seeds_for(quick=False) == [0, 1, 2]
+        SEEDS["seeds"] = (4, 5)
+        assert seeds_for(quick=True) == [4, 5] and seeds_for(quick=False) == [4, 5]
+    finally:
+        SEEDS["seeds"] = saved
+
+
+def test_inverse_width_extrapolation_recovers_the_bulk_value():
+    from fiberpipe.validation.wall_correction import extrapolate_inverse_width
+
+    widths = [3.75e-3, 7.5e-3, 15e-3]
+    bulk, slope = extrapolate_inverse_width(widths, [25.0 + 0.03 / w for w in widths])
+    assert bulk == pytest.approx(25.0, rel=1e-9) and slope == pytest.approx(0.03, rel=1e-9)
