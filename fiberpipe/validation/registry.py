@@ -129,7 +129,9 @@ def write_outputs(summary: dict, out: Path, *, docs_page: Path | None = None) ->
         image_dir.mkdir(exist_ok=True)
         command = "fiberpipe validate" + (" --quick" if summary["quick"] else "") + (" --reuse" if summary.get("reuse_only") else "")
         times = ("the compaction cases read from the runs in the work folder; " if summary.get("reuse_only") else "") + \
-            "wall time per case: " + ", ".join(f"{name} {c['wall_time_s']:.0f} s" for name, c in summary["cases"].items())
+            "CPU (wall) time per case: " + ", ".join(
+                f"{name} {c.get('cpu_time_s', float('nan')):.0f} s ({c['wall_time_s']:.0f} s)"
+                for name, c in summary["cases"].items())
         seeds = f" (seeds {', '.join(map(str, summary['seeds']))})" if summary.get("seeds") else ""
         text = [f"`{command}`{seeds}: {summary['passed']} of "
                 f"{summary['checked']} checked rows pass; {times}. A seed count below 3 in the table: the seeds "
