@@ -97,7 +97,7 @@ def validate(quick: bool = False) -> list[ValidationRow]:
     for key, label in (("beta", "β from Gutowski's A_s"), ("v0", "Gutowski's V_0")):
         limits, corrections, values = extrapolated(per_seed, key, own_width)
         note = (f"{method}; by width per seed " + "; ".join(", ".join(f"{v:.3g}" for v in y) for y in values)
-                + f"; the case's width is off by " + ", ".join(f"{100 * c:+.2g} %" for c in corrections))
+                + "; the case's width is off by " + ", ".join(f"{100 * c:+.2g} %" for c in corrections))
         reference = wave.span / wave.rise if key == "beta" else math.nan
         rows.append(ValidationRow(case, f"{label} at infinite width", reference, limits, 0.30, SOURCE,
                                   informational=True, note=note,
