@@ -79,3 +79,15 @@ def test_inverse_width_extrapolation_recovers_the_bulk_value():
     widths = [3.75e-3, 7.5e-3, 15e-3]
     bulk, slope = extrapolate_inverse_width(widths, [25.0 + 0.03 / w for w in widths])
     assert bulk == pytest.approx(25.0, rel=1e-9) and slope == pytest.approx(0.03, rel=1e-9)
+
+
+def test_wall_correction_states_the_bulk_value_and_the_case_widths_offset():
+    from fiberpipe.validation.wall_correction import extrapolated
+
+    widths = [3.75e-3, 7.5e-3, 15e-3]
+    figures = [[{"width_m": w, "beta": 160.0 - 0.2 / w} for w in widths]]
+    limits, corrections, values = extrapolated(figures, "beta", 7.5e-3)
+    assert limits[0] == pytest.approx(160.0)
+    assert corrections[0] == pytest.approx((160.0 - 0.2 / 7.5e-3) / 160.0 - 1)
+    nan_seed = [[{"width_m": w, "beta": float("nan")} for w in widths]]
+    assert extrapolated(nan_seed, "beta", 7.5e-3)[0][0] != extrapolated(nan_seed, "beta", 7.5e-3)[0][0]  # nan
