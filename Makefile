@@ -217,6 +217,19 @@ clean:
 specimen-400: setup
 	$(FP) specimen configs/specimens/bundle-400.yaml --out runs/specimens/bundle-400
 
+# yarns of 1000 and 4000 of the study's fibers: the specimen packed, then compacted at the fast
+# settings on two threads (docs/benchmarks.md, "Virtual specimens")
+.PHONY: yarn-1000 yarn-4000
+yarn-1000 yarn-4000: yarn-%: setup
+	$(FP) specimen configs/specimens/yarn-$*.yaml --out runs/specimens/yarn-$*
+	$(FP) run runs/specimens/yarn-$*/config.yaml --out runs/yarn-$*
+
+# the writers and post on 24 synthetic frames of the 4000-fiber yarn (docs/benchmarks.md)
+.PHONY: bench-output-4000
+bench-output-4000: setup
+	$(FP) specimen configs/specimens/yarn-4000.yaml --out runs/specimens/yarn-4000
+	$(PY) benchmarks/bench_output_scale.py runs/specimens/yarn-4000 --out runs/bench-output-4000
+
 .PHONY: bench-400
 bench-400: specimen-400
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_bundle_cost.py runs/specimens/bundle-400/config.yaml

@@ -87,11 +87,15 @@ def main(argv=None) -> None:
             for name in ("trace_slices.png", "trace_midlines.png"):
                 shutil.copy(run / name, a.pictures / f"cross_ply_{name}")
             _orthogonal_slices(volume, a.pictures / "cross_ply_volume.png")
-    off = ", ".join(f"{ax}: {v['volume_fraction']:.0%} of the fiber volume, {v['fibers']} fibers" for ax, v in tr["off_axis"].items())
+    off = ", ".join(f"{ax}: {v['volume_fraction']:.0%} of the fiber volume, {v['fibers']} fibers"
+                    for ax, v in tr["off_axis"].items() if ax != "oblique")
+    oblique = tr["off_axis"].get("oblique", {"fibers": 0, "length_vox": 0.0})
     lines = [f"# Real cross-ply CT (qim3d fibers_150x150x150.tif, 1.3 um), only voxel_size given\n",
              f"- segment + trace: {wall:.1f} s; tracer chosen by auto: {tr['method']}; traced radius "
              f"{tr['median_radius_m'] / VOXEL_SIZE_M:.2f} voxels; {tr['fibers']} fibers",
              f"- regions along other axes: {off or 'none'}",
+             f"- tracks more than 30 deg off their slicing axis (a +-45 deg ply), left out: {oblique['fibers']} "
+             f"({oblique['length_vox']:.0f} voxels of track)",
              f"- fibers along z crossing the middle slice: {n}; over >= 80 % of the depth: {full} ({full / max(n, 1):.0%}); "
              f"median z extent {median:.0f} of 150 slices"]
     text = "\n".join(lines) + "\n"

@@ -60,7 +60,7 @@ def main(argv=None) -> None:
         n_main = int(f.meta.get("n_fibers_main_axis", f.n_fibers))
         main_acc = trace_accuracy(_subset(f, np.arange(n_main)), _subset(truth, np.flatnonzero(m["axis_zyx"] == 0)),
                                   voxel_size_m=vs)
-        cross = sum(v["fibers"] for v in (f.meta.get("off_axis") or {}).values())
+        cross = sum(v["fibers"] for ax, v in (f.meta.get("off_axis") or {}).items() if ax != "oblique")
         worst = worst_of(worst, acc)
         ft = fibretracker_cell(run_fibretracker, vol, vs, r, truth, splits=True)
         rows.append(f"| {s} | {r:.2f} | {f.meta.get('radius_vox_estimate', float('nan')):.2f} | "

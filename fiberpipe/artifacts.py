@@ -253,6 +253,24 @@ def write_json_atomic(path: str | Path, obj) -> None:
     write_text_atomic(path, json_text(obj))
 
 
+#: target size of one HDF5 chunk (bytes): h5py's advice is 10 KiB – 1 MiB
+CHUNK_BYTES = 1 << 20
+
+
+def chunk_shape(shape: tuple[int, ...], itemsize: int, target_bytes: int = CHUNK_BYTES) -> tuple[int, ...]:
+    """HDF5 chunks along the first axis (a frame, a history row): one row per chunk when a row
+    holds ``target_bytes`` or more (its later axes cut to fit), else as many rows as fit; so a
+    frame of a (frames, nodes, 3) series reads without decompressing the others."""
+    row = int(np.prod(shape[1:], dtype=np.int64)) * itemsize
+    if len(shape) == 1 or row < target_bytes:
+        rows = max(1, min(shape[0], target_bytes // max(row, itemsize)))
+        return (rows, *shape[1:])
+    rest = list(shape[1:])
+    while int(np.prod(rest, dtype=np.int64)) * itemsize > target_bytes and rest[0] > 1:
+        rest[0] = (rest[0] + 1) // 2
+    return (1, *rest)
+
+
 def write_artifact(
     path: str | Path,
     kind: str,
@@ -264,6 +282,7 @@ def write_artifact(
     config_sha256: str = "",
     inputs: dict[str, str] | None = None,
     compression: str | None = None,
+    chunks: str = "auto",
 ) -> Path:
     """Write an artifact atomically.
 
@@ -289,6 +308,9 @@ def write_artifact(
         ``{name: sha256}`` of the input artifacts.
     compression : str, optional
         h5py compression for large arrays (e.g. ``"gzip"``); None stores them raw.
+    chunks : {"auto", "rows"}
+        The compressed arrays' chunks: h5py's guess, or along the first axis (:func:`chunk_shape`:
+        a frame of a time series per chunk).
     """
     units = units or {}
     with artifact_writer(path, kind, attrs=attrs, config_sha256=config_sha256, inputs=inputs) as f:
@@ -297,7 +319,8 @@ def write_artifact(
             arr = np.asarray(arr)
             kw = {}
             if compression and arr.size > 4096:
-                kw = {"compression": compression, "shuffle": True, "chunks": True}
+                kw = {"compression": compression, "shuffle": True,
+                      "chunks": chunk_shape(arr.shape, arr.itemsize) if chunks == "rows" else True}
             ds = f.create_dataset(name, data=arr, **kw)
             ds.attrs["units"] = units.get(name) or DIMENSIONLESS
         for name, gattrs in (group_attrs or {}).items():

@@ -4,7 +4,7 @@ the command and the date.
 
 Parts (each can be skipped with ``--skip``):
 
-* ``solver``  — element-steps per second, 40/160/640 fibers of 50 elements, contact off and on
+* ``solver``  — element-steps per second, 40/160/640/1000 fibers of 50 elements, contact off and on
   (:mod:`fiberpipe.benchmarks.bench_solver`);
 * ``contact`` — ns per candidate pair of the contact pass, loose and squeezed bundles, per law
   (:mod:`fiberpipe.benchmarks.bench_contact`);
@@ -14,7 +14,7 @@ Parts (each can be skipped with ``--skip``):
   settings of ``FAST_OVERRIDES``): wall time, U reached, final load;
 * ``imaging`` — the imaging stages' wall time and peak memory on a 200×400×1000 volume
   (:mod:`fiberpipe.benchmarks.bench_imaging`, part b; ``--quick``: a quarter of the length);
-* ``threads`` — ``solver.threads: 2`` against one thread at 160 and 640 fibers, alternating in one
+* ``threads`` — ``solver.threads: 2`` against one thread at 160, 640 and 1000 fibers, alternating in one
   process (:mod:`fiberpipe.benchmarks.bench_threads`).
 
 Everything it runs is in the package: outside a source checkout the paper-40 scene is the copy in
@@ -190,10 +190,12 @@ def _threads_part(quick: bool, echo) -> list[str]:
     import sys
     echo("bench: threads ...")
     args = [sys.executable, "-m", "fiberpipe.benchmarks.bench_threads"] + (["--fibers", "160", "--rounds", "4"] if quick else [])
+    # the squeezed 1000-fiber bundle (contacts active): the scale row
+    runs = [[]] if quick else [[], ["--no-contact"], ["--fibers", "1000", "--pitch", "1.98", "--steps", "100", "--rounds", "6"]]
     env = dict(os.environ, NUMBA_NUM_THREADS="2")
     body = []
     # without contact: the share of the step that runs in parallel (the contact pass is serial)
-    for extra in ([[]] if quick else [[], ["--no-contact"]]):
+    for extra in runs:
         out = subprocess.run(args + extra, capture_output=True, text=True, env=env)
         rows = [l for l in out.stdout.splitlines() if l.startswith("|")]
         if not rows:
@@ -208,11 +210,13 @@ def _solver_part(quick: bool, steps: int | None, echo) -> list[str]:
     echo("bench: solver throughput ...")
     solver_bench = _load("bench_solver")
     n = steps or (200 if quick else 1000)
-    rows = [solver_bench.measure(f, n, 3, c) for c in (False, True) for f in (40, 160, 640)]
+    rows = [solver_bench.measure(f, n, 3, c) for c in (False, True) for f in ((40, 160, 640) if quick else (40, 160, 640, 1000))]
+    if not quick:  # the same bundles squeezed (pitch 1.98 r): the contact and friction passes on active pairs
+        rows += [solver_bench.measure(f, n, 3, c, pitch_r=1.98) for c in (False, True) for f in (40, 1000)]
     return ["## Solver throughput", "",
             f"`python -m fiberpipe.benchmarks.bench_solver` (one thread, best of 3 calls of {n} steps; {load()}). "
-            "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r, clamps, damping, "
-            "gravity; contact = hertz_oriented with friction.", ""] + solver_bench.table(rows) + [""]
+            "Scene in the script's docstring: wavy fibers on a grid of pitch 2.2 r (and squeezed, 1.98 r), clamps, "
+            "damping, gravity; contact = hertz_oriented with friction.", ""] + solver_bench.table(rows) + [""]
 
 
 def _contact_part(quick: bool, echo) -> list[str]:

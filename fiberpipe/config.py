@@ -760,13 +760,16 @@ class SolverConfig(Section):
                          "NUMBA_NUM_THREADS threads (read when it starts; fiberpipe study and fit set it to the largest "
                          "solver.threads of their runs unless it is set): a run asking for more warns")
     settle_time: Time = 0.0
-    stable_step: Literal["element", "modes"] = Field(
+    stable_step: Literal["element", "modes", "adaptive"] = Field(
         "element", description="the stable step dt_safety multiplies: element = the element-by-element bound "
         "(every element mode, the axial one included); modes = 2/ω_max of the assembled beam system with the "
         "scene's fixed degrees of freedom removed, × √(1 − plane penalty factor) (larger with "
         "scene.constraints.lock_axial: all); the fiber–fiber contact stiffness is not in it, dt_safety must "
         "cover it (paper-40: 0.85, 1.165 × fewer steps, load-cell curve within 0.08 % of the element step's; "
-        "docs/benchmarks.md)")
+        "docs/benchmarks.md); adaptive = the element bound, each step split into as many equal sub-steps as the "
+        "contact law's tangent at the current penetrations and the plane penalty need, with the same dt_safety "
+        "margin, re-evaluated every 50 steps (deterministic: a resumed run is the same bit for bit; the "
+        "sub-step of each history row in its dt_s; docs/solver.md)")
 
     @model_validator(mode="after")
     def _check(self):
@@ -776,7 +779,21 @@ class SolverConfig(Section):
         _positive("solver.end_time", self.end_time)
         if self.rotational_inertia_scaling < 1 or self.mass_scaling < 1:
             raise ValueError("solver.rotational_inertia_scaling and solver.mass_scaling must be >= 1")
+        cores = usable_cores()
+        if self.threads > cores:
+            raise ValueError(f"solver.threads is {self.threads}, more than the {cores} cores this process may run on: "
+                             "a thread without a core of its own makes the run slower, not faster")
         return self
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it, else ``os.cpu_count``)."""
+    import os
+
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
 
 
 class ReferenceStageConfig(Section):
@@ -878,14 +895,43 @@ class SpecimenWaveConfig(Section):
         return self
 
 
+class SpecimenYarnConfig(Section):
+    """``kind: yarn``: fibers along z packed in an elliptical cross-section (x wide, y high) at the
+    target v_f0, compacted between the plates along y (fiberpipe.model.specimen_yarn)."""
+
+    aspect_ratio: float = Field(1.0, gt=0, le=20, description="the cross-section's width / height (x / y); "
+                                "1: a circle")
+    helix_angle: Optional[Angle] = Field(None, ge=0, lt=math.radians(60), description="twist: the helix angle "
+                                         "of the fibers at the yarn's surface, tan α = 2π R T (R = √(a b)); "
+                                         "none: twist_per_length")
+    twist_per_length: float = Field(0.0, ge=0, description="twist T in turns per metre (used when helix_angle "
+                                    "is none); 0: an untwisted yarn")
+    orientation_spread: Angle = Field(0.0, ge=0, lt=math.radians(30), description="mean angle between "
+                                      "neighbouring fibers Φ: each fiber tilted normal with σ = Φ/√π per component")
+    wave_amplitude: Length = Field(0.0, ge=0, description="waviness: half the peak-to-trough lateral excursion of "
+                                   "each fiber's sinusoid (random direction and phase); 0: straight fibers")
+    wave_length: Length = Field(5e-3, description="waviness: the sinusoid's wavelength")
+    walls: bool = Field(False, description="the cassette's walls at the cross-section's sides (x = ±a); false: "
+                        "no walls (the yarn spreads freely between the plates)")
+    overlap_tolerance: float = Field(0.01, gt=0, lt=0.5, description="largest fiber–fiber overlap left by the "
+                                     "packing, as a fraction of the radius (2r − d ≤ this × r); beyond it the "
+                                     "v_f0 is refused as not packable")
+
+    @model_validator(mode="after")
+    def _check(self):
+        _positive("specimen.yarn.wave_length", self.wave_length)
+        return self
+
+
 class SpecimenConfig(Section):
     """A virtual specimen: ``n_fibers`` fibers of ``fiber.radius`` deposited in a cassette."""
 
-    kind: Literal["cassette", "network_3d", "planar_mat", "wavy_bundle"] = Field(
+    kind: Literal["cassette", "network_3d", "planar_mat", "wavy_bundle", "yarn"] = Field(
         "cassette", description="cassette: quasi-parallel fibers deposited and settled in the cassette (below); "
         "network_3d: straight fibers of isotropic orientation, planar_mat: straight fibers in random horizontal "
         "directions, wavy_bundle: aligned sinusoidal fibers (specimen.wave), each placed at random without overlap in "
-        "a cell of width × depth at the target v_f0 (docs/specimen.md)")
+        "a cell of width × depth at the target v_f0; yarn: aligned fibers packed in an elliptical cross-section at "
+        "the target v_f0 with optional twist, orientation spread and waviness (specimen.yarn; docs/specimen.md)")
     seed: int = 0
     seeds: Optional[list[int]] = Field(
         None, description="an ensemble: one specimen per seed, each built and compacted (fiberpipe run, study "
@@ -912,6 +958,7 @@ class SpecimenConfig(Section):
     depth: Optional[Length] = Field(None, description="network_3d, planar_mat, wavy_bundle: the cell's size along z "
                                     "(walls at 0 and depth; default: the width)")
     wave: SpecimenWaveConfig = Field(default_factory=SpecimenWaveConfig)
+    yarn: SpecimenYarnConfig = Field(default_factory=SpecimenYarnConfig)
     bow: SpecimenBowConfig = Field(default_factory=SpecimenBowConfig)
     waviness: SpecimenWavinessConfig = Field(default_factory=SpecimenWavinessConfig)
     settle: SpecimenSettleConfig = Field(default_factory=SpecimenSettleConfig)

@@ -126,3 +126,24 @@ def test_input_hash_covers_folders_and_metaimage_data_and_reads_each_input_once(
     A._INPUT_HASHES.clear()
     first = A.input_sha256(stack)
     assert A.input_sha256(stack) == first and len(reads) == 2  # the folder's two files, once
+
+
+def test_compressed_frames_are_chunked_per_frame_and_read_back_identically(tmp_path):
+    from fiberpipe.artifacts import chunk_shape
+
+    rng = np.random.default_rng(0)
+    frames = rng.normal(size=(5, 40000, 3)) * 1e-3  # 5 frames of 40 000 nodes (0.96 MB a frame)
+    history = np.cumsum(rng.normal(size=(3000, 2)), axis=0)
+    small = np.arange(10.0)
+    path = write_artifact(tmp_path / "s.h5", "simulation", {"frames/positions": frames, "history/plate_force": history,
+                                                            "frames/time": small}, compression="gzip", chunks="rows")
+    with h5py.File(path, "r") as f:
+        assert f["frames/positions"].compression == "gzip" and f["frames/positions"].chunks == (1, 40000, 3)
+        assert f["history/plate_force"].compression == "gzip"
+        assert f["frames/time"].compression is None  # small arrays stay contiguous
+    art = read_artifact(path, "simulation")
+    assert np.array_equal(art["frames/positions"], frames) and np.array_equal(art["history/plate_force"], history)
+    # a 4000-fiber frame (204 000 nodes, 4.9 MB) is cut into chunks of at most 1 MiB, one frame each
+    chunks = chunk_shape((24, 204000, 3), 8)
+    assert chunks[0] == 1 and chunks[2] == 3 and chunks[1] * 3 * 8 <= 1 << 20 and chunks[1] * 3 * 8 > 1 << 19
+    assert chunk_shape((2000,), 8) == (2000,)

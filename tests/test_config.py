@@ -47,6 +47,7 @@ def test_extends_overrides_and_resolves_paths(tmp_path, write_yaml):
         ("material: {youngs_modulus: '15 kg'}", "'material.youngs_modulus'"),
         ("material: {youngs_modulus: -3}", "youngs_modulus must be positive"),
         ("solver: {dt_safety: 1.5}", "dt_safety must be in (0, 1]"),
+        ("solver: {threads: 100000}", "solver.threads is 100000, more than the"),
         ("scene: {friction: {mu: -0.1}}", "friction.mu must be >= 0"),
         ("fiber: {radius: '-0.25 mm'}", "fiber.radius must be positive"),
         ("scene: {contact: {law: hertz_paralel}}", "'scene.contact.law'"),

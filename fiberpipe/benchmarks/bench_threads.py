@@ -7,6 +7,7 @@ call (threads share the wall clock, not the CPU clock). The load average is reco
 means something only on an idle machine (each thread needs a core).
 
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads [--fibers 160 640]
+    NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --fibers 1000 --pitch 1.98 --steps 100 --rounds 6
     NUMBA_NUM_THREADS=2 .venv/bin/python -m fiberpipe.benchmarks.bench_threads --state runs/bench/p40_708000.npz
 
 ``--state``: paper-40 at the study's settings from states saved by ``benchmarks/paper40_states.py``
@@ -28,13 +29,13 @@ import time
 from fiberpipe.benchmarks.scenes import scene_and_state
 
 
-def _bench_scene(n_fibers: int, contact: bool):
-    """The bench bundle of ``n_fibers``: (model, effects, dt, state at rest)."""
+def _bench_scene(n_fibers: int, contact: bool, pitch_r: float):
+    """The bench bundle of ``n_fibers`` at grid pitch ``pitch_r`` radii: (model, effects, dt, state at rest)."""
     from fiberpipe.benchmarks.bench_solver import bundle
     from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, State
     from fiberpipe.solver.integrator import SimulationSettings, choose_time_step
 
-    m = bundle(n_fibers)
+    m = bundle(n_fibers, pitch_r=pitch_r)
     effects = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
     if contact:
         from fiberpipe.benchmarks.scenes import default_contact
@@ -44,7 +45,7 @@ def _bench_scene(n_fibers: int, contact: bool):
 
 
 def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: bool = True,
-            state: str | None = None, config: str | None = None) -> dict:
+            state: str | None = None, config: str | None = None, pitch_r: float = 2.2) -> dict:
     from fiberpipe.solver.integrator import Integrator
 
     runs = {}
@@ -52,7 +53,7 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
         if config or state:  # a saved state, a config's scene, or both (scene_and_state)
             m, effects, dt, saved_state = scene_and_state(state, config)
         else:
-            m, effects, dt, saved_state = _bench_scene(n_fibers, contact)
+            m, effects, dt, saved_state = _bench_scene(n_fibers, contact, pitch_r)
         integrator = Integrator(m, effects, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
         integrator.advance(saved_state, 300 if config else 10)  # compile (from rest: past the first contacts)
         runs[th] = (integrator, saved_state, m.n_elements)
@@ -64,28 +65,33 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
     else:
         label = n_fibers
     t = {1: [], threads: []}
+    cpu = {1: [], threads: []}
     load = [os.getloadavg()[0]]
     for r in range(rounds):
         for th in ((1, threads) if r % 2 == 0 else (threads, 1)):
             integrator, saved_state, _ = runs[th]
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             integrator.advance(saved_state, steps)
             t[th].append(time.perf_counter() - t0)
+            cpu[th].append(time.process_time() - c0)
         load.append(os.getloadavg()[0])
     per = [a / b for a, b in zip(t[1], t[threads])]
     return {"fibers": label,
             "elements": runs[1][2], "threads": threads, "contact": contact, "steps": steps, "rounds": rounds,
             "s_1": min(t[1]), "s_n": min(t[threads]), "ratio_best": min(t[1]) / min(t[threads]),
-            "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load)}
+            "ratio_median": statistics.median(per), "load_min": min(load), "load_max": max(load),
+            # CPU seconds of the n-thread calls over their wall seconds: ≈ n when every thread had a core
+            "cpu_per_wall_n": sum(cpu[threads]) / sum(t[threads]), "cpu_per_wall_1": sum(cpu[1]) / sum(t[1])}
 
 
 def table(rows) -> list[str]:
-    out = ["| fibers | elements | contact and friction | steps × rounds | 1 thread (s, best) | n threads (s, best) | 1 / n, best | 1 / n, median of rounds | load average |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    out = ["| fibers | elements | contact and friction | steps × rounds | 1 thread (s, best) | n threads (s, best) | 1 / n, best | 1 / n, median of rounds | CPU/wall, 1 and n threads | load average |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r['fibers']} | {r['elements']} | {'on' if r['contact'] else 'off'} | "
                    f"{r['steps']} × {r['rounds']} | {r['s_1']:.3f} | "
                    f"{r['s_n']:.3f} ({r['threads']}) | **{r['ratio_best']:.2f}×** | {r['ratio_median']:.2f}× | "
+                   f"{r.get('cpu_per_wall_1', float('nan')):.2f}, {r.get('cpu_per_wall_n', float('nan')):.2f} | "
                    f"{r['load_min']:.1f}–{r['load_max']:.1f} |")
     return out
 
@@ -96,6 +102,8 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--rounds", type=int, default=10)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--pitch", type=float, default=2.2,
+                    help="grid pitch of the bench bundle in radii (1.98: squeezed, contacts active)")
     ap.add_argument("--no-contact", action="store_true",
                     help="beams, clamps, damping and gravity only: the part that runs in parallel")
     ap.add_argument("--state", nargs="+", default=[],
@@ -108,7 +116,7 @@ def main(argv=None):
     elif a.state:
         rows = [measure(0, a.steps, a.rounds, a.threads, state=p) for p in a.state]
     else:
-        rows = [measure(n, a.steps, a.rounds, a.threads, contact=not a.no_contact) for n in a.fibers]
+        rows = [measure(n, a.steps, a.rounds, a.threads, contact=not a.no_contact, pitch_r=a.pitch) for n in a.fibers]
     print("\n".join(table(rows)))
     return rows
 

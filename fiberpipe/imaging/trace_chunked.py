@@ -21,7 +21,8 @@ from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
-from .trace import _GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_slices
+from .trace import (_GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_gain,
+                    grey_sigma_along, track_slices)
 
 
 class SliceSource:
@@ -170,8 +171,10 @@ def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, 
     if grey_src is not None:
         g = grey_src.open() if hasattr(grey_src, "open") else grey_src
         n = int(arr.shape[axis])
-        grey_t = _GreySlices(_Block(g, w0, b1, dtype=None, axis=axis, halo=GREY_HALO), block, samp, levels=levels,
-                             k_range=(-w0, n - 1 - w0))
+        sigma = grey_sigma_along(r)
+        halo = max(GREY_HALO, int(np.ceil(3 * sigma)) + 2)
+        grey_t = _GreySlices(_Block(g, w0, b1, dtype=None, axis=axis, halo=halo), block, samp, levels=levels,
+                             k_range=(-w0, n - 1 - w0), sigma_along=sigma)
     tracks, n_det = track_slices(block, r, samp, grey_t=grey_t, **params)
     out = []
     for t in tracks:
@@ -186,8 +189,9 @@ def _track_block(src, grey_src, b0: int, b1: int, r: float, samp, params: dict, 
 WARM_UP = 16
 
 
-#: Slices a block's grey reads reach beyond its faces: the half-width of the smoothing along the
-#: slices (3 sigma of :class:`fiberpipe.imaging.trace._GreySlices`, plus its read-back window).
+#: Slices a block's grey reads reach beyond its faces, at least: the half-width of the smoothing along
+#: the slices (3 sigma of :class:`fiberpipe.imaging.trace._GreySlices`, plus its read-back window;
+#: more for thicker fibers, :func:`fiberpipe.imaging.trace.grey_sigma_along`).
 GREY_HALO = 8
 
 
@@ -221,7 +225,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         ``join_gap_vox``, ``join_offset_vox``, ``join_angle_deg`` of :func:`fiberpipe.imaging.trace.trace`.
     **options
         The tracking fields of :class:`fiberpipe.imaging.trace.SliceOptions` (``max_jump_vox``,
-        ``max_skip``, ``momentum``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
+        ``max_skip``, ``gain``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
         ``spacing_vox``, ``peak_threshold``, ``refine``); fibers must run within ~45 degrees of
         ``axis`` (one slicing axis: no region split).
 
@@ -252,9 +256,10 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
         max_jump_vox=float(o.max_jump_vox) if o.max_jump_vox is not None else max(2.0, 0.6 * r),
         min_length_vox=max(10.0, 3.0 * r) if o.min_length_vox is None else o.min_length_vox,
         merge_gap_vox=int(max(6, 3 * r)) if o.merge_gap_vox is None else o.merge_gap_vox,
-        smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox)
+        smooth_sigma_vox=max(1.0, 0.5 * r) if o.smooth_sigma_vox is None else o.smooth_sigma_vox,
+        gain=track_gain(grey is not None) if o.gain is None else o.gain)
     params = dict(min_distance=min_distance, peak_threshold=o.peak_threshold, max_jump=o.max_jump_vox,
-                  max_skip=o.max_skip, momentum=o.momentum, refine=o.refine)
+                  max_skip=o.max_skip, gain=o.gain, refine=o.refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
     levels = None
@@ -273,7 +278,7 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     out.meta.update(method="slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,
-                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, momentum=o.momentum,
+                    params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, gain=o.gain,
                                 min_length_vox=o.min_length_vox, merge_gap_vox=o.merge_gap_vox,
                                 smooth_sigma_vox=o.smooth_sigma_vox, spacing_vox=o.spacing_vox,
                                 peak_threshold=o.peak_threshold, min_distance_vox=min_distance))

@@ -121,6 +121,26 @@ def close_cassette(fibers, raw: dict, specimen, radius_m: float, *, where: str, 
     return closed, {"needed": True, **figures}
 
 
+#: specimen.kind -> (module, builder, report) of the kinds beside the cassette: the builder
+#: ``build(cfg, raw, out, *, where, seed, ready_config_text) -> specimen.json's dict``, the report
+#: ``report(info, out) -> str``
+SPECIMEN_KINDS = {
+    "network_3d": ("fiberpipe.model.specimen_networks", "build_network_specimen", "network_report"),
+    "planar_mat": ("fiberpipe.model.specimen_networks", "build_network_specimen", "network_report"),
+    "wavy_bundle": ("fiberpipe.model.specimen_networks", "build_network_specimen", "network_report"),
+    "yarn": ("fiberpipe.model.specimen_yarn", "build_yarn_specimen", "yarn_report"),
+}
+
+
+def specimen_kind(kind: str):
+    """The (builder, report) of a specimen kind of :data:`SPECIMEN_KINDS` (imported on demand)."""
+    import importlib
+
+    module, build, report = SPECIMEN_KINDS[kind]
+    loaded = importlib.import_module(module)
+    return getattr(loaded, build), getattr(loaded, report)
+
+
 def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None, echo=print,
                    progress: bool = False) -> dict:
     """Build the specimen of ``raw``'s specimen section into ``out``; returns specimen.json's dict.
@@ -134,10 +154,9 @@ def build_specimen(raw: dict, out: Path, *, where: str, seed: int | None = None,
 
     cfg, specimen = specimen_config(raw, where)
     seed = specimen.seed if seed is None else int(seed)
-    if specimen.kind != "cassette":  # the literature's specimens (fiberpipe.model.specimen_networks)
-        from fiberpipe.model.specimen_networks import build_network_specimen
-
-        return build_network_specimen(cfg, raw, out, where=where, seed=seed, ready_config_text=ready_config_text)
+    if specimen.kind != "cassette":  # the literature's specimens and the yarn (SPECIMEN_KINDS)
+        builder, _ = specimen_kind(specimen.kind)
+        return builder(cfg, raw, out, where=where, seed=seed, ready_config_text=ready_config_text)
     r = float(cfg.fiber.radius)
     check_fits(specimen, r, where)
     curvatures, kappa = fiber_curvatures(specimen, seed)
@@ -285,9 +304,8 @@ def run_specimen_command(config: str, out: Path, *, seed: int | None = None, ove
 def specimen_report(info: dict, out: Path) -> str:
     """The command's summary: v_f0, contacts at U = 0, the Φ histogram, Table 4's curvatures."""
     if info.get("kind", "cassette") != "cassette":
-        from fiberpipe.model.specimen_networks import network_report
-
-        return network_report(info, out)
+        _, report = specimen_kind(info["kind"])
+        return report(info, out)
     settle_cfg, c = info["statistics"], info["contacts_at_U0"]
     n = info["generator"]["n_fibers"]
     lines = [

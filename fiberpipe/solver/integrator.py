@@ -20,7 +20,7 @@ from typing import Callable, NamedTuple, Sequence
 import numpy as np
 
 from ..errors import FiberpipeError, SimulationDiverged
-from ._kernels_integrate import no_record, record_energy, step_loop_for
+from ._kernels_integrate import damping_factors, no_record, record_energy, step_loop_for
 from ._kernels_beam import EB_SIZE, PARALLEL_CHUNKS, beam_forces, new_element_forces, node_beams
 from .checkpoint import Checkpoint, SimulationInterrupted, restore_into
 from .layout import (ACC_SIZE, ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z, H_CONTACTS, H_FD, H_KE, H_KE_LF,
@@ -33,7 +33,8 @@ from .step_data import DriveArrays, Fixity, ModelArrays, SceneKernel, StepContro
 from .terms.base import SceneArrays, Term, no_forces
 from .terms.planes import CHECKPOINT_FIELDS as PLANE_CHECKPOINT_FIELDS
 from .terms.planes import plane_arrays, plane_check, plane_energy
-from .timestep import DEFAULT_DT_SAFETY, TimeStepReport, modal_time_step, stable_time_step
+from .timestep import (ADAPTIVE_LOOK_STEPS, DEFAULT_DT_SAFETY, AdaptiveStep, TimeStepReport, modal_time_step,
+                       stable_time_step, step_change_kick)
 
 ENERGY_NAMES = ("kinetic", "strain", "damping", "external", "contact", "friction", "contact_stored",
                 "kinetic_leapfrog", "damping_leapfrog", "total", "residual")
@@ -73,7 +74,9 @@ class SimulationSettings:
         friction pass stays serial.
     stable_step : str — ``solver.stable_step``: ``"element"`` (default) the element-by-element bound
         of :func:`~fiberpipe.solver.timestep.stable_time_step`; ``"modes"`` the constrained assembled
-        system's (:func:`~fiberpipe.solver.timestep.modal_time_step`).
+        system's (:func:`~fiberpipe.solver.timestep.modal_time_step`); ``"adaptive"`` the element
+        bound, each step split into sub-steps that follow the contact's stiffness
+        (:class:`~fiberpipe.solver.timestep.AdaptiveStep`).
     """
 
     dt_safety: float = DEFAULT_DT_SAFETY
@@ -92,8 +95,8 @@ class SimulationSettings:
     stable_step: str = "element"
 
     def __post_init__(self):
-        if self.stable_step not in ("element", "modes"):
-            raise FiberpipeError(f"solver.stable_step must be element or modes, got {self.stable_step!r}")
+        if self.stable_step not in ("element", "modes", "adaptive"):
+            raise FiberpipeError(f"solver.stable_step must be element, modes or adaptive, got {self.stable_step!r}")
         if not 0.0 < self.dt_safety <= 1.0:
             raise FiberpipeError(f"solver.dt_safety must be in (0, 1], got {self.dt_safety}")
         if self.output_frames < 2:
@@ -287,6 +290,12 @@ class Integrator:
                                for k, slot in enumerate(term.energies)}
         self.hist = np.zeros((history_rows, H_WALL + scene.n_walls + len(self.energy_columns)))
         self.h_row = 0
+        # solver.stable_step adaptive: each step of dt taken as substeps[0] sub-steps; the sub-step of each row
+        self.substeps = np.ones(1, np.int64)
+        self.dt_prev = np.zeros(1)  # the last sub-step taken (0: none yet)
+        self.dt_rows = np.zeros(history_rows)
+        self.step_change_J = np.zeros(1)  # the leapfrog kinetic term's shift at the step changes so far
+        self.step_change_rows = np.zeros(history_rows)
         c = model.material.wave_speed_m_s
         self.v_limit = 0.2 * c if speed_limit_m_s is None else float(speed_limit_m_s)
         if runaway_m is None:
@@ -334,12 +343,25 @@ class Integrator:
         if self.threads > 1:
             import numba
             numba.set_num_threads(_usable_threads(self.threads))
-        scene_kernel, work = self._kernel_args()
-        control = StepControl(self.dt, int(n_steps), float(state.t), int(state.step), int(self.h_row),
-                              self.history_every, float(self.v_limit), self.x_limit, float(self.e_ref))
-        status, done, self.h_row, bad = self.plan.loop(
-            self.model_arrays, scene_kernel, StepState(state.x, state.q, state.v, state.w, state.acc), work, control,
-            self.plan.chain, self.plan.owner)
+        sub = int(self.substeps[0])  # the loop counts sub-steps: a history row every history_every steps still
+        dt_sub = self.dt / sub
+        row_before = self.h_row
+        if self.dt_prev[0] > 0.0 and self.dt_prev[0] != dt_sub and n_steps > 0:
+            # the step changed (solver.stable_step adaptive): the first sub-step alone, then its kick set right
+            v_before, w_before = state.v.copy(), state.w.copy()
+            status, done, bad = self._substep_loop(state, 1, 0, sub)
+            if status == STATUS_OK:
+                self.step_change_J[0] += step_change_kick(state, v_before, w_before, float(self.dt_prev[0]), dt_sub,
+                                                          damping_factors(float(self.scene.alpha), dt_sub),
+                                                          self.fixity, self.model.mass, self.model.J)
+                status, rest, bad = self._substep_loop(state, int(n_steps) * sub - 1, 1, sub)
+                done += rest
+        else:
+            status, done, bad = self._substep_loop(state, int(n_steps) * sub, 0, sub)
+        self.dt_prev[0] = dt_sub
+        self.dt_rows[row_before:self.h_row] = dt_sub
+        self.step_change_rows[row_before:self.h_row] = self.step_change_J[0]
+        done //= sub
         state.step += int(done)
         state.t = state.step * self.dt
         if status == STATUS_OK and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
@@ -349,10 +371,25 @@ class Integrator:
             return int(STATUS_NAN), int(done), int(bad_nodes[0])
         return int(status), int(done), int(bad)
 
+    def _substep_loop(self, state: State, n_sub: int, offset: int, sub: int) -> tuple[int, int, int]:
+        """``n_sub`` sub-steps of ``dt / sub`` in one call of the step loop, ``offset`` sub-steps into the
+        current step; returns ``(status, sub-steps done, bad node)``."""
+        scene_kernel, work = self._kernel_args()
+        dt_sub = self.dt / sub
+        control = StepControl(dt_sub, n_sub, float(state.t) + offset * dt_sub, int(state.step) * sub + offset,
+                              int(self.h_row), self.history_every * sub, float(self.v_limit), self.x_limit,
+                              float(self.e_ref))
+        status, done, self.h_row, bad = self.plan.loop(
+            self.model_arrays, scene_kernel, StepState(state.x, state.q, state.v, state.w, state.acc), work, control,
+            self.plan.chain, self.plan.owner)
+        return status, done, bad
+
     def _mutable_arrays(self) -> dict:
         """The integrator's arrays the step loop changes, by checkpoint name (the planes' by
         ``planes.CHECKPOINT_FIELDS``)."""
-        arrays = {"strain_prev": self.strain_prev, "drive_v": self.drive_v}
+        arrays = {"strain_prev": self.strain_prev, "drive_v": self.drive_v, "substeps": self.substeps,
+                  "dt_prev": self.dt_prev, "dt_rows": self.dt_rows, "step_change": self.step_change_J,
+                  "step_change_rows": self.step_change_rows}
         arrays.update({name: getattr(self.planes, f) for f, name in PLANE_CHECKPOINT_FIELDS.items()})
         return arrays
 
@@ -363,6 +400,8 @@ class Integrator:
     def restore_arrays(self, arrays: dict) -> None:
         """Copy saved mutable arrays back in place (shapes must agree)."""
         for k, cur in self._mutable_arrays().items():
+            if k in ("substeps", "dt_prev", "dt_rows", "step_change", "step_change_rows") and k not in arrays:
+                continue  # a checkpoint of a version without sub-steps: one sub-step throughout
             new = np.asarray(arrays[k])
             if cur.shape != new.shape:
                 raise FiberpipeError(f"checkpoint does not fit this scene: integrator array {k} has shape "
@@ -539,6 +578,8 @@ def default_chunk_steps(model: Model, settings: SimulationSettings) -> int:
     """Steps per jitted call: about 5e6 element-steps (≈ 0.3 s on one core), at most ``max_chunk_steps``."""
     if settings.chunk_steps is not None:
         return int(settings.chunk_steps)
+    if settings.stable_step == "adaptive":  # the sub-steps are chosen between chunks
+        return ADAPTIVE_LOOK_STEPS
     return int(max(100, min(settings.max_chunk_steps, 5_000_000 // max(model.n_elements, 1))))
 
 
@@ -649,6 +690,12 @@ class _Run:
         watches = (term.make_watch(model, plan.dt_s, settings.dt_safety) for term in effects
                    if hasattr(term, "make_watch"))
         self.watches = [w for w in watches if w is not None]
+        self.adaptive = None
+        if settings.stable_step == "adaptive":  # the sub-steps follow the watched stiffness instead of warning
+            scene = self.integrator.scene
+            self.adaptive = AdaptiveStep(model, plan.dt_s, settings.dt_safety, scene.penalty_factor,
+                                         scene.penalty_dt(), self.watches[0] if self.watches else None)
+            self.watches = []
         self.warnings: list[str] = []
         few_threads = threads_warning(settings.threads)
         if few_threads:
@@ -702,6 +749,9 @@ class _Run:
         plan, integrator, model, rep = self.plan, self.integrator, self.model, self.plan.timestep
         times, positions, rotations = self._frames()
         notes = [rep.summary(), f"dt = {plan.dt_s:.4g} s ({plan.dt_s / rep.dt_stable_s:.3g} × stable)"]
+        if self.adaptive is not None and integrator.substeps[0] > 1:
+            notes.append(f"adaptive step: {int(integrator.substeps[0])} sub-steps of {plan.dt_s / integrator.substeps[0]:.4g} s "
+                         "per step at the end (history dt_s)")
         if self.resume is not None:
             notes.append(f"resumed from a checkpoint at t = {self.resume.t:.6g} s (step {self.resume.step})")
         if model.rotary_inertia_scale != 1.0:
@@ -709,8 +759,10 @@ class _Run:
                          "(accuracy trade-off)")
         return SimulationResult(
             frames_time=times, frames_positions=positions, frames_rotations=rotations,
-            history=_history_dict(integrator.hist, integrator.h_row, integrator.scene.n_walls,
-                                  _residual_start(state, self.ke0, self.se0), integrator.energy_columns),
+            history=dict(_history_dict(integrator.hist, integrator.h_row, integrator.scene.n_walls,
+                                       _residual_start(state, self.ke0, self.se0), integrator.energy_columns),
+                         dt_s=integrator.dt_rows[:integrator.h_row].copy(),
+                         **{"energy/step_change": integrator.step_change_rows[:integrator.h_row].copy()}),
             dt_s=plan.dt_s, steps=state.step, elements=model.n_elements,
             wall_time_s=self.wall_before + time.perf_counter() - self.t_wall,
             effects=[term.name for term in self.effects], timestep=rep, final_state=state, completed=completed,
@@ -747,6 +799,10 @@ class _Run:
         if status != STATUS_OK:
             raise self.diverged(state, last_good, status, bad, detail)
         self.warnings += [m for m in (w(state.t) for w in self.watches) if m]
+        if self.adaptive is not None:
+            self.adaptive.look(self.integrator.substeps, state.t)
+            if self.adaptive.warning and self.adaptive.warning not in self.warnings:
+                self.warnings.append(self.adaptive.warning)
 
 
 def simulate(model: Model, effects: Sequence[Term], settings: SimulationSettings | None = None, *,

@@ -348,3 +348,116 @@ def _round_down(x: float, digits: int) -> float:
         return x
     e = math.floor(math.log10(x)) - digits + 1
     return math.floor(x / 10.0**e) * 10.0**e
+
+
+#: ``solver.stable_step: adaptive`` looks at the contact's stiffness every this many steps (the run's
+#: chunks are at most this long): the window over which the step lags a stiffening contact
+ADAPTIVE_LOOK_STEPS = 50
+
+#: the most sub-steps a step of an adaptive run is split into (a contact stiffer than that is a
+#: warning: the run goes on at the smallest step)
+MAX_SUBSTEPS = 256
+
+
+class AdaptiveStep:
+    """The sub-steps of ``solver.stable_step: adaptive``: each step Δt₀ of the run's grid (dt_safety ×
+    the element bound) is taken as m equal sub-steps Δt₀/m, m chosen from the contact's stiffness.
+
+    Bound: central differences are stable while (ω Δt)² ≤ 4 in every mode (Belytschko, Liu & Moran
+    2000, §6.3). A penalty k on a node of mass m_min adds 2k/m_min to the ω² of the beam modes it
+    couples with (shear and bending; :func:`fiberpipe.solver.terms.contact.penalty_step_bound`),
+    the plane penalty ``c m (2/Δt_pen)²`` adds 4c/Δt_pen² (Weyl's inequality, as in
+    :func:`modal_time_step`), so the step keeps the run's margin when
+
+        Δt ≤ dt_safety · 2 / √(ω_beam² + 2k/m_min + 4c/Δt_pen²).
+
+    ``k`` is the law's tangent at the largest penetration since the last look (a law that stiffens
+    with the penetration) or 3/2 of the largest secant F_n/δ (Hertz), read from the contact's
+    :class:`~fiberpipe.solver.terms.contact.ContactSlopeWatch` every :data:`ADAPTIVE_LOOK_STEPS`
+    steps. m rises at once to what the stiffness needs and does not fall again: the step shrinks
+    with a stiffening contact and never grows (a compaction's contacts stiffen as it goes). Why not
+    grow: each change of the step shifts the leapfrog's invariant by ¼(Δt_old² − Δt_new²) Σ m|a_n|²,
+    which :func:`step_change_kick` books for a shrinking step to within rounding, but a growing one
+    in a rattling contact created 2.6–4.5 % of the loads' work on the six-fiber scene (scaled_stiffness
+    table1_phi2 at 1000 N/m, the step doubled after 20 or 100 looks in a row found half the sub-steps
+    enough for twice the stiffness). The choice
+    depends on the state only, at step numbers fixed by the run's grid, so a resumed run makes it
+    again bit for bit.
+    """
+
+    def __init__(self, model: Model, dt_s: float, dt_safety: float, penalty_factor: float, penalty_dt_s: float,
+                 watch=None):
+        rep = stable_time_step(model)
+        self.dt_s = float(dt_s)
+        self.dt_safety = min(float(dt_safety), 1.0)
+        self.watch = watch
+        self.m_min = float(np.min(model.mass)) if model.n_nodes else 1.0
+        # the beam modes a contact couples with, and the plane penalty's share of ω²
+        omega2_beam = max((2.0 / rep.per_mode_s[mode]) ** 2 for mode in ("shear", "bending"))
+        self.omega2_fixed = omega2_beam + 4.0 * float(penalty_factor) / float(penalty_dt_s) ** 2
+        self.warning: str | None = None
+
+    def needed_substeps(self, k_node_n_per_m: float) -> int:
+        """The fewest sub-steps of Δt₀ that carry a contact stiffness ``k`` [N/m] per node with the margin."""
+        omega2 = self.omega2_fixed + 2.0 * max(k_node_n_per_m, 0.0) / self.m_min
+        dt_ok = self.dt_safety * 2.0 / math.sqrt(omega2)
+        return max(1, int(math.ceil(self.dt_s / dt_ok * (1.0 - 1e-12))))
+
+    def look(self, substeps: np.ndarray, t_s: float) -> None:
+        """After a look at the contact's stiffness (it resets its peaks), the sub-steps of the next
+        stretch into ``substeps[0]`` (in place: the integrator's checkpointed array)."""
+        k = self.watch.stiffness()[0] if self.watch is not None else 0.0
+        needed = self.needed_substeps(k)
+        if needed > MAX_SUBSTEPS:
+            if self.warning is None:
+                self.warning = (f"by t = {t_s:.4g} s the contact ({k:.3g} N/m per node) needs {needed} sub-steps of "
+                                f"the step {self.dt_s:.3g} s, more than {MAX_SUBSTEPS}: the run goes on at "
+                                f"{self.dt_s / MAX_SUBSTEPS:.3g} s (energy may be created); use a law that stiffens less")
+            needed = MAX_SUBSTEPS
+        substeps[0] = max(int(substeps[0]), needed)
+
+
+def step_change_kick(state, v_before: np.ndarray, w_before: np.ndarray, dt_old_s: float, dt_new_s: float,
+                     coef: tuple, fixity, mass: np.ndarray, inertia: np.ndarray) -> float:
+    """Set right the first step after the step changed from ``dt_old_s`` to ``dt_new_s`` (in place);
+    returns the shift [J] of the leapfrog's kinetic term that the change makes.
+
+    Central differences with a variable step kick the half-step velocity by the mean of the two
+    steps, v_{n+½} = v_{n−½} + ½(Δt_old + Δt_new) a_n (Belytschko, Liu & Moran 2000, §6.2.1); the
+    step loop, which keeps its step, kicked by Δt_new. ``state`` is the state after that first step
+    (``v_before``, ``w_before``: the half-step velocities before it; ``coef``: the step's
+    ``(c_keep, dt_c)`` of :func:`fiberpipe.solver._kernels_integrate.damping_factors`), from which
+    a_n = (v_{n+½} − c_keep v_{n−½}) / dt_c on the free degrees of freedom; the missing
+    ½(Δt_old − Δt_new) a_n is added to the velocities and Δt_new times it to the positions, and the
+    body-frame spins' share rotates the quaternions (q ⊗ exp(½Δt_new δΩ), to first order in δΩ).
+    Without it a change of the step in a stiff contact created 68 × the loads' work on the six-fiber
+    scene (scaled_stiffness table1_phi2 at 1000 N/m).
+
+    The shift: the leapfrog's kinetic term ½ v_{n−½}·M v_{n+½} is the mean of the half-step kinetic
+    energies less ¼Δt² Σ m|a_n|² (``_kernels_integrate.update_range``), so at the same motion it moves
+    by ¼(Δt_old² − Δt_new²) Σ (m|a_n|² + J|α_n|²) when the step changes: a term of the step, not of
+    the motion, which the energy balance takes out (``energy/step_change`` of the history).
+    """
+    c_keep, dt_c = coef
+    half = 0.5 * (dt_old_s - dt_new_s) / dt_c
+    free = np.column_stack([fixity.free_x, fixity.free_y, fixity.free_z])
+    acc = (state.v - c_keep * v_before) * free / dt_c
+    alpha = (state.w - c_keep * w_before) * fixity.free_rot[:, None] / dt_c
+    shift = 0.25 * (dt_old_s ** 2 - dt_new_s ** 2) * float(np.sum(mass[:, None] * acc ** 2) + np.sum(inertia * alpha ** 2))
+    dv = half * (state.v - c_keep * v_before) * free
+    state.v += dv
+    state.x += dt_new_s * dv
+    dw = half * (state.w - c_keep * w_before) * fixity.free_rot[:, None]
+    state.w += dw
+    h = 0.5 * dt_new_s * dw  # q ⊗ (cos|h|, sin|h| ĥ)
+    a = np.linalg.norm(h, axis=1)
+    s = np.where(a > 0.0, np.sin(a) / np.where(a > 0.0, a, 1.0), 1.0)
+    pw, px, py, pz = np.cos(a), s * h[:, 0], s * h[:, 1], s * h[:, 2]
+    q = state.q
+    qw, qx, qy, qz = q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), q[:, 3].copy()
+    q[:, 0] = qw * pw - qx * px - qy * py - qz * pz
+    q[:, 1] = qw * px + qx * pw + qy * pz - qz * py
+    q[:, 2] = qw * py - qx * pz + qy * pw + qz * px
+    q[:, 3] = qw * pz + qx * py - qy * px + qz * pw
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    return shift

@@ -29,6 +29,7 @@ import numpy as np
 from fiberpipe.artifacts import read_mesh, write_artifact
 from fiberpipe.config import Config
 from fiberpipe.errors import ArtifactError, FiberpipeError, SimulationDiverged
+from fiberpipe.io.output_size import check_free_space
 from fiberpipe.io.vtk import mesh_vtu, write_pvd
 from fiberpipe.progress import terminal_bar
 from fiberpipe.stages._common import input_hashes
@@ -38,6 +39,7 @@ log = logging.getLogger(__name__)
 #: Units of the history series the solver may record (anything else is stored as given).
 HISTORY_UNITS = {
     "time": "s",
+    "dt_s": "s",
     "plate_displacement": "m",
     "plate_force": "N",
     "wall_force": "N",
@@ -93,7 +95,10 @@ def write_simulation(path: Path, mesh, result, *, config_sha256: str = "", input
         "effects": list(result.effects if effects is None else effects),
     }
     attrs.update(extra_attrs or {})
-    return write_artifact(path, "simulation", datasets, units=units, attrs=attrs, config_sha256=config_sha256, inputs=inputs)
+    # frames and histories gzip-compressed in per-frame chunks (artifacts.chunk_shape): a 4000-fiber
+    # run reads one frame without the others
+    return write_artifact(path, "simulation", datasets, units=units, attrs=attrs, config_sha256=config_sha256, inputs=inputs,
+                          compression="gzip", chunks="rows")
 
 
 def write_frames_vtk(out_dir: Path, mesh, frames_time, frames_positions, *, stem: str = "simulation",
@@ -242,6 +247,8 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
     run_dir = out.parent
     ck_path = run_dir / CHECKPOINT_NAME
     inputs = input_hashes({"mesh": Path(mesh_path)})
+    check_free_space(run_dir, int(mesh.nodes_m.shape[0]), int(mesh.n_elements), int(cfg.solver.output_frames),
+                     where=str(getattr(cfg, "source_path", None) or ""))
     plane_overlap = clear_scene_planes(mesh, cfg)
     model, effects, settings = build_simulation(mesh, cfg)
     asked = list(cfg.scene.effects)  # what the user asked for is what is recorded (friction included)

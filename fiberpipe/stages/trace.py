@@ -73,6 +73,12 @@ def run_trace(
 def warn_off_axis(off_axis: dict, mode: str) -> None:
     """One warning line per volume axis a region of the fibers runs along besides the slicing axis."""
     for ax, info in off_axis.items():
+        if ax == "oblique":
+            from fiberpipe.imaging.trace import DENSE_MAX_TILT_DEG
+
+            log.warning("trace: %d tracks (%.0f voxels long in all) run more than %g deg off the slicing axis "
+                        "(a +-45 deg ply): left out", info["fibers"], info["length_vox"], DENSE_MAX_TILT_DEG)
+            continue
         log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis (a cross ply or a tow "
                     "lying in the slices): %s (%d fibers); trace.off_axis: %s", 100 * info["volume_fraction"],
                     ax, info["action"], info["fibers"], "drop leaves it out" if mode == "trace"

@@ -99,3 +99,30 @@ def test_harder_family_touching_tilted_low_contrast(seed):
     acc = trace_accuracy(trace(segment(vol)[0], voxel_size_m=vs), truth, voxel_size_m=vs)
     assert acc["recall"] >= 0.98 and acc["precision"] >= 0.98, acc
     assert acc["mean_error_vox"] <= 0.30 and acc["coverage"] >= 0.95, acc
+
+
+def test_pieces_overlapping_by_a_slice_with_a_stray_end_point_are_merged():
+    """A fiber tracked as two pieces: the first ends with one detection 2 voxels off (a noise
+    peak beside the fiber) in the slice where the second starts. The stray point is dropped (half
+    a radius off the running median) and the overlap cut, so the pieces chain into one track
+    with every point on the fiber."""
+    from fiberpipe.imaging.trace import _Track, merge_pieces
+
+    def piece(ks, stray=None):
+        t = _Track(ks[0], np.array([10.0 + 0.05 * ks[0], 20.0]), 3.0)
+        for k in ks[1:]:
+            t.k.append(k)
+            t.p.append(np.array([10.0 + 0.05 * k, 20.0]))
+            t.r.append(3.0)
+        if stray is not None:
+            t.p[-1] = t.p[-1] + np.array([0.0, stray])
+        return t
+
+    first, second = piece(list(range(0, 31)), stray=2.0), piece(list(range(30, 80)))
+    merged = merge_pieces([first, second], np.ones(2), max_gap=9, max_dist=2.0, fit_n=6, outlier_vox=1.5)
+    assert len(merged) == 1
+    k, p, _ = merged[0]
+    assert np.array_equal(k, np.arange(80))
+    assert np.allclose(p[:, 1], 20.0) and np.allclose(p[:, 0], 10.0 + 0.05 * k)
+    # without the outlier drop, the stray end point still chains (the overlap is cut), but it stays
+    assert len(merge_pieces([first, second], np.ones(2), max_gap=9, max_dist=2.0, fit_n=6)) == 1

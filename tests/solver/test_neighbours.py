@@ -138,3 +138,17 @@ def test_pairs_sorted_by_key_as_argsort_sorts_them(n):
     assert np.array_equal(buf[:m], pairs[order])
     assert np.array_equal(keys[:m], pairs[order, 0] * ne + pairs[order, 1])
     assert np.all(buf[m:] == -9) and np.all(keys[m:] == -7)  # rows beyond n untouched
+
+
+def test_the_cell_grid_is_bounded_by_the_segment_count_however_far_apart_the_segments():
+    """Memory O(E): a few segments spread over a metre get at most 4 E + 64 cells (the cells grow),
+    not (1 m / h)³; two segments a metre apart are no candidates."""
+    from fiberpipe.solver.neighbours import _cell_grid
+
+    h, nc, tot = _cell_grid(np.zeros(3), np.ones(3), 1e-3, 100)
+    assert tot == int(np.prod(nc)) and tot <= 4 * 100 + 64 and h >= 1e-3
+    x = np.array([[0.0, 0, 0], [LE, 0, 0], [1.0, 1.0, 1.0], [1.0 + LE, 1.0, 1.0]])
+    seg = np.array([[0, 1], [2, 3]], np.int64)
+    pairs, keys = np.zeros((4, 2), np.int64), np.zeros(4, np.int64)
+    n = build_pairs(x, seg, np.full(2, R), np.array([0, 1], np.int64), np.zeros((2, 2)), 0.05e-3, 0.0, pairs, keys)
+    assert n == 0
