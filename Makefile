@@ -43,7 +43,8 @@ test-all: setup
 verify: setup
 	$(PY) -m fiberpipe.verification
 
-# the bundle-scale validation cases, full variants, into docs/validation.md (each case <= 15 min on 2 cores)
+# the bundle-scale validation cases, full variants, three seeds, into docs/validation.md (CPU per case
+# in docs/validation.md: within 15 min except case 5, about 18 min)
 .PHONY: validate
 validate: setup
 	$(FP) validate --out runs/validation --docs docs/validation.md
