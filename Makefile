@@ -43,7 +43,8 @@ test-all: setup
 verify: setup
 	$(PY) -m fiberpipe.verification
 
-# the bundle-scale validation cases, full variants, into docs/validation.md (each case <= 15 min on 2 cores)
+# the bundle-scale validation cases, full variants, three seeds, into docs/validation.md (CPU per case
+# in docs/validation.md: within 15 min except case 5, about 18 min)
 .PHONY: validate
 validate: setup
 	$(FP) validate --out runs/validation --docs docs/validation.md
@@ -265,8 +266,16 @@ study-prediction: setup
 	$(PY) tools/study_prediction.py --out runs/study-prediction --figure docs/img/study_prediction.png \
 	    $(if $(SEEDS),--seeds $(SEEDS)) $(if $(FAST),--fast-only)
 
-# each unknown of the study in turn on two seeds of the prediction's specimens (SEEDS=N to change), the
-# tornado plot and the table of docs/results.md
+# each unknown of the study in turn on the prediction's first four seeds (SEEDS=N to change), the tornado
+# plot and the table of docs/results.md; ONLY="bow-4m vf-35" runs those variants alone
 study-sensitivity: study-prediction
 	$(PY) tools/study_sensitivity.py --prediction runs/study-prediction --out runs/study-sensitivity \
-	    --seeds $(or $(SEEDS),2) --doc docs/results.md --figure docs/img/study_sensitivity.png
+	    --seeds $(or $(SEEDS),4) --doc docs/results.md --figure docs/img/study_sensitivity.png $(if $(ONLY),--only $(ONLY))
+
+# the bow radius and v_f0 fitted to the study's curve points on a grid of four-seed ensembles (reusing the
+# sensitivity's runs), then the parallel and oblique 6° models on the fitted family; docs/results.md
+.PHONY: study-fit-ensemble
+study-fit-ensemble: study-sensitivity
+	$(PY) tools/study_fit.py --prediction runs/study-prediction --sensitivity runs/study-sensitivity \
+	    --out runs/study-fit --seeds $(or $(SEEDS),4) --doc docs/results.md --figure docs/img/study_fit.png \
+	    $(foreach g,$(GRID),--grid $(g)) $(if $(COLLECT),--collect)

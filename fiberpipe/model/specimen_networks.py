@@ -109,8 +109,12 @@ def place_fibers(kind: str, sp, radius_m: float, cell: Cell, seed: int, where: s
     else:
         points = 2
     placed: list[np.ndarray] = []
-    starts = np.zeros((0, 3))
-    ends = np.zeros((0, 3))
+    # every fiber has ``points`` points: its segments are rows k of these (fibers, points − 1, 3) arrays
+    starts = np.zeros((sp.n_fibers, points - 1, 3))
+    ends = np.zeros((sp.n_fibers, points - 1, 3))
+    box_lo = np.zeros((sp.n_fibers, 3))
+    box_hi = np.zeros((sp.n_fibers, 3))
+    reach = 2 * radius_m + sp.gap
     for k in range(sp.n_fibers):
         for _ in range(MAX_DRAWS_PER_FIBER):
             shape = fiber_shape(kind, sp, points, rng)
@@ -121,13 +125,16 @@ def place_fibers(kind: str, sp, radius_m: float, cell: Cell, seed: int, where: s
             if kind == "wavy_bundle":
                 centre[2] = cell.depth_m / 2
             fiber = centre + shape
-            if len(starts):
-                d, _, _ = segment_distances(fiber[:-1, None, :], fiber[1:, None, :], starts[None], ends[None])
-                if d.min() < 2 * radius_m + sp.gap:
+            # only the fibers whose bounding boxes come within the clearance can be closer than it
+            near = np.all((box_lo[:k] <= fiber.max(axis=0) + reach) & (box_hi[:k] >= fiber.min(axis=0) - reach), axis=1)
+            if np.any(near):
+                d, _, _ = segment_distances(fiber[:-1, None, :], fiber[1:, None, :],
+                                            starts[:k][near].reshape(1, -1, 3), ends[:k][near].reshape(1, -1, 3))
+                if d.min() < reach:
                     continue
             placed.append(fiber)
-            starts = np.vstack([starts, fiber[:-1]])
-            ends = np.vstack([ends, fiber[1:]])
+            starts[k], ends[k] = fiber[:-1], fiber[1:]
+            box_lo[k], box_hi[k] = fiber.min(axis=0), fiber.max(axis=0)
             break
         else:
             raise ConfigError(f"specimen: random addition placed {k} of {sp.n_fibers} fibers in the cell at v_f0 = "

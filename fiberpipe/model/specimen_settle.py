@@ -163,7 +163,7 @@ def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settl
     from fiberpipe.errors import ConfigError
 
     scene = closing_scene(raw, plan, close_cfg, settle_cfg)
-    cfg, mesh, res, wall = _run_scene(scene, fibers, where, progress)
+    cfg, mesh, res, wall, dt_safety = _run_closing(scene, fibers, where, progress)
     radius = float(cfg.fiber.radius)
     X = np.asarray(res.frames_positions)
     off = np.asarray(mesh.node_offsets)
@@ -175,7 +175,7 @@ def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settl
         "start_height_m": float(plan.start_m), "target_height_m": float(plan.target_m),
         "velocity_m_s": float(plan.velocity_m_s), "relax_time_s": float(plan.relax_time_s),
         "alpha_per_s": float(close_cfg.damping_alpha), "mass_scaling": float(close_cfg.mass_scaling),
-        "dt_s": float(res.dt_s), "steps": int(res.steps), "wall_time_s": wall,
+        "dt_s": float(res.dt_s), "steps": int(res.steps), "wall_time_s": wall, "dt_safety": dt_safety,
         "residual_load_N": float(force[-1]), "peak_load_N": float(force.max()),
         "lower_load_N": float(np.asarray(history["plate_force"])[-1, 0]),
         "wall_load_N": float(np.abs(np.asarray(history["wall_force"])[-1]).sum()),
@@ -192,6 +192,26 @@ def close_pile(fibers: Polylines, raw: dict, plan: ClosingPlan, close_cfg, settl
                           where=where)
     closed = Polylines.from_list([X[-1][off[i]:off[i + 1]] for i in range(len(off) - 1)], radius)
     return closed, out
+
+
+CLOSING_RETRY_STEP_FACTOR = 0.5  # the step of a closing run again after it diverged, × its own
+
+
+def _run_closing(scene_raw: dict, fibers: Polylines, where: str, progress=None):
+    """:func:`_run_scene` of the closing; run once more at half the step (``solver.dt_safety`` × 0.5)
+    when it diverges. A stiffening law (the study's Table 1 presets: the slope × S per d of
+    penetration) can outgrow the step where the closing load presses fibers deepest, at its peak;
+    the same pile closes at a smaller step. Returns ``_run_scene``'s tuple and the dt_safety used."""
+    from fiberpipe.config import SolverConfig
+    from fiberpipe.errors import SimulationDiverged
+
+    dt_safety = float((scene_raw.get("solver") or {}).get("dt_safety", SolverConfig().dt_safety))
+    try:
+        return (*_run_scene(copy.deepcopy(scene_raw), fibers, where, progress), dt_safety)
+    except SimulationDiverged:
+        retry = copy.deepcopy(scene_raw)
+        retry.setdefault("solver", {})["dt_safety"] = dt_safety * CLOSING_RETRY_STEP_FACTOR
+        return (*_run_scene(retry, fibers, where, progress), dt_safety * CLOSING_RETRY_STEP_FACTOR)
 
 
 def _run_scene(scene_raw: dict, fibers: Polylines, where: str, progress=None):

@@ -162,14 +162,27 @@ def member_jobs(raw: dict, seeds: list[int], out: Path) -> list[tuple[str, dict,
     return jobs
 
 
+def member_or_error(raw: dict, run_dir: str, where: str, specimen_store: str, member=None) -> dict:
+    """``member`` (:func:`run_member` unless given), or ``{"error": its one-line message}`` when the
+    member's input is bad (a :class:`fiberpipe.errors.FiberpipeError`: a v_f0 its pile cannot reach)."""
+    from fiberpipe.errors import FiberpipeError
+
+    try:
+        return (member or run_member)(raw, run_dir, where, specimen_store=specimen_store)
+    except FiberpipeError as exc:
+        return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__, "wall_time_s": 0.0}
+
+
 def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers: int | None = None,
                   scheduler: str | None = None, specimen_store: Path | None = None, where: str = "ensemble",
-                  echo=print, member=None) -> dict[str, dict]:
+                  echo=print, member=None, keep_going: bool = False) -> dict[str, dict]:
     """Run several ensembles ``{name: (raw, seeds, out)}`` in one pass of the scheduler (their members
     side by side); write each one's outputs (:func:`write_ensemble`); returns ``{name: ensemble.json}``.
     ``specimen_store``: where the specimens go (default: ``specimens/`` beside the first ensemble);
     ``member``: the members' task, ``member(raw, run_dir, where, specimen_store)``, :func:`run_member`
-    unless given (a function the workers can import or unpickle)."""
+    unless given (a function the workers can import or unpickle). ``keep_going``: an ensemble whose
+    member stops on bad input returns ``{"error": the first member's message, "seeds": ...}`` (and
+    writes nothing) while the others finish; without it the first such error ends the pass."""
     from fiberpipe.studies.runner import execute
 
     names = list(ensembles)
@@ -182,14 +195,42 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
             owner[f"{name}/{job_id}"] = name
     n_workers = workers or max(1, min(len(jobs), os.cpu_count() or 1))
     echo(f"ensemble: {len(jobs)} runs ({', '.join(f'{n}: {len(ensembles[n][1])} seeds' for n in names)})")
-    results = execute(jobs, n_workers, scheduler, where, echo,
-                      fn=functools.partial(member or run_member, specimen_store=str(store.resolve())))
+    task = (functools.partial(member_or_error, member=member, specimen_store=str(store.resolve())) if keep_going
+            else functools.partial(member or run_member, specimen_store=str(store.resolve())))
+    results = execute(jobs, n_workers, scheduler, where, echo, fn=task)
     summaries = {}
     for name in names:
         raw, seeds, out = ensembles[name]
-        members = {job_id.split("/", 1)[1]: res for job_id, res in results.items() if owner[job_id] == name}
+        members = {job_id.rsplit("/", 1)[1]: res for job_id, res in results.items() if owner[job_id] == name}
+        errors = [f"seed {job_id.split('-', 1)[1]}: {res['error']}" for job_id, res in members.items() if "error" in res]
+        if errors:
+            echo(f"  {out}: not run ({errors[0]})")
+            summaries[name] = {"error": errors[0], "seeds": [int(s) for s in seeds]}
+            continue
         summaries[name] = write_ensemble(Path(out), seeds, members, echo)
     return summaries
+
+
+def collect_ensemble(out: Path, seeds: list[int], echo=print) -> dict:
+    """An ensemble's outputs (:func:`write_ensemble`) from the member runs ``out/seed-<s>/`` an earlier
+    pass finished, running nothing (a pass killed part way, or runs whose cache keys a change of the
+    package's code has made stale); ``{"error": ...}`` naming the first seed without a finished run.
+    Each member's specimen is the one its run's ``config.yaml`` reads."""
+    members = {}
+    for seed in seeds:
+        run = Path(out) / f"seed-{seed}"
+        if not (run / "post" / "force_displacement.csv").is_file():
+            return {"error": f"seed {seed}: no finished run in {run}", "seeds": [int(s) for s in seeds]}
+        fibers = (yaml.safe_load((run / "config.yaml").read_text()).get("input") or {}).get("fibers")
+        specimen_dir = Path(fibers).parent
+        info = json.loads((specimen_dir / "specimen.json").read_text())
+        summary_path = run / "summary.json"
+        simulate = (json.loads(summary_path.read_text()).get("stages") or {}).get("simulate", {}) \
+            if summary_path.is_file() else {}
+        members[f"seed-{seed}"] = {"v_f0": float(info["volume_fraction"]), "specimen_dir": str(specimen_dir),
+                                   "closing_residual_load_N": (info.get("closing") or {}).get("residual_load_N"),
+                                   "solver_wall_time_s": simulate.get("solver_wall_time_s")}
+    return write_ensemble(Path(out), seeds, members, echo)
 
 
 def run_ensemble(raw: dict, seeds: list[int], out: Path, **kwargs) -> dict:

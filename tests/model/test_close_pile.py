@@ -97,3 +97,30 @@ def test_the_settling_takes_its_own_contact_section_and_mass_scaling():
     assert "mass_scaling" not in scene["solver"]  # the compaction's mass scaling is not the settling's
     assert settle_scene(raw, width_m=3e-3, alpha_per_s=300.0, time_s=0.1, mu=0.2, lock="all",
                         frames=3)["scene"]["contact"] == raw["scene"]["contact"]
+
+
+def test_a_closing_that_diverges_runs_once_more_at_half_the_step(monkeypatch):
+    """A stiffening law can outgrow the step at the closing's peak load: the closing runs again at
+    dt_safety × 0.5, reports the dt_safety it used, and a second divergence is the error."""
+    from fiberpipe.errors import SimulationDiverged
+    from fiberpipe.model import specimen_settle
+
+    seen = []
+
+    def diverges_at(limit):
+        def run(scene, fibers, where, progress=None):
+            seen.append(scene["solver"]["dt_safety"])
+            if scene["solver"]["dt_safety"] > limit:
+                raise SimulationDiverged("a node moved faster than the speed limit")
+            return "cfg", "mesh", "result", 1.0
+        return run
+
+    monkeypatch.setattr(specimen_settle, "_run_scene", diverges_at(0.5))
+    scene = {"solver": {"dt_safety": 0.9}}
+    assert specimen_settle._run_closing(scene, None, "w") == ("cfg", "mesh", "result", 1.0, pytest.approx(0.45))
+    assert seen == [0.9, pytest.approx(0.45)] and scene["solver"]["dt_safety"] == 0.9  # the caller's scene unchanged
+    seen.clear()
+    monkeypatch.setattr(specimen_settle, "_run_scene", diverges_at(0.1))
+    with pytest.raises(SimulationDiverged):
+        specimen_settle._run_closing(scene, None, "w")
+    assert seen == [0.9, pytest.approx(0.45)]

@@ -103,6 +103,24 @@ def test_bad_network_specimens_are_refused_in_one_line_naming_the_key(change, ke
     assert key in message and "\n" not in message and message.startswith("net.yaml:")
 
 
+@pytest.mark.parametrize("kind, change, key", [
+    ("planar_mat", {"width": "0.9 mm"}, "specimen.width = 0.9 mm is narrower than two fiber diameters"),
+    ("wavy_bundle", {"width": "0.8 mm", "depth": "9 mm", "wave": {"span": "2 mm", "rise": "0.1 mm"}},
+     "specimen.width = 0.8 mm is narrower than two fiber diameters"),
+    ("wavy_bundle", {"length": "1.5 mm", "depth": "9 mm", "wave": {"span": "2 mm", "rise": "0.1 mm"}},
+     "mesh.element_length = 0.5 mm: the mesh cannot resolve it"),
+    ("planar_mat", {"length": "20 mm"}, "specimen.length = 20 mm does not fit the cell"),
+    ("wavy_bundle", {"depth": "8 mm", "wave": {"span": "2 mm", "rise": "0.1 mm"}}, "specimen.depth = 8 mm cannot hold"),
+])
+def test_bad_mat_and_bundle_cells_are_refused_in_one_line_naming_the_key(kind, change, key, tmp_path):
+    """A cell narrower than two fiber diameters, an aspect ratio the mesh cannot resolve (fewer than
+    four elements per fiber), a fiber longer than its cell: one line naming the key."""
+    with pytest.raises(ConfigError) as info:
+        build_specimen(base(kind, **change), tmp_path / "x", where="net.yaml", seed=0)
+    message = str(info.value)
+    assert key in message and "\n" not in message and message.startswith("net.yaml:")
+
+
 def test_wavy_span_the_mesh_cannot_resolve_is_refused(tmp_path):
     raw = base("wavy_bundle", width="3 mm", depth="9 mm", volume_fraction=0.3, wave={"span": "1 mm", "rise": "0.1 mm"})
     with pytest.raises(ConfigError, match="specimen.wave.span = 1 mm spans 2 elements"):

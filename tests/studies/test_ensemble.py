@@ -16,8 +16,8 @@ from click.testing import CliRunner
 
 from fiberpipe.cli import main
 from fiberpipe.errors import ConfigError
-from fiberpipe.studies.ensemble import (ensemble_seeds, parse_seeds_option, run_ensemble, run_ensembles, run_member,
-                                        specimen_key)
+from fiberpipe.studies.ensemble import (collect_ensemble, ensemble_seeds, parse_seeds_option, run_ensemble, run_ensembles,
+                                        run_member, specimen_key)
 
 # four fibers of 4 mm on 1 mm elements, deposited without settling, compacted by 0.05 mm: ≈ 1 s a run
 TINY = {
@@ -81,6 +81,20 @@ def test_ensemble_reports_the_members_mean_and_band_and_reuses_finished_runs(ser
     assert all(p.stat().st_mtime_ns == t for p, t in stamps.items())
 
 
+def test_collecting_finished_runs_gives_the_ensemble_they_ran_and_names_a_missing_seed(serial, tmp_path):
+    import shutil
+
+    out, summary = serial
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("ensemble*", "summary.json"))
+    collected = collect_ensemble(copy, [0, 1, 2], echo=lambda *_: None)
+    for key in ("seeds", "v_f0", "final_load_N", "final_load_mean_N", "final_load_sd_N", "specimens"):
+        assert collected[key] == summary[key], key
+    assert (copy / "ensemble.csv").is_file()
+    assert collect_ensemble(copy, [0, 5], echo=lambda *_: None) == {
+        "error": f"seed 5: no finished run in {copy / 'seed-5'}", "seeds": [0, 5]}
+
+
 def test_variants_that_differ_only_in_their_compaction_share_specimens():
     other = yaml.safe_load(yaml.safe_dump(TINY))
     other["scene"]["loading"]["displacement"] = "0.1 mm"
@@ -99,6 +113,29 @@ def test_variants_that_differ_only_in_their_compaction_share_specimens():
     other_law = yaml.safe_load(yaml.safe_dump(own))
     other_law["scene"]["contact"] = {"law": "linear", "stiffness": 1e6}
     assert specimen_key(other_law) == specimen_key(own) != specimen_key(TINY)
+
+
+def _unreachable_at_seed_1(raw, run_dir, where, specimen_store):
+    """The member's task, but seed 1's input is refused as a pile that cannot be closed is."""
+    from fiberpipe.studies import ensemble
+
+    if raw["specimen"]["seed"] == 1:
+        raise ConfigError("specimen.volume_fraction = 0.9: closing the cassette does not reach it", where=where)
+    return ensemble.run_member(raw, run_dir, where, specimen_store)
+
+
+def test_keep_going_reports_a_refused_ensemble_and_finishes_the_others(tmp_path):
+    # ensembles named by their folders (names with slashes)
+    good, bad = str(tmp_path / "good"), str(tmp_path / "bad")
+    results = run_ensembles({good: (TINY, [0], tmp_path / "good"), bad: (TINY, [0, 1], tmp_path / "bad")},
+                            workers=1, echo=lambda *_: None, member=_unreachable_at_seed_1, keep_going=True)
+    assert results[bad]["seeds"] == [0, 1]
+    assert results[bad]["error"].startswith("seed 1: ") and "volume_fraction = 0.9" in results[bad]["error"]
+    assert not (tmp_path / "bad" / "ensemble.json").exists()
+    assert results[good]["seeds"] == [0] and (tmp_path / "good" / "ensemble.json").is_file()
+    with pytest.raises(ConfigError, match="does not reach it"):  # without keep_going the error ends the pass
+        run_ensembles({"bad": (TINY, [1], tmp_path / "bad2")}, workers=1, echo=lambda *_: None,
+                      member=_unreachable_at_seed_1)
 
 
 def _killed_once(raw, run_dir, where, specimen_store, marker):

@@ -1,0 +1,53 @@
+"""The study's fit and sensitivity commands (``tools/study_fit.py``, ``tools/study_sensitivity.py``):
+the fit never leaves the ranges the study states, and its grid points reuse the prediction's and
+the sensitivity's ensembles (same specimens, same runs)."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tools"))
+
+import study_fit  # noqa: E402
+import study_prediction  # noqa: E402
+import study_sensitivity  # noqa: E402
+from fiberpipe.config import load_raw  # noqa: E402
+from fiberpipe.studies.ensemble import specimen_key  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def base():
+    return study_prediction._with(load_raw(ROOT / "configs" / "specimens" / "study-prediction.yaml"), study_prediction.FAST)
+
+
+@pytest.mark.parametrize("text", ["specimen.bow.spool_radius=0.02,0.1",  # below Table 4 read in 1/cm
+                                  "specimen.bow.spool_radius=0.1,5",  # beyond Table 4 read in 1/m
+                                  "specimen.volume_fraction=0.377,0.45",
+                                  "specimen.phi_mean=0.1"])  # no stated range for it in the fit
+def test_the_fit_refuses_values_outside_the_studys_ranges(text):
+    with pytest.raises(SystemExit, match="--grid"):
+        study_fit.parse_grid([text])
+
+
+def test_grid_points_reuse_the_prediction_and_the_sensitivity_runs_and_specimens(base, tmp_path):
+    prediction = tmp_path / "pred"
+    (prediction / "fast").mkdir(parents=True)
+    (prediction / "fast" / "ensemble.json").write_text(json.dumps({"seeds": [0, 1, 2, 3]}))
+    grid = study_fit.parse_grid(["specimen.bow.spool_radius=0.02604,0.1", "specimen.volume_fraction=0.35,0.377"])
+    points = [{"specimen.bow.spool_radius": r, "specimen.volume_fraction": v}
+              for r in grid["specimen.bow.spool_radius"] for v in grid["specimen.volume_fraction"]]
+    folders = study_fit.point_folders(points, base, [0, 1, 2, 3], prediction, tmp_path / "sens", tmp_path / "fit")
+    assert folders == [tmp_path / "sens" / "vf-35", prediction / "fast",
+                       tmp_path / "fit" / "points" / "spool_radius0.1-volume_fraction0.35", tmp_path / "sens" / "bow-100mm"]
+    # the prediction's point is the prediction's config itself: the same specimens (the key hashes the raw config)
+    same = study_prediction._with(base, study_fit.changed_values(points[1], base))
+    assert specimen_key(same) == specimen_key(base)
+    variant = dict(study_sensitivity.VARIANTS[0][3])
+    assert specimen_key(study_prediction._with(base, study_fit.changed_values(points[3], base))) == \
+        specimen_key(study_prediction._with(base, variant))
+    # another seed list than the prediction's: the point runs on its own
+    other = study_fit.point_folders(points[1:2], base, [0, 1], prediction, tmp_path / "sens", tmp_path / "fit")
+    assert other == [tmp_path / "fit" / "points" / "spool_radius0.02604-volume_fraction0.377"]
