@@ -21,3 +21,16 @@ def replace_section(page: Path, begin: str, end: str, text: str) -> None:
     tmp = page.with_suffix(page.suffix + ".tmp")
     tmp.write_text(new)
     tmp.replace(page)
+
+
+def replace_marked(page: Path, begin: str, end: str, text: str) -> None:
+    """Replace the span of ``page`` from ``begin`` through ``end`` with ``text``, which carries its own
+    markers (atomic)."""
+    doc = page.read_text()
+    try:
+        i, j = doc.index(begin), doc.index(end) + len(end)
+    except ValueError:
+        raise SystemExit(f"{page}: markers '{begin}' … '{end}' not found") from None
+    tmp = page.with_suffix(page.suffix + ".tmp")
+    tmp.write_text(doc[:i] + text + doc[j:])
+    tmp.replace(page)

@@ -183,7 +183,8 @@ def plot(rows: list[dict], best: dict, figure: Path) -> None:
 
 
 def main(argv=None) -> int:
-    from fiberpipe.artifacts import write_json_atomic, write_text_atomic
+    from fiberpipe.artifacts import write_json_atomic
+    from generated import replace_marked
     from fiberpipe.config import load_raw
     from fiberpipe.studies.ensemble import collect_ensemble, run_ensembles
     from study_prediction import FAST, _with
@@ -261,9 +262,7 @@ def main(argv=None) -> int:
     text = table_markdown(rows, grid, best, laws, seeds)
     print(text)
     if args.doc:
-        doc = Path(args.doc).read_text()
-        begin, end = doc.index(BEGIN), doc.index(END) + len(END)
-        write_text_atomic(Path(args.doc), doc[:begin] + text + doc[end:])
+        replace_marked(Path(args.doc), BEGIN, END, text)
     return 0
 
 

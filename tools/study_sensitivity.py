@@ -147,7 +147,8 @@ def run_variants(raw: dict, chosen: list, seeds: list[int], out: Path, predictio
 def main(argv=None) -> int:
     import json
 
-    from fiberpipe.artifacts import write_json_atomic, write_text_atomic
+    from fiberpipe.artifacts import write_json_atomic
+    from generated import replace_marked
     from fiberpipe.config import load_raw
     from study_prediction import FAST, _with
 
@@ -186,9 +187,7 @@ def main(argv=None) -> int:
     text = table_markdown(rows, baseline)
     print(text)
     if args.doc:
-        doc = Path(args.doc).read_text()
-        begin, end = doc.index(BEGIN), doc.index(END) + len(END)
-        write_text_atomic(Path(args.doc), doc[:begin] + text + doc[end:])
+        replace_marked(Path(args.doc), BEGIN, END, text)
     return 0
 
 
