@@ -24,8 +24,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 # one unknown at a time: (name, unknown, what it is, overrides of the prediction's config). The wall
-# friction is the scene's one μ (fiber–fiber and walls alike: fiberpipe has no separate wall μ); the
-# plate length is not here: fiberpipe's plates are infinite planes.
+# friction is the walls' own μ (scene.walls.mu; the fibers keep μ = 0.2); the plate length is the
+# study's 3 mm × 6 mm plate (scene.plates.size: 3 mm across the cassette, 6 mm along the 15 mm fibers,
+# centred on the fibers) against the full-length plates of the prediction.
 VARIANTS = [  # in the order they run (the fit's unknowns first)
     ("bow-100mm", "bow radius", "bow radius 0.1 m", {"specimen.bow.spool_radius": 0.1}),
     ("bow-4m", "bow radius", "bow radius 4 m (Table 4 in 1/m)", {"specimen.bow.spool_radius": 4.0}),
@@ -34,15 +35,18 @@ VARIANTS = [  # in the order they run (the fit's unknowns first)
      {"scene.contact": {"law": "scaled_stiffness", "preset": "table1_parallel"}}),
     ("bow-41mm", "bow radius", "bow radius 41 mm (Table 4 in 1/cm as the curvature itself)",
      {"specimen.bow.spool_radius": 0.0409}),
-    ("mu-0", "wall friction (the global μ)", "μ = 0, fiber–fiber and walls", {"scene.friction.mu": 0.0}),
-    ("mu-0.3", "wall friction (the global μ)", "μ = 0.3, fiber–fiber and walls", {"scene.friction.mu": 0.3}),
+    ("walls-mu-0", "wall friction", "walls μ = 0 (fibers μ = 0.2)", {"scene.walls.mu": 0.0}),
+    ("walls-mu-0.3", "wall friction", "walls μ = 0.3 (fibers μ = 0.2)", {"scene.walls.mu": 0.3}),
+    ("plate-6mm", "plate length", "plates 6 mm along the fibers, 3 mm across (the full length: 15 mm)",
+     {"scene.plates.size": ["3 mm", "6 mm"]}),
+    ("mu-0", "friction μ", "μ = 0, fiber–fiber, plates and walls", {"scene.friction.mu": 0.0}),
     ("phi-10", "Φ_mean", "Φ_mean 10°", {"specimen.phi_mean": "10 deg"}),
     ("phi-2", "Φ_mean", "Φ_mean 2°", {"specimen.phi_mean": "2 deg"}),
     ("bow-flat", "bow plane", "flat (as fibers lie)", {"specimen.bow.plane": "flat"}),
-    ("waviness", "short-wave waviness", "Table 4 in 1/mm (267 1/m, 1.8–2.5 mm waves)",
-     {"specimen.waviness.curvature_per_m": 267.0}),
     ("vf-40", "v_f0", "v_f0 40 %", {"specimen.volume_fraction": 0.40}),
     ("law-hertz", "contact law", "Hertz, orientation-aware", {"scene.contact": {"law": "hertz_oriented"}}),
+    ("waviness", "short-wave waviness", "Table 4 in 1/mm (267 1/m, 1.8–2.5 mm waves)",
+     {"specimen.waviness.curvature_per_m": 267.0}),
 ]
 BEGIN, END = "<!-- sensitivity: begin", "<!-- sensitivity: end -->"
 

@@ -51,3 +51,22 @@ def test_grid_points_reuse_the_prediction_and_the_sensitivity_runs_and_specimens
     # another seed list than the prediction's: the point runs on its own
     other = study_fit.point_folders(points[1:2], base, [0, 1], prediction, tmp_path / "sens", tmp_path / "fit")
     assert other == [tmp_path / "fit" / "points" / "spool_radius0.02604-volume_fraction0.377"]
+
+
+@pytest.mark.parametrize("name", ["walls-mu-0", "walls-mu-0.3", "plate-6mm", "mu-0", "law-hertz"])
+def test_compaction_variants_compact_the_predictions_own_specimens(base, name):
+    overrides = next(v[3] for v in study_sensitivity.VARIANTS if v[0] == name)
+    variant = study_prediction._with(base, overrides)
+    assert specimen_key(variant) == specimen_key(base)
+
+
+def test_the_wall_friction_variants_keep_the_fibers_mu_and_the_plate_variant_is_the_studys_plate(base):
+    from fiberpipe.config import validate_config
+
+    variants = {v[0]: v[3] for v in study_sensitivity.VARIANTS}
+    for name, wall_mu in (("walls-mu-0", 0.0), ("walls-mu-0.3", 0.3)):
+        config = validate_config(study_prediction._with(base, variants[name]))
+        assert (config.scene.walls.mu, config.scene.friction.mu) == (wall_mu, 0.2)
+    plates = validate_config(study_prediction._with(base, variants["plate-6mm"])).scene.plates
+    # axis y: [along x (across the 3 mm cassette), along z (the fibers, 15 mm)]
+    assert plates.axis == "y" and plates.size == pytest.approx([3e-3, 6e-3])
