@@ -95,7 +95,7 @@ def point_folders(points: list[dict], base: dict, seeds: list[int], prediction: 
     these seeds), a sensitivity variant's folder for its overrides, else ``out/points/<id>``."""
     import json
 
-    from study_sensitivity import VARIANTS
+    from study_sensitivity import RERUN, VARIANTS
 
     summary = prediction / "fast" / "ensemble.json"
     same_seeds = summary.is_file() and json.loads(summary.read_text())["seeds"] == seeds
@@ -105,7 +105,7 @@ def point_folders(points: list[dict], base: dict, seeds: list[int], prediction: 
         if not changed and same_seeds:
             folders.append(prediction / "fast")
             continue
-        same = [name for name, _, _, overrides in VARIANTS if overrides == changed]
+        same = [name for name, _, _, overrides in VARIANTS if overrides == changed and name != RERUN]
         ident = "-".join(f"{k.rsplit('.', 1)[1]}{v:g}" for k, v in point.items())
         folders.append(sensitivity / same[0] if same else out / "points" / ident)
     return folders
