@@ -71,7 +71,9 @@ def table_markdown(rows: list[dict], baseline: dict) -> str:
             why = "not run" if "no finished run" in row["error"] else f"stopped: {row['error'].split(';')[0]}"
             lines.append(f"| {row['unknown']} | {row['label']} | — | {why} | | | | |")
             continue
-        lines.append(f"| {row['unknown']} | {row['label']} | {len(row['final_load_N'])} | {_loads(row['final_load_N'])} | "
+        stopped = "".join(f" (seed {seed} stopped: {why})" for seed, why in row.get("stopped", {}).items())
+        lines.append(f"| {row['unknown']} | {row['label']} | {len(row['final_load_N'])}{stopped} | "
+                     f"{_loads(row['final_load_N'])} | "
                      f"{row['mean_N']:.3g} ± {row['sd_N']:.2g} | {row['change_N']:+.3g} | {row['rms_N']:.3g} | "
                      f"{', '.join(f'{v:.3f}' for v in row['v_f0'])} |")
     return "\n".join(lines + ["", END])
@@ -111,10 +113,35 @@ def _statistics(ensemble: dict, folder: Path) -> dict:
     from study_prediction import against_study
 
     loads = ensemble["final_load_N"]
-    return {"final_load_N": loads, "v_f0": ensemble["v_f0"], "mean_N": float(np.mean(loads)),
+    return {"seeds": [int(v) for v in ensemble["seeds"]], "stopped": ensemble.get("stopped", {}),
+            "final_load_N": loads, "v_f0": ensemble["v_f0"], "mean_N": float(np.mean(loads)),
             "sd_N": float(np.std(loads, ddof=1)) if len(loads) > 1 else 0.0,
             "closing_residual_load_N": ensemble.get("closing_residual_load_N"),
             "rms_N": against_study(folder)["rms_N"]}
+
+
+def _stop_reason(run: Path) -> str | None:
+    """The one-line reason a member run stopped (its run.log's ERROR line), or None (no such line: not run)."""
+    log = run / "run.log"
+    if not log.is_file():
+        return None
+    errors = [line for line in log.read_text().splitlines() if " ERROR " in line]
+    if not errors:
+        return None
+    text = errors[-1].split("stopped: ", 1)[-1]
+    return text.split(": ", 1)[-1].split(" (step")[0].split(": a node")[0].split(": a fiber")[0]
+
+
+def collect_finished(folder: Path, seeds: list[int], error: dict) -> dict:
+    """An ensemble over the seeds whose runs finished, naming each seed whose run stopped (``stopped``:
+    seed -> reason); ``error`` as it is when no run stopped (a seed not run) or none finished."""
+    from fiberpipe.studies.ensemble import collect_ensemble
+
+    finished = [s for s in seeds if (folder / f"seed-{s}" / "post" / "force_displacement.csv").is_file()]
+    stopped = {s: _stop_reason(folder / f"seed-{s}") for s in seeds if s not in finished}
+    if not finished or any(reason is None for reason in stopped.values()):
+        return error
+    return {**collect_ensemble(folder, finished, echo=lambda *_: None), "stopped": stopped}
 
 
 def rms_of_runs(runs: list[str]) -> float:
@@ -144,6 +171,8 @@ def run_variants(raw: dict, chosen: list, seeds: list[int], out: Path, predictio
         ensembles = {name: (_with(raw, overrides), seeds, out / name) for name, _, _, overrides in chosen}
         results = run_ensembles(ensembles, workers=workers, specimen_store=prediction / "specimens", where=where,
                                 keep_going=True)
+    results = {name: collect_finished(out / name, seeds, result) if "error" in result else result
+               for name, result in results.items()}
     rows = []
     for name, unknown, label, overrides in chosen:
         row = {"name": name, "unknown": unknown, "label": label, "overrides": overrides}
@@ -188,10 +217,13 @@ def main(argv=None) -> int:
                 "mean_N": float(np.mean(base_loads)), "sd_N": float(np.std(base_loads, ddof=1)) if len(seeds) > 1 else 0.0,
                 "rms_N": rms_of_runs([prediction["runs"][k] for k in index])}
     # the rows after the prediction's rerun by this version change from the rerun (the same code)
-    reference = baseline
+    # (a variant with a stopped seed: from the reference's mean over the same seeds)
+    reference = {**baseline, "seeds": seeds}
     for row in rows:
         if "error" not in row:
-            row["change_N"], row["reference_mean_N"] = row["mean_N"] - reference["mean_N"], reference["mean_N"]
+            loads = dict(zip(reference["seeds"], reference["final_load_N"]))
+            row["reference_mean_N"] = float(np.mean([loads[s] for s in row["seeds"]]))
+            row["change_N"] = row["mean_N"] - row["reference_mean_N"]
             if row["name"] == RERUN:
                 reference = row
     write_json_atomic(out / "sensitivity.json", {"seeds": seeds, "baseline": baseline, "variants": rows})
