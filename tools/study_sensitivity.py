@@ -39,7 +39,7 @@ VARIANTS = [  # in the order they run (the fit's unknowns first)
     (RERUN, "none", "the prediction rerun by this version (the reference of the rows below it)", {}),
     ("walls-mu-0", "wall friction", "walls μ = 0 (fibers μ = 0.2)", {"scene.walls.mu": 0.0}),
     ("walls-mu-0.3", "wall friction", "walls μ = 0.3 (fibers μ = 0.2)", {"scene.walls.mu": 0.3}),
-    ("plate-6mm", "plate length", "plates 6 mm along the fibers, 3 mm across (the full length: 15 mm)",
+    ("plate-6mm", "plate length", "the study's 3 mm × 6 mm plates (full length: 15 mm)",
      {"scene.plates.size": ["3 mm", "6 mm"]}),
     ("mu-0", "friction μ", "μ = 0, fiber–fiber, plates and walls", {"scene.friction.mu": 0.0}),
     ("phi-10", "Φ_mean", "Φ_mean 10°", {"specimen.phi_mean": "10 deg"}),
@@ -91,7 +91,7 @@ def tornado(rows: list[dict], baseline: dict, figure: Path) -> None:
 
     rows = sorted([r for r in rows if "error" not in r], key=lambda r: abs(r["change_N"]))
     base_mean = baseline["mean_N"]
-    fig, ax = plt.subplots(figsize=(8.5, 0.42 * len(rows) + 1.6))
+    fig, ax = plt.subplots(figsize=(10.5, 0.42 * len(rows) + 1.6))
     ax.axvspan(-baseline["sd_N"], baseline["sd_N"], color="0.85", label="the prediction's seed sd")
     for k, row in enumerate(rows):
         ax.barh(k, row["change_N"], color="C3" if row["change_N"] < 0 else "C0", alpha=0.75)
@@ -101,8 +101,8 @@ def tornado(rows: list[dict], baseline: dict, figure: Path) -> None:
     ax.axvline(0, color="k", lw=0.8)
     ax.axvline(12.0 - base_mean, color="C2", ls="--", lw=1, label="the study's 12 N")
     ax.set_yticks(range(len(rows)), [f"{r['unknown']}: {r['label']}" for r in rows], fontsize=7)
-    ax.set_xlabel(f"change of the mean F(U = 1.15 mm) from the prediction's ({base_mean:.1f} N; its rerun by this "
-                  f"version below that row) [N]", fontsize=8)
+    ax.set_xlabel(f"change of the mean F(U = 1.15 mm) from the prediction's {base_mean:.1f} N "
+                  "(or its rerun's, the table's reference) [N]", fontsize=8)
     ax.grid(alpha=0.3, axis="x")
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
