@@ -113,8 +113,10 @@ def test_runner_uses_its_config(name, tmp_path, monkeypatch):
         p = by_type[Plates]
         assert (p.axis, p.lower, p.upper, p.lower_position_m) == (sc.plates.axis, sc.plates.lower, sc.plates.upper,
                                                                   sc.plates.lower_position)
-    if "friction" in sc.effects:
-        assert hooks and hooks[0]["mu"] == pytest.approx(0.3)
+    if "friction" in sc.effects:  # fiber–fiber friction in the contact hook, plane friction in the planes' terms
+        mus = [h["mu"] for h in hooks if "contact" in sc.effects]
+        mus += [by_type[kind].mu for kind in (Plates, Walls) if kind in by_type]
+        assert mus and all(mu == pytest.approx(0.3) for mu in mus)
     if "contact" in sc.effects:
         law = hooks[0]["law"]
         e_star = mat.youngs_modulus / (2 * (1 - mat.poisson_ratio_value**2))
