@@ -104,7 +104,7 @@ def tornado(rows: list[dict], baseline: dict, figure: Path) -> None:
     ax.set_xlabel(f"change of the mean F(U = 1.15 mm) from the prediction's {base_mean:.1f} N "
                   "(or its rerun's, the table's reference) [N]", fontsize=8)
     ax.grid(alpha=0.3, axis="x")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     _save(fig, figure)
 
