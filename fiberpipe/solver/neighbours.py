@@ -19,7 +19,9 @@ Rule (``docs/contact.md``):
 Output: ``pairs (P, 2) int64`` with ``i < j``, sorted by the key ``i·E + j`` (so friction history can
 be carried across rebuilds by ``searchsorted``, see :mod:`fiberpipe.solver.friction`). The kernel
 writes into a preallocated buffer and returns ``−needed`` when it is too small; :class:`VerletList`
-grows it and retries.
+grows it and retries. ``build_pairs_threads`` (``solver.threads`` > 1) lists the same pairs from
+``prange`` tasks of consecutive segments, each segment's partners sorted as they are found, so the
+tasks' lists joined in task order are the list in key order (no sort of the whole list).
 """
 
 from __future__ import annotations
