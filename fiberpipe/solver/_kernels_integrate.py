@@ -593,12 +593,24 @@ _head_record = no_record
 _rest_record = _end_record
 
 
+def _with_counts(kernel, name: str):
+    """``kernel`` as the loop's body may call it: a kernel that does not choose numba's reference
+    counts (``_nrt``) or inlining would inherit the body's (none) and could not allocate, so it gets
+    a copy of its own that keeps them (a term's eval written without regard to the loop)."""
+    options = getattr(kernel, "targetoptions", {})
+    if "_nrt" in options or options.get("inline", "never") != "never":
+        return kernel
+    flags = {k: v for k, v in options.items() if k in ("fastmath", "error_model", "boundscheck")}
+    return specialise(kernel, name, {}, cache=False, _nrt=True, **flags)
+
+
 def terms_chain(kernels, records, tag: str):
     """``(eval chain, record chain)``: jitted functions calling each of ``kernels`` (the terms' evals)
     and ``records`` (:func:`record_energy` or :func:`no_record`) in turn; ``tag`` names the copies."""
     chain_eval, chain_record = _end_eval, _end_record
     for k in range(len(kernels) - 1, -1, -1):
-        chain_eval = specialise(_link_eval, f"_eval_{tag}_{k}", {"_head_eval": kernels[k], "_rest_eval": chain_eval},
+        head = _with_counts(kernels[k], f"_eval_{tag}_{k}_counted")
+        chain_eval = specialise(_link_eval, f"_eval_{tag}_{k}", {"_head_eval": head, "_rest_eval": chain_eval},
                                 cache=False, inline="always", fastmath=True, error_model="numpy")
         chain_record = specialise(_link_record, f"_record_{tag}_{k}",
                                   {"_head_record": records[k], "_rest_record": chain_record}, cache=False,
@@ -639,6 +651,9 @@ _loop_body = _advance_template
 def _specialise(name: str, chain, forces_of, cache: bool, parallel: bool = False):
     chain_eval, chain_record = chain
     flags = dict(cache=cache, fastmath=True, error_model="numpy")
+    if getattr(forces_of, "targetoptions", {}).get("inline", "never") == "never":
+        # an accessor returns an array of its data: without reference counts only an inlined one may
+        forces_of = specialise(forces_of, name + "_forces_of", {}, cache=False, inline="always")
     body = specialise(_advance_template, name + "_body", {
         "_terms_eval": chain_eval, "_terms_record": chain_record, "_owner_forces": forces_of,
         "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
