@@ -833,10 +833,7 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
                                   min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
                                   spacing_vox=o.spacing_vox)
     if o.radius_from == "grey":
-        out, oblique = drop_oblique(out, v, ax)
-        if oblique["fibers"]:
-            out.meta["oblique"] = oblique
-            out.meta.setdefault("off_axis", {"oblique": oblique})
+        out = drop_oblique_into_meta(out, v, ax)
     out.meta.update(method="dense" if o.radius_from == "grey" else "slices", axis=ax, direction_zyx=direction,
                     radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
                     n_fibers=out.n_fibers, time_detect_s=t_det, time_total_s=time.perf_counter() - t0,
@@ -850,7 +847,6 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
 def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.ndarray, ax: int) -> float:
     """The fiber radius (pixels across ``ax``) of a dense pack, from its grey slices
     (:func:`fiberpipe.imaging.dense.estimate_radius_grey`, started from the mask's estimate)."""
-    from .dense import estimate_radius_grey
     from .orientation import axis_regions
 
     # on the fibers along ax only: a cross ply's stripes in these slices are no cross-sections
@@ -861,12 +857,21 @@ def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.nda
     mask_t = mask.transpose(perm)
     vt = voxel_size_zyx_m[list(perm)]
     samp = vt[1:] / vt[1:].min()
+    return grey_radius_of_slices(mask_t, grey.transpose(perm), samp)
+
+
+def grey_radius_of_slices(mask_t, grey_t, samp: np.ndarray, levels=None) -> float:
+    """The grey radius (:func:`fiberpipe.imaging.dense.estimate_radius_grey`) of slices with the
+    fibers' axis first (arrays, or blocks read slice by slice), started from the mask's estimate;
+    ``levels``: the grey levels of :class:`_GreySlices` when measured elsewhere."""
+    from .dense import estimate_radius_grey
+
     r0 = estimate_radius_vox(mask_t, samp)
 
     def detect(sl, g, r):
         return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
 
-    return estimate_radius_grey(_GreySlices(grey.transpose(perm), mask_t, samp), mask_t, samp, r0, detect)
+    return estimate_radius_grey(_GreySlices(grey_t, mask_t, samp, levels=levels), mask_t, samp, r0, detect)
 
 
 def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, min_fraction: float,
@@ -904,12 +909,18 @@ def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, m
             n = pb.n_fibers
         info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": int(n),
                           "action": "traced along its own axis" if off_axis == "trace" else "left out"}
+    add_oblique(info, parts)
+    return combine_region_parts(parts, info, direction_zyx=direction)
+
+
+def add_oblique(info: dict, parts: list) -> None:
+    """``info["oblique"]``: the tracks :func:`drop_oblique` left out of the regions' ``parts``,
+    summed (fibers, voxels of track), when any."""
     oblique = [p.meta["oblique"] for p in parts if "oblique" in p.meta]
     if oblique:
         info["oblique"] = {"fibers": sum(x["fibers"] for x in oblique),
                            "length_vox": round(sum(x["length_vox"] for x in oblique), 1),
                            "action": oblique[0]["action"]}
-    return combine_region_parts(parts, info, direction_zyx=direction)
 
 
 #: The dense tracer keeps a track only within this angle (degrees) of its slicing axis.
@@ -947,6 +958,16 @@ def drop_oblique(fibers: Polylines, voxel_size_zyx_m, axis: int, max_tilt_deg: f
     out = Polylines.from_list([fibers.fiber(i) for i in keep], radii if len(keep) else 0.0)
     out.meta.update(fibers.meta)
     return out, info
+
+
+def drop_oblique_into_meta(fibers: Polylines, voxel_size_zyx_m, axis: int) -> Polylines:
+    """:func:`drop_oblique`, what it left out in ``meta["oblique"]`` (and ``meta["off_axis"]``) when
+    anything."""
+    out, oblique = drop_oblique(fibers, voxel_size_zyx_m, axis)
+    if oblique["fibers"]:
+        out.meta["oblique"] = oblique
+        out.meta.setdefault("off_axis", {"oblique": oblique})
+    return out
 
 
 def combine_region_parts(parts: list, info: dict, **meta) -> Polylines:

@@ -335,6 +335,8 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     with connect(cfg.chunks.scheduler) as client:
         kw = dict(expected_radius_m=t.expected_radius or cfg.fiber.radius, block=cfg.chunks.slices,
                   scheduler=client, grey=grey, join=join, **opts)
+        if method == "dense" and grey is not None:
+            kw["radius_from"] = "grey"
         if split:
             fibers = _trace_regions_chunked(cfg, src, vs, axis, Path(out).with_name("trace_regions.tmp.h5"), kw)
         else:
@@ -367,12 +369,13 @@ def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Pat
 
     from fiberpipe.imaging._util import voxel_size_zyx
     from fiberpipe.imaging.regions_chunked import RegionSource, axis_labels_chunked
-    from fiberpipe.imaging.trace import combine_region_parts
+    from fiberpipe.imaging.trace import add_oblique, combine_region_parts
     from fiberpipe.imaging.trace_chunked import SliceSource, trace_chunked
     from fiberpipe.stages._chunks import create_volume_dataset
 
     t, grey = cfg.trace, kw.get("grey")
-    r_vox = float(kw["expected_radius_m"]) / float(voxel_size_zyx(voxel_size).min())
+    r_vox = (None if kw.get("expected_radius_m") is None
+             else float(kw["expected_radius_m"]) / float(voxel_size_zyx(voxel_size).min()))
     try:
         with h5py.File(scratch, "w") as f:
             ds = create_volume_dataset(f, "labels", src.shape, np.uint8, "1")
@@ -391,6 +394,7 @@ def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Pat
                               "fibers": int(parts[-1].n_fibers) if t.off_axis == "trace" else 0,
                               "action": "traced along its own axis" if t.off_axis == "trace" else "left out"}
         labels.close()
+        add_oblique(info, parts)
         return combine_region_parts(parts, info) if info else parts[0]
     finally:
         scratch.unlink(missing_ok=True)
