@@ -833,7 +833,7 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
                                   min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
                                   spacing_vox=o.spacing_vox)
     if o.radius_from == "grey":
-        out = drop_oblique_into_meta(out, v, ax)
+        out = drop_oblique_into_meta(out, v, ax, grey=grey, radius_vox=r)
     out.meta.update(method="dense" if o.radius_from == "grey" else "slices", axis=ax, direction_zyx=direction,
                     radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
                     n_fibers=out.n_fibers, time_detect_s=t_det, time_total_s=time.perf_counter() - t0,
@@ -921,6 +921,8 @@ def add_oblique(info: dict, parts: list) -> None:
         info["oblique"] = {"fibers": sum(x["fibers"] for x in oblique),
                            "length_vox": round(sum(x["length_vox"] for x in oblique), 1),
                            "action": oblique[0]["action"]}
+        if any("by_structure" in x for x in oblique):
+            info["oblique"]["by_structure"] = sum(x.get("by_structure", 0) for x in oblique)
 
 
 #: The dense tracer keeps a track only within this angle (degrees) of its slicing axis.
@@ -960,14 +962,48 @@ def drop_oblique(fibers: Polylines, voxel_size_zyx_m, axis: int, max_tilt_deg: f
     return out, info
 
 
-def drop_oblique_into_meta(fibers: Polylines, voxel_size_zyx_m, axis: int) -> Polylines:
-    """:func:`drop_oblique`, what it left out in ``meta["oblique"]`` (and ``meta["off_axis"]``) when
-    anything."""
+def drop_oblique_into_meta(fibers: Polylines, voxel_size_zyx_m, axis: int, grey=None,
+                           radius_vox: float | None = None) -> Polylines:
+    """:func:`drop_oblique`, then, given ``grey`` (anything read by boxes) and ``radius_vox``, the
+    tracks whose grey structure runs more than :data:`DENSE_MAX_TILT_DEG` off ``axis``
+    (:func:`fiberpipe.imaging.dense.structure_direction`); what was left out in ``meta["oblique"]``
+    (and ``meta["off_axis"]``) when anything: ``fibers``, ``length_vox``, ``by_structure`` (the
+    tracks the second test left out)."""
     out, oblique = drop_oblique(fibers, voxel_size_zyx_m, axis)
+    if grey is not None and radius_vox is not None and out.n_fibers:
+        out, by_structure = _drop_oblique_structure(out, grey, voxel_size_zyx_m, axis, radius_vox)
+        oblique["fibers"] += by_structure["fibers"]
+        oblique["length_vox"] = round(oblique["length_vox"] + by_structure["length_vox"], 1)
+        oblique["by_structure"] = by_structure["fibers"]
     if oblique["fibers"]:
         out.meta["oblique"] = oblique
         out.meta.setdefault("off_axis", {"oblique": oblique})
     return out
+
+
+def _drop_oblique_structure(fibers: Polylines, grey, voxel_size_zyx_m, axis: int, radius_vox: float):
+    """The fibers whose grey structure (:func:`fiberpipe.imaging.dense.structure_direction`) runs
+    within :data:`DENSE_MAX_TILT_DEG` of ``axis``, and what was left out (``fibers``,
+    ``length_vox``)."""
+    from .dense import structure_direction
+
+    v = np.asarray(voxel_size_zyx_m, dtype=np.float64)
+    keep, dropped_length = [], 0.0
+    for i in range(fibers.n_fibers):
+        zyx = fibers.fiber(i)[:, ::-1] / v
+        d = structure_direction(grey, zyx, radius_vox, v)
+        tilt = np.degrees(np.arccos(min(1.0, abs(d[axis]) / max(float(np.linalg.norm(d)), 1e-12))))
+        if tilt > DENSE_MAX_TILT_DEG:
+            dropped_length += float(np.linalg.norm(np.diff(zyx, axis=0), axis=1).sum())
+        else:
+            keep.append(i)
+    info = {"fibers": fibers.n_fibers - len(keep), "length_vox": round(dropped_length, 1)}
+    if len(keep) == fibers.n_fibers:
+        return fibers, info
+    radii = np.broadcast_to(np.asarray(fibers.radius_m, dtype=np.float64), (fibers.n_fibers,))[keep]
+    out = Polylines.from_list([fibers.fiber(i) for i in keep], radii if len(keep) else 0.0)
+    out.meta.update(fibers.meta)
+    return out, info
 
 
 def combine_region_parts(parts: list, info: dict, **meta) -> Polylines:

@@ -284,7 +284,8 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
                                   spacing_vox=o.spacing_vox)
     dense = o.radius_from == "grey" and grey is not None
     if dense:  # as in memory: tracks of a +-45 deg ply left out and counted
-        out = drop_oblique_into_meta(out, v, axis)
+        out = drop_oblique_into_meta(out, v, axis, grey=grey.open() if hasattr(grey, "open") else grey,
+                                     radius_vox=r)
     out.meta.update(method="dense" if dense else "slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,

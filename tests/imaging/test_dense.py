@@ -173,3 +173,36 @@ def test_tracks_more_than_30_degrees_off_the_slicing_axis_are_left_out_and_count
     assert info["fibers"] == 1 and info["length_vox"] == pytest.approx(40.0, abs=1e-6)
     kept, info = drop_oblique(Polylines.from_list([along, oblique], 2 * vs), np.full(3, vs), 0, max_tilt_deg=45)
     assert kept.n_fibers == 2 and info["fibers"] == 0
+
+
+def test_the_grey_structure_around_a_track_gives_its_ply_direction():
+    """A ply of r = 2.5 fibers 40 degrees off z (x-z plane) beside a ply along z, CNR 4: the
+    structure tensor in the tube around a straight line along z through the tilted ply reads the
+    ply's 40 degrees (within 5), around a fiber of the z ply less than 5 degrees; the dense tracer's
+    second test leaves out a z-parallel track through the tilted ply and keeps the z fiber."""
+    from fiberpipe.imaging.dense import structure_direction
+    from fiberpipe.imaging.phantom import render_polylines
+    from fiberpipe.imaging.trace import drop_oblique_into_meta
+    from fiberpipe.polylines import Polylines
+
+    vs, r, shape = 1e-6, 2.5, (48, 40, 72)
+    z = np.linspace(-30, 78, 109)
+    tilt = np.tan(np.radians(40))
+    lines = [np.column_stack([np.full_like(z, x), np.full_like(z, y), z]) for x in (4, 10, 16, 22) for y in (6, 13, 20, 27, 34)]
+    lines += [np.column_stack([x0 + tilt * z, np.full_like(z, y), z]) for x0 in range(8, 80, 7) for y in (6, 13, 20, 27, 34)]
+    z_ply, tilted_ply = lines[:20], lines[20:]
+    vol = render_polylines(Polylines.from_list([p * vs for p in tilted_ply], r * vs), shape, vs, blur_sigma_vox=0.8,
+                           contrast_to_noise=4.0, seed=5)
+    # the z ply at x < 30, the tilted one beyond
+    vol[:, :, :30] = render_polylines(Polylines.from_list([p * vs for p in z_ply], r * vs), shape, vs,
+                                      blur_sigma_vox=0.8, contrast_to_noise=4.0, seed=6)[:, :, :30]
+    k = np.arange(4.0, 44.0)
+    through_ply = np.column_stack([k, np.full_like(k, 20.0), np.full_like(k, 52.0)])  # z y x, voxels
+    along_z = np.column_stack([k, np.full_like(k, 20.0), np.full_like(k, 10.0)])
+    angle = lambda d: np.degrees(np.arccos(abs(d[0]) / np.linalg.norm(d)))  # noqa: E731
+    assert abs(angle(structure_direction(vol, through_ply, r, np.full(3, vs))) - 40.0) <= 5.0
+    assert angle(structure_direction(vol, along_z, r, np.full(3, vs))) <= 5.0
+    tracks = Polylines.from_list([p[:, ::-1] * vs for p in (through_ply, along_z)], r * vs)
+    kept = drop_oblique_into_meta(tracks, np.full(3, vs), 0, grey=vol, radius_vox=r)
+    assert kept.n_fibers == 1 and np.allclose(kept.fiber(0), along_z[:, ::-1] * vs)
+    assert kept.meta["oblique"]["fibers"] == 1 and kept.meta["oblique"]["by_structure"] == 1
