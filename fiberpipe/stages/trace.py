@@ -386,6 +386,10 @@ def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Pat
         labels = SliceSource(scratch, "labels")
         parts = [trace_chunked(RegionSource(src, labels, [c for c in range(3) if c not in others]), voxel_size,
                                axis=axis, **kw)]
+        if kw.get("expected_radius_m") is None and kw.get("radius_from") == "grey":
+            # as in memory: the other regions traced at the main region's grey radius
+            in_plane = float(np.delete(np.asarray(voxel_size_zyx(voxel_size), dtype=float), axis).min())
+            kw = dict(kw, expected_radius_m=float(parts[0].meta["radius_vox_estimate"]) * in_plane)
         info = {}
         for b in others:
             if t.off_axis == "trace":
