@@ -108,6 +108,7 @@ def main(argv=None) -> None:
                 shutil.copy(run / name, a.pictures / f"cross_ply_{name}")
             _orthogonal_slices(volume, a.pictures / "cross_ply_volume.png")
     off = ", ".join(f"{ax}: {v['volume_fraction']:.0%} of the fiber volume, {v['fibers']} fibers"
+                    + (f" ({v['oblique']} tracks off its axis left out)" if v.get("oblique") else "")
                     for ax, v in tr["off_axis"].items() if ax != "oblique")
     oblique = tr["off_axis"].get("oblique", {"fibers": 0, "length_vox": 0.0})
     lines = [f"# Real cross-ply CT (qim3d fibers_150x150x150.tif, 1.3 um), only voxel_size given\n",

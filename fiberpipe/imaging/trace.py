@@ -900,17 +900,25 @@ def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, m
     del main
     info = {}
     for b in others:
-        n = 0
         if off_axis == "trace":
             sub = mask & (labels == b)
-            pb = trace_slices(sub, voxel_size_m, axis=b, **opts)
+            parts.append(trace_slices(sub, voxel_size_m, axis=b, **opts))
             del sub
-            parts.append(pb)
-            n = pb.n_fibers
-        info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": int(n),
-                          "action": "traced along its own axis" if off_axis == "trace" else "left out"}
+        info["zyx"[b]] = region_info(fr[b], parts[-1] if off_axis == "trace" else None)
     add_oblique(info, parts)
     return combine_region_parts(parts, info, direction_zyx=direction)
+
+
+def region_info(volume_fraction: float, traced: Polylines | None) -> dict:
+    """What ``off_axis`` reports for a region along another volume axis: its share of the fiber
+    volume, the fibers traced along its axis (``traced``; None: left out) and, when any, the tracks
+    of it left out as oblique (``oblique``: a region whose every track runs off its axis is
+    reported with a count, not traced)."""
+    out = {"volume_fraction": round(float(volume_fraction), 4), "fibers": int(traced.n_fibers) if traced else 0,
+           "action": "traced along its own axis" if traced is not None else "left out"}
+    if traced is not None and "oblique" in traced.meta:
+        out["oblique"] = int(traced.meta["oblique"]["fibers"])
+    return out
 
 
 def add_oblique(info: dict, parts: list) -> None:

@@ -206,3 +206,18 @@ def test_the_grey_structure_around_a_track_gives_its_ply_direction():
     kept = drop_oblique_into_meta(tracks, np.full(3, vs), 0, grey=vol, radius_vox=r)
     assert kept.n_fibers == 1 and np.allclose(kept.fiber(0), along_z[:, ::-1] * vs)
     assert kept.meta["oblique"]["fibers"] == 1 and kept.meta["oblique"]["by_structure"] == 1
+
+
+def test_a_region_whose_tracks_all_run_off_its_axis_is_reported_with_a_count():
+    """off_axis for a region along y whose every track the 30-degree limit left out: no fiber,
+    and the count of tracks left out; a region traced normally reports no such count."""
+    from fiberpipe.imaging.trace import region_info
+    from fiberpipe.polylines import Polylines
+
+    empty = Polylines.from_list([], 0.0)
+    empty.meta["oblique"] = {"fibers": 7, "length_vox": 70.0, "action": "left out"}
+    info = region_info(0.09, empty)
+    assert info == {"volume_fraction": 0.09, "fibers": 0, "action": "traced along its own axis", "oblique": 7}
+    line = Polylines.from_list([np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])], 0.1)
+    assert "oblique" not in region_info(0.2, line) and region_info(0.2, line)["fibers"] == 1
+    assert region_info(0.2, None)["action"] == "left out"
