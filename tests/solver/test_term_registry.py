@@ -149,6 +149,22 @@ def _allocating_springs_eval(x, q, v, w, f, mom, acc, t, dt, data):
     return 0
 
 
+def test_an_eval_that_does_not_choose_reference_counts_gets_a_copy_that_keeps_them():
+    """The step loop's body runs without numba's reference counts, which a callee inherits unless it
+    chooses its own: a term's eval that does not choose is called through a copy that keeps them
+    (so it may allocate); one that chooses (the contact term's) or is inlined is called as it is."""
+    from fiberpipe.solver._kernels_integrate import _with_counts
+    from fiberpipe.solver.terms.contact import contact_step
+    from fiberpipe.solver.terms.planes import eval_plane_friction
+
+    copy = _with_counts(_allocating_springs_eval, "allocating_springs_counted")
+    assert copy is not _allocating_springs_eval and copy.targetoptions["_nrt"] is True
+    assert copy.py_func.__code__ is _allocating_springs_eval.py_func.__code__
+    assert _with_counts(contact_step, "contact") is contact_step
+    assert _with_counts(eval_plane_friction, "plane_friction") is eval_plane_friction
+
+
+@pytest.mark.slow
 def test_a_term_eval_that_allocates_runs_in_the_step_loop():
     """The step loop's body runs without numba's reference counts; a term's eval that allocates (and
     does not choose them itself) still compiles and runs, and gives the same forces as one that does
