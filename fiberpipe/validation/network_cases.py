@@ -150,8 +150,13 @@ def validate_wavy_bundle(quick: bool = False) -> list[ValidationRow]:
                           BETA_TOLERANCE, GUTOWSKI, note=note, data={"fits": fits, "curves": curves_of(runs)},
                           bounds=QUICK_BOUNDS["beta"] if quick else None)]
     if not quick and runs:
-        rows.append(refinement_row("4 aligned wavy bundle", "wavy-bundle.yaml", runs[0], "gutowski", "beta",
-                                   BETA_TOLERANCE))
+        from .compaction_runs import MissingRun
+
+        try:
+            rows.append(refinement_row("4 aligned wavy bundle", "wavy-bundle.yaml", runs[0], "gutowski", "beta",
+                                       BETA_TOLERANCE))
+        except MissingRun:  # --reuse without the refined run: left out, as a seed without a run is
+            pass
     return rows
 
 
