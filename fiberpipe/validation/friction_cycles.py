@@ -50,9 +50,13 @@ def cycle_overrides(strain: float, gap_m: float) -> dict:
 
 
 def turning_row(run) -> int:
-    """The history row where the first loading ends (the plate's travel first at its largest)."""
+    """The history row where the first loading ends: the largest travel before the unloading's
+    lowest point. (The rows sample the steps: the row nearest the turn may fall short of the end's
+    travel by a few 1e-8 of it, so the first row at the largest travel would be the reload's end.)"""
     travel = np.asarray(run.simulation.history["plate_displacement"], float).sum(axis=1)
-    return int(np.argmax(travel >= travel.max() * (1 - 1e-9)))
+    near_top = int(np.argmax(travel >= 0.99 * travel.max()))
+    bottom = near_top + int(np.argmin(travel[near_top:]))
+    return int(np.argmax(travel[: bottom + 1]))
 
 
 def loop_figures(run) -> dict:

@@ -34,6 +34,12 @@ def test_loop_figures_take_the_terms_from_the_turning_point_on():
     assert f["stored_change_J"] == pytest.approx(20.0) and f["force_at_turn_N"] == pytest.approx(2.0)
 
 
+def test_turning_row_is_the_first_turn_when_its_row_falls_short_of_the_end():
+    travel = np.array([0.0, 1.0, 2.0 * (1 - 2e-8), 1.5, 1.2, 1.6, 2.0])  # the turn's row sampled just before it
+    run = synthetic_run(travel, np.linspace(0, 6, 7))
+    assert turning_row(run) == 2
+
+
 def test_cycle_path_goes_to_the_strain_back_to_0_6_and_again():
     o = cycle_overrides(0.6, 10e-3)
     assert o["scene.loading.path"] == pytest.approx([6e-3, 3.6e-3, 6e-3])
