@@ -62,6 +62,24 @@ def z_fiber_depths(fibers, n_slices: int) -> tuple[int, int, float]:
     return len(spans), int(np.sum(spans >= 0.8 * (n_slices - 1))), float(np.median(spans)) if len(spans) else 0.0
 
 
+#: The band of y (voxels) between the unidirectional plies (y < 30 and y > 120), where no fiber runs along z.
+OTHER_PLIES_Y_VOX = (30.0, 120.0)
+
+
+def z_tracks_between_plies(fibers, n_slices: int) -> tuple[int, int, float]:
+    """Traced fibers running along z (end to end nearest z) whose mean y lies in
+    :data:`OTHER_PLIES_Y_VOX`, where only the other plies are: how many, how many cross the middle
+    slice, their median z extent (voxels)."""
+    spans, crossing = [], 0
+    for i in range(fibers.n_fibers):
+        p = fibers.fiber(i) / VOXEL_SIZE_M
+        d = p[-1] - p[0]
+        if np.argmax(np.abs(d)) == 2 and OTHER_PLIES_Y_VOX[0] <= p[:, 1].mean() <= OTHER_PLIES_Y_VOX[1]:
+            spans.append(float(np.ptp(p[:, 2])))
+            crossing += int(p[:, 2].min() <= n_slices / 2 <= p[:, 2].max())
+    return len(spans), crossing, float(np.median(spans)) if spans else 0.0
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "fiberpipe")
@@ -81,13 +99,16 @@ def main(argv=None) -> None:
         wall = time.perf_counter() - t0
         run = Path(tmp) / "run"
         tr = json.loads((run / "summary.json").read_text())["stages"]["trace"]
-        n, full, median = z_fiber_depths(read_fibers(run / "fibers.h5"), 150)
+        fibers = read_fibers(run / "fibers.h5")
+        n, full, median = z_fiber_depths(fibers, 150)
+        n_between, n_between_mid, between_median = z_tracks_between_plies(fibers, 150)
         if a.pictures:
             a.pictures.mkdir(parents=True, exist_ok=True)
             for name in ("trace_slices.png", "trace_midlines.png"):
                 shutil.copy(run / name, a.pictures / f"cross_ply_{name}")
             _orthogonal_slices(volume, a.pictures / "cross_ply_volume.png")
     off = ", ".join(f"{ax}: {v['volume_fraction']:.0%} of the fiber volume, {v['fibers']} fibers"
+                    + (f" ({v['oblique']} tracks off its axis left out)" if v.get("oblique") else "")
                     for ax, v in tr["off_axis"].items() if ax != "oblique")
     oblique = tr["off_axis"].get("oblique", {"fibers": 0, "length_vox": 0.0})
     lines = [f"# Real cross-ply CT (qim3d fibers_150x150x150.tif, 1.3 um), only voxel_size given\n",
@@ -95,7 +116,10 @@ def main(argv=None) -> None:
              f"{tr['median_radius_m'] / VOXEL_SIZE_M:.2f} voxels; {tr['fibers']} fibers",
              f"- regions along other axes: {off or 'none'}",
              f"- tracks more than 30 deg off their slicing axis (a +-45 deg ply), left out: {oblique['fibers']} "
-             f"({oblique['length_vox']:.0f} voxels of track)",
+             f"({oblique['length_vox']:.0f} voxels of track; {oblique.get('by_structure', 0)} of them by the grey "
+             "structure around them)",
+             f"- tracks along z between the unidirectional plies (y = {OTHER_PLIES_Y_VOX[0]:g}-{OTHER_PLIES_Y_VOX[1]:g}): "
+             f"{n_between}, {n_between_mid} crossing the middle slice, median z extent {between_median:.0f} slices",
              f"- fibers along z crossing the middle slice: {n}; over >= 80 % of the depth: {full} ({full / max(n, 1):.0%}); "
              f"median z extent {median:.0f} of 150 slices"]
     text = "\n".join(lines) + "\n"

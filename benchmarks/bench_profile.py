@@ -128,7 +128,7 @@ def kernel_times(state_path) -> dict:
         v, segs.nodes, pairs, npairs, rec, prm.mu, prm.kt_n_per_m, dt, data.lists[0].friction, f, n_act, calls), 2000)
     planes_friction = integ.term_data("plane_friction")
     out["friction, plates and walls (plane_friction, candidate nodes)"] = _best(lambda: plane_friction(
-        v, integ.planes, planes_friction, dt, int(planes_friction.calls[0])), 2000)
+        v, planes_friction, dt, int(planes_friction.calls[0])), 2000)
     out["_candidates"] = npairs
     out["_in_contact"] = int(res[1])
     out["_elements"] = model.n_elements

@@ -222,3 +222,35 @@ def fit_disk_centres(img, centres, amplitude, radius, sigma, samp_y, samp_x, n_i
                 c[k, p] += min(0.5, max(-0.5, s))
             a[k] = min(3.0, max(0.2, a[k] + step[k, 2]))
     return c, a, ssr
+
+
+@njit(cache=True)
+def render_disks(shape_hw, centres, radius, sigma, samp_y, samp_x):
+    """The blurred-disk model of :func:`fit_disk_centres` (unit amplitude) as an image:
+    ``sum_k T(|x - c_k|)``, ``T(rho) = erfc((rho - radius) / (sqrt(2) sigma)) / 2``.
+
+    Parameters
+    ----------
+    shape_hw : (2,) int64 ndarray, the image's shape
+    centres : (n, 2) float64 ndarray, pixel indices (row, col)
+    radius, sigma : float, units of the smallest pixel size
+    samp_y, samp_x : float, pixel sizes relative to the smallest
+
+    Returns
+    -------
+    (H, W) float64 ndarray
+    """
+    H, W = shape_hw[0], shape_hw[1]
+    model = np.zeros((H, W), dtype=np.float64)
+    hy = int(np.ceil((radius + 3.0 * sigma) / samp_y)) + 1
+    hx = int(np.ceil((radius + 3.0 * sigma) / samp_x)) + 1
+    s2 = np.sqrt(2.0) * sigma
+    for k in range(centres.shape[0]):
+        y0 = int(np.floor(centres[k, 0]))
+        x0 = int(np.floor(centres[k, 1]))
+        for y in range(max(0, y0 - hy), min(H, y0 + hy + 2)):
+            dy = (y - centres[k, 0]) * samp_y
+            for x in range(max(0, x0 - hx), min(W, x0 + hx + 2)):
+                dx = (x - centres[k, 1]) * samp_x
+                model[y, x] += 0.5 * math.erfc((np.sqrt(dy * dy + dx * dx) - radius) / s2)
+    return model

@@ -833,10 +833,7 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
                                   min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
                                   spacing_vox=o.spacing_vox)
     if o.radius_from == "grey":
-        out, oblique = drop_oblique(out, v, ax)
-        if oblique["fibers"]:
-            out.meta["oblique"] = oblique
-            out.meta.setdefault("off_axis", {"oblique": oblique})
+        out = drop_oblique_into_meta(out, v, ax, grey=grey, radius_vox=r)
     out.meta.update(method="dense" if o.radius_from == "grey" else "slices", axis=ax, direction_zyx=direction,
                     radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw), n_tracks_merged=n_merged,
                     n_fibers=out.n_fibers, time_detect_s=t_det, time_total_s=time.perf_counter() - t0,
@@ -850,7 +847,6 @@ def trace_slices(mask: np.ndarray, voxel_size_m, *, expected_radius_m: float | N
 def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.ndarray, ax: int) -> float:
     """The fiber radius (pixels across ``ax``) of a dense pack, from its grey slices
     (:func:`fiberpipe.imaging.dense.estimate_radius_grey`, started from the mask's estimate)."""
-    from .dense import estimate_radius_grey
     from .orientation import axis_regions
 
     # on the fibers along ax only: a cross ply's stripes in these slices are no cross-sections
@@ -861,12 +857,21 @@ def grey_radius_vox(mask: np.ndarray, grey: np.ndarray, voxel_size_zyx_m: np.nda
     mask_t = mask.transpose(perm)
     vt = voxel_size_zyx_m[list(perm)]
     samp = vt[1:] / vt[1:].min()
+    return grey_radius_of_slices(mask_t, grey.transpose(perm), samp)
+
+
+def grey_radius_of_slices(mask_t, grey_t, samp: np.ndarray, levels=None) -> float:
+    """The grey radius (:func:`fiberpipe.imaging.dense.estimate_radius_grey`) of slices with the
+    fibers' axis first (arrays, or blocks read slice by slice), started from the mask's estimate;
+    ``levels``: the grey levels of :class:`_GreySlices` when measured elsewhere."""
+    from .dense import estimate_radius_grey
+
     r0 = estimate_radius_vox(mask_t, samp)
 
     def detect(sl, g, r):
         return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
 
-    return estimate_radius_grey(_GreySlices(grey.transpose(perm), mask_t, samp), mask_t, samp, r0, detect)
+    return estimate_radius_grey(_GreySlices(grey_t, mask_t, samp, levels=levels), mask_t, samp, r0, detect)
 
 
 def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, min_fraction: float,
@@ -895,21 +900,37 @@ def _trace_axis_regions(mask, voxel_size_m, ax: int, direction, off_axis: str, m
     del main
     info = {}
     for b in others:
-        n = 0
         if off_axis == "trace":
             sub = mask & (labels == b)
-            pb = trace_slices(sub, voxel_size_m, axis=b, **opts)
+            parts.append(trace_slices(sub, voxel_size_m, axis=b, **opts))
             del sub
-            parts.append(pb)
-            n = pb.n_fibers
-        info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4), "fibers": int(n),
-                          "action": "traced along its own axis" if off_axis == "trace" else "left out"}
+        info["zyx"[b]] = region_info(fr[b], parts[-1] if off_axis == "trace" else None)
+    add_oblique(info, parts)
+    return combine_region_parts(parts, info, direction_zyx=direction)
+
+
+def region_info(volume_fraction: float, traced: Polylines | None) -> dict:
+    """What ``off_axis`` reports for a region along another volume axis: its share of the fiber
+    volume, the fibers traced along its axis (``traced``; None: left out) and, when any, the tracks
+    of it left out as oblique (``oblique``: a region whose every track runs off its axis is
+    reported with a count, not traced)."""
+    out = {"volume_fraction": round(float(volume_fraction), 4), "fibers": int(traced.n_fibers) if traced else 0,
+           "action": "traced along its own axis" if traced is not None else "left out"}
+    if traced is not None and "oblique" in traced.meta:
+        out["oblique"] = int(traced.meta["oblique"]["fibers"])
+    return out
+
+
+def add_oblique(info: dict, parts: list) -> None:
+    """``info["oblique"]``: the tracks :func:`drop_oblique` left out of the regions' ``parts``,
+    summed (fibers, voxels of track), when any."""
     oblique = [p.meta["oblique"] for p in parts if "oblique" in p.meta]
     if oblique:
         info["oblique"] = {"fibers": sum(x["fibers"] for x in oblique),
                            "length_vox": round(sum(x["length_vox"] for x in oblique), 1),
                            "action": oblique[0]["action"]}
-    return combine_region_parts(parts, info, direction_zyx=direction)
+        if any("by_structure" in x for x in oblique):
+            info["oblique"]["by_structure"] = sum(x.get("by_structure", 0) for x in oblique)
 
 
 #: The dense tracer keeps a track only within this angle (degrees) of its slicing axis.
@@ -941,6 +962,50 @@ def drop_oblique(fibers: Polylines, voxel_size_zyx_m, axis: int, max_tilt_deg: f
             keep.append(i)
     info = {"fibers": fibers.n_fibers - len(keep), "length_vox": round(dropped_length, 1),
             "action": f"left out (tracks more than {max_tilt_deg:g} deg off the slicing axis: a ply the slices cannot follow)"}
+    if len(keep) == fibers.n_fibers:
+        return fibers, info
+    radii = np.broadcast_to(np.asarray(fibers.radius_m, dtype=np.float64), (fibers.n_fibers,))[keep]
+    out = Polylines.from_list([fibers.fiber(i) for i in keep], radii if len(keep) else 0.0)
+    out.meta.update(fibers.meta)
+    return out, info
+
+
+def drop_oblique_into_meta(fibers: Polylines, voxel_size_zyx_m, axis: int, grey=None,
+                           radius_vox: float | None = None) -> Polylines:
+    """:func:`drop_oblique`, then, given ``grey`` (anything read by boxes) and ``radius_vox``, the
+    tracks whose grey structure runs more than :data:`DENSE_MAX_TILT_DEG` off ``axis``
+    (:func:`fiberpipe.imaging.dense.structure_direction`); what was left out in ``meta["oblique"]``
+    (and ``meta["off_axis"]``) when anything: ``fibers``, ``length_vox``, ``by_structure`` (the
+    tracks the second test left out)."""
+    out, oblique = drop_oblique(fibers, voxel_size_zyx_m, axis)
+    if grey is not None and radius_vox is not None and out.n_fibers:
+        out, by_structure = _drop_oblique_structure(out, grey, voxel_size_zyx_m, axis, radius_vox)
+        oblique["fibers"] += by_structure["fibers"]
+        oblique["length_vox"] = round(oblique["length_vox"] + by_structure["length_vox"], 1)
+        oblique["by_structure"] = by_structure["fibers"]
+    if oblique["fibers"]:
+        out.meta["oblique"] = oblique
+        out.meta.setdefault("off_axis", {"oblique": oblique})
+    return out
+
+
+def _drop_oblique_structure(fibers: Polylines, grey, voxel_size_zyx_m, axis: int, radius_vox: float):
+    """The fibers whose grey structure (:func:`fiberpipe.imaging.dense.structure_direction`) runs
+    within :data:`DENSE_MAX_TILT_DEG` of ``axis``, and what was left out (``fibers``,
+    ``length_vox``)."""
+    from .dense import structure_direction
+
+    v = np.asarray(voxel_size_zyx_m, dtype=np.float64)
+    keep, dropped_length = [], 0.0
+    for i in range(fibers.n_fibers):
+        zyx = fibers.fiber(i)[:, ::-1] / v
+        d = structure_direction(grey, zyx, radius_vox, v)
+        tilt = np.degrees(np.arccos(min(1.0, abs(d[axis]) / max(float(np.linalg.norm(d)), 1e-12))))
+        if tilt > DENSE_MAX_TILT_DEG:
+            dropped_length += float(np.linalg.norm(np.diff(zyx, axis=0), axis=1).sum())
+        else:
+            keep.append(i)
+    info = {"fibers": fibers.n_fibers - len(keep), "length_vox": round(dropped_length, 1)}
     if len(keep) == fibers.n_fibers:
         return fibers, info
     radii = np.broadcast_to(np.asarray(fibers.radius_m, dtype=np.float64), (fibers.n_fibers,))[keep]

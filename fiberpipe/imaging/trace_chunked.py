@@ -21,8 +21,8 @@ from ..errors import InputError
 from ..polylines import Polylines
 from ._util import voxel_size_zyx
 from ._dask import _client
-from .trace import (_GreySlices, _join, estimate_radius_vox, finish_tracks, grey_levels, slice_options, track_gain,
-                    grey_sigma_along, track_slices)
+from .trace import (_GreySlices, _join, drop_oblique_into_meta, estimate_radius_vox, finish_tracks, grey_levels,
+                    grey_radius_of_slices, grey_sigma_along, slice_options, track_gain, track_slices)
 
 
 class SliceSource:
@@ -226,8 +226,12 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     **options
         The tracking fields of :class:`fiberpipe.imaging.trace.SliceOptions` (``max_jump_vox``,
         ``max_skip``, ``gain``, ``min_length_vox``, ``merge_gap_vox``, ``smooth_sigma_vox``,
-        ``spacing_vox``, ``peak_threshold``, ``refine``); fibers must run within ~45 degrees of
-        ``axis`` (one slicing axis: no region split).
+        ``spacing_vox``, ``peak_threshold``, ``refine``, ``radius_from``); fibers must run within ~45
+        degrees of ``axis`` (one slicing axis: no region split). ``radius_from="grey"`` with
+        ``grey`` (the dense tracer): the radius from six grey slices
+        (:func:`fiberpipe.imaging.dense.estimate_radius_grey`) unless given, and the tracks more
+        than 30 degrees off ``axis`` left out and counted in ``meta["oblique"]``
+        (:func:`fiberpipe.imaging.trace.drop_oblique`), as in memory.
 
     Returns
     -------
@@ -247,8 +251,16 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     perm = (axis,) + tuple(i for i in range(3) if i != axis)
     vt = v[list(perm)]
     samp = vt[1:] / vt[1:].min()
+    levels = None
+    if grey is not None:  # one scale for every block: the whole volume's background and fiber levels
+        g = grey.open() if hasattr(grey, "open") else grey
+        levels = grey_levels(_Block(g, 0, shape[axis], dtype=None, axis=axis, read_ahead=1),
+                             _Block(arr, 0, shape[axis], axis=axis, read_ahead=1))
     if expected_radius_m is not None:
         r = float(expected_radius_m) / vt[1:].min()
+    elif o.radius_from == "grey" and grey is not None:  # the dense tracer: six slices (and their neighbours) read
+        r = grey_radius_of_slices(_Block(arr, 0, shape[axis], axis=axis, read_ahead=1),
+                                  _Block(g, 0, shape[axis], dtype=None, axis=axis, read_ahead=1), samp, levels)
     else:
         r = estimate_radius_vox(_Block(arr, 0, shape[axis], axis=axis, read_ahead=1), samp)  # 16 spread slices
     min_distance = max(1, int(round((0.75 if grey is not None else 0.5) * r)))
@@ -262,11 +274,6 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
                   max_skip=o.max_skip, gain=o.gain, refine=o.refine)
     edges = list(range(0, shape[axis], int(block))) + [shape[axis]]
     jobs = list(zip(edges[:-1], edges[1:]))
-    levels = None
-    if grey is not None:  # one scale for every block: the whole volume's background and fiber levels
-        g = grey.open() if hasattr(grey, "open") else grey
-        levels = grey_levels(_Block(g, 0, shape[axis], dtype=None, axis=axis, read_ahead=1),
-                             _Block(arr, 0, shape[axis], axis=axis, read_ahead=1))
     results = _track_blocks(src, grey, jobs, (r, samp, params, axis, levels), scheduler, progress)
     t_track = time.perf_counter() - t0
     raw = [_Piece(k, p.astype(np.float64), rr) for res, _ in results for k, p, rr in res]
@@ -275,7 +282,11 @@ def trace_chunked(src, voxel_size_m, *, expected_radius_m: float | None = None, 
     out, n_merged = finish_tracks(raw, v, perm, r, merge_gap_vox=o.merge_gap_vox, max_jump=o.max_jump_vox,
                                   min_length_vox=o.min_length_vox, smooth_sigma_vox=o.smooth_sigma_vox,
                                   spacing_vox=o.spacing_vox)
-    out.meta.update(method="slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
+    dense = o.radius_from == "grey" and grey is not None
+    if dense:  # as in memory: tracks of a +-45 deg ply left out and counted
+        out = drop_oblique_into_meta(out, v, axis, grey=grey.open() if hasattr(grey, "open") else grey,
+                                     radius_vox=r)
+    out.meta.update(method="dense" if dense else "slices", axis=axis, radius_vox_estimate=r, n_detections=n_det, n_tracks_raw=len(raw),
                     n_tracks_merged=n_merged, n_fibers=out.n_fibers, blocks=len(jobs), block_slices=int(block),
                     time_track_s=t_track, time_total_s=time.perf_counter() - t0,
                     params=dict(max_jump_vox=o.max_jump_vox, max_skip=o.max_skip, gain=o.gain,

@@ -425,12 +425,12 @@ def check_row(model, state, row, ke, se, vmax2, control):
 
 
 @njit(inline="always", **_FLAGS)
-def _node_array(a, n):
-    """``(a, True)`` for an (n, 3) force array of the scene or the hook, else ``(zeros, False)``: the
-    update reads one for every node."""
-    if a.shape[0] == n:
+def _node_array(a, zeros):
+    """``(a, True)`` for an (N, 3) force array of the scene or a term, else ``(zeros, False)`` (the
+    work's (N, 3) zeros): the update reads one for every node."""
+    if a.shape[0] == zeros.shape[0]:
         return a, True
-    return np.zeros((n, 3)), False
+    return zeros, False
 
 
 def _advance_template(model, scene, state, work, control, terms, owner):
@@ -438,7 +438,7 @@ def _advance_template(model, scene, state, work, control, terms, owner):
 
     ``terms``: the per-step terms' entries as a chain ``((data, history column), rest)`` ending in
     ``()`` (:func:`terms_chain`); ``owner``: the data of the term whose force arrays the update applies
-    (``()``: none). Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is a
+    (``terms.base.NO_OWNER``: none). Returns ``(status, steps_done, h_row, bad_node)``; ``status`` is a
     ``layout.STATUS_*`` code (not OK: the state is the one at the check that failed).
     """
     x, q, v, w, acc = state
@@ -450,13 +450,13 @@ def _advance_template(model, scene, state, work, control, terms, owner):
     vd_scale = scene.alpha_per_s * dt
     N = x.shape[0]
     coef = damping_factors(scene.alpha_per_s, dt)  # the constant factors of the update, folded once per call
-    acc_before = np.zeros(ACC_SIZE)
+    acc_before = work.acc_before
     # the owner term's force array and the scene's friction force array, which the update adds to the
     # nodes, books (Δt f_n·v̄_n; the friction's as friction work too) and clears ((0, 3): none)
-    fc, has_fc = _node_array(_owner_forces(owner), N)
-    ff, has_ff = _node_array(scene.friction_f, N)
+    fc, has_fc = _node_array(_owner_forces(owner), work.zeros)
+    ff, has_ff = _node_array(scene.friction_f, work.zeros)
     fixity = scene.fixity
-    f_ext, _ = _node_array(scene.f_ext, N)  # the update resets f to it for every node
+    f_ext, _ = _node_array(scene.f_ext, work.zeros)  # the update resets f to it for every node
     # the forces of the first step; the update resets f and mom for each next one
     eval_external(work.f, work.mom, f_ext)
     # the largest node speed is not known until the first update (the state may have been set
@@ -593,12 +593,24 @@ _head_record = no_record
 _rest_record = _end_record
 
 
+def _with_counts(kernel, name: str):
+    """``kernel`` as the loop's body may call it: a kernel that does not choose numba's reference
+    counts (``_nrt``) or inlining would inherit the body's (none) and could not allocate, so it gets
+    a copy of its own that keeps them (a term's eval written without regard to the loop)."""
+    options = getattr(kernel, "targetoptions", {})
+    if "_nrt" in options or options.get("inline", "never") != "never":
+        return kernel
+    flags = {k: v for k, v in options.items() if k in ("fastmath", "error_model", "boundscheck")}
+    return specialise(kernel, name, {}, cache=False, _nrt=True, **flags)
+
+
 def terms_chain(kernels, records, tag: str):
     """``(eval chain, record chain)``: jitted functions calling each of ``kernels`` (the terms' evals)
     and ``records`` (:func:`record_energy` or :func:`no_record`) in turn; ``tag`` names the copies."""
     chain_eval, chain_record = _end_eval, _end_record
     for k in range(len(kernels) - 1, -1, -1):
-        chain_eval = specialise(_link_eval, f"_eval_{tag}_{k}", {"_head_eval": kernels[k], "_rest_eval": chain_eval},
+        head = _with_counts(kernels[k], f"_eval_{tag}_{k}_counted")
+        chain_eval = specialise(_link_eval, f"_eval_{tag}_{k}", {"_head_eval": head, "_rest_eval": chain_eval},
                                 cache=False, inline="always", fastmath=True, error_model="numpy")
         chain_record = specialise(_link_record, f"_record_{tag}_{k}",
                                   {"_head_record": records[k], "_rest_record": chain_record}, cache=False,
@@ -618,18 +630,36 @@ def terms_chain(kernels, records, tag: str):
 
 _terms_eval = _end_eval
 _terms_record = _end_record
+# The loop's body runs without reference counts (numba's ``nrt`` flag off; called from jitted
+# code only, as unboxing the terms' typed lists needs the counts): it allocates nothing (its scratch
+# is the work arrays'), and with counts numba takes and releases a reference, an atomic count, to
+# every array of each structure it hands to a kernel it calls, per step (the beam pass and the update
+# alone take about a hundred arrays). Its entry, called from Python, takes them once per call.
+_NO_COUNTS = dict(_nrt=False, no_cpython_wrapper=True)
 _beam_pass = beam_pass_all
 _owner_forces = no_forces
 _update_pass = update_nodes
 
 
+def _loop_entry(model, scene, state, work, control, terms, owner):
+    return _loop_body(model, scene, state, work, control, terms, owner)
+
+
+_loop_body = _advance_template
+
+
 def _specialise(name: str, chain, forces_of, cache: bool, parallel: bool = False):
     chain_eval, chain_record = chain
-    return specialise(_advance_template, name, {
+    flags = dict(cache=cache, fastmath=True, error_model="numpy")
+    if getattr(forces_of, "targetoptions", {}).get("inline", "never") == "never":
+        # an accessor returns an array of its data: without reference counts only an inlined one may
+        forces_of = specialise(forces_of, name + "_forces_of", {}, cache=False, inline="always")
+    body = specialise(_advance_template, name + "_body", {
         "_terms_eval": chain_eval, "_terms_record": chain_record, "_owner_forces": forces_of,
         "_beam_pass": beam_pass_fibers if parallel else beam_pass_all,
         "_update_pass": update_nodes_fibers if parallel else update_nodes,
-    }, cache=cache, fastmath=True, error_model="numpy")
+    }, **flags, **_NO_COUNTS)
+    return specialise(_loop_entry, name, {"_loop_body": body}, **flags)
 
 
 advance_plain = _specialise("advance_plain", (_end_eval, _end_record), no_forces, True)

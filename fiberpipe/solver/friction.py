@@ -333,14 +333,14 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def plane_friction(v, planes, friction, dt, step):
+def plane_friction(v, friction, dt, step):
     """Friction of rigid planes on the nodes touching them, from the plane pass of this step.
 
-    ``planes`` : :class:`fiberpipe.solver.step_data.PlaneArrays` after the plane pass
-    (:func:`fiberpipe.solver._kernels_boundary.plane_contacts_listed`): its list of the nodes near
+    ``friction`` : the planes' friction data (:class:`fiberpipe.solver.terms.planes.PlaneFrictionData`):
+    its ``planes`` (:class:`fiberpipe.solver.step_data.PlaneArrays`) after the plane pass
+    (:func:`fiberpipe.solver._kernels_boundary.plane_contacts_listed`), with the list of the nodes near
     each plane (``cand_idx``, ``cand_off``) and each listed node's normal force ``cand_fn`` [N]
-    (``k_i g(δ) g'(δ)``, −1 where the node does not touch the plane). ``friction`` : the planes'
-    friction data (:class:`fiberpipe.solver.terms.planes.PlaneFrictionData`): ``mu`` (P,) and
+    (``k_i g(δ) g'(δ)``, −1 where the node does not touch the plane); ``mu`` (P,) and
     ``kt_n_per_m`` (P,) per plane, the planes' velocities ``vel`` (P, 3) m/s, the history ``hist``
     (N, P, 4) [N] of each (node, plane) entry with the step of its last update in column 3, the
     tangential reaction ``tforce`` (P, 3) on each plane (out) and the friction force array ``ff``
@@ -351,6 +351,7 @@ def plane_friction(v, planes, friction, dt, step):
     [J], the elastic energy of the tangential springs [J], the energy given back [J], as
     :func:`friction_forces_ex`).
     """
+    planes = friction.planes  # one argument: each array a call passes is reference-counted on entry and exit
     pl_axis, pl_sign, cand_idx, cand_off, cand_fn = planes.axis, planes.sign, planes.cand_idx, planes.cand_off, planes.cand_fn
     pl_vel, hist, pl_tforce, f_out = friction.vel, friction.hist, friction.tforce, friction.ff
     diss = 0.0

@@ -30,7 +30,7 @@ from .layout import (ACC_SIZE, ACC_STORED0, DRIVEN, FIX_ROT, FIX_X, FIX_Y, FIX_Z
 from .model import Model
 from .state import State
 from .step_data import DriveArrays, Fixity, ModelArrays, SceneKernel, StepControl, StepState, WorkArrays
-from .terms.base import SceneArrays, Term, no_forces
+from .terms.base import NO_OWNER, SceneArrays, Term, no_forces
 from .terms.planes import CHECKPOINT_FIELDS as PLANE_CHECKPOINT_FIELDS
 from .terms.planes import plane_check, plane_energy, set_up_planes
 from .timestep import (ADAPTIVE_LOOK_STEPS, DEFAULT_DT_SAFETY, AdaptiveStep, TimeStepReport, modal_time_step,
@@ -212,7 +212,7 @@ class ScenePlan(NamedTuple):
 
     terms: list        # (term, data, first energy column or -1) of each per-step term, in turn
     chain: tuple       # ((data, column), rest) ... () (_kernels_integrate.terms_chain)
-    owner: object      # the data of the term whose force arrays the update applies (() when none)
+    owner: object      # the data of the term whose force arrays the update applies (NO_OWNER when none)
     owner_index: int   # that term's index in ``terms`` (-1: none)
     loop: object       # the step loop specialised on them
 
@@ -251,7 +251,7 @@ def _scene_plan(per_step: list, first_column: int, threads: int) -> ScenePlan:
     loop = step_loop_for(evals, records, forces_of=getattr(owner, "forces_of", None) or no_forces, threads=threads,
                          cache_names=[k.cache_name for _, _, k in per_step])
     owner_index = owners[0] if owners else -1
-    return ScenePlan(rows, _chain_of(rows), rows[owner_index][1] if owners else (), owner_index, loop)
+    return ScenePlan(rows, _chain_of(rows), rows[owner_index][1] if owners else NO_OWNER, owner_index, loop)
 
 
 def _chain_of(rows: list) -> tuple:
@@ -315,6 +315,8 @@ class Integrator:
         self.model_arrays = model_arrays(model)
         self.eb = np.zeros((model.n_elements, EB_SIZE))
         self.task_sums = np.zeros((PARALLEL_CHUNKS, 9))
+        self.acc_before = np.zeros(ACC_SIZE)
+        self.zeros = np.zeros((model.n_nodes, 3))
         self.ef = new_element_forces(n)
         self.fixity = fixity_of(scene.fix_mask, n)
 
@@ -331,7 +333,8 @@ class Integrator:
         drives = DriveArrays(scene.drive_vec, scene.drive_T, scene.drive_ta, scene.drive_mode, self.drive_v)
         scene_kernel = SceneKernel(float(scene.alpha), float(scene.beta), scene.f_ext, scene.fix_mask,
                                    scene.node_drive, drives, self.planes, self.fixity, scene.friction_f)
-        work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist, self.task_sums)
+        work = WorkArrays(self.f, self.mom, self.ef, self.eb, self.strain_prev, self.hist, self.task_sums,
+                          self.acc_before, self.zeros)
         return scene_kernel, work
 
     def advance(self, state: State, n_steps: int) -> tuple[int, int, int]:
@@ -426,7 +429,7 @@ class Integrator:
                 data = restore_into(data, saved[term.name])
             rows.append((term, data, col))
         index = self.plan.owner_index
-        self.plan = self.plan._replace(terms=rows, chain=_chain_of(rows), owner=rows[index][1] if index >= 0 else ())
+        self.plan = self.plan._replace(terms=rows, chain=_chain_of(rows), owner=rows[index][1] if index >= 0 else NO_OWNER)
 
 
 def model_arrays(model: Model) -> ModelArrays:

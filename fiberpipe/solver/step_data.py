@@ -138,6 +138,8 @@ class WorkArrays(NamedTuple):
     strain_prev: np.ndarray  # (E, 6) last step's strains (stiffness-proportional damping) or (0, 6)
     hist: np.ndarray         # (rows, layout.H_WALL + walls) history rows
     task_sums: np.ndarray    # (tasks, 9) the parallel node passes' sums per task (solver.threads > 1)
+    acc_before: np.ndarray   # (layout.ACC_SIZE,) the accumulators at a history row's step's start
+    zeros: np.ndarray        # (N, 3) zeros: the force array the update reads where a scene has none
 
 
 class StepControl(NamedTuple):

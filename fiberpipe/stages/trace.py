@@ -79,9 +79,10 @@ def warn_off_axis(off_axis: dict, mode: str) -> None:
             log.warning("trace: %d tracks (%.0f voxels long in all) run more than %g deg off the slicing axis "
                         "(a +-45 deg ply): left out", info["fibers"], info["length_vox"], DENSE_MAX_TILT_DEG)
             continue
+        oblique = f", {info['oblique']} tracks off its axis left out" if info.get("oblique") else ""
         log.warning("trace: %.0f %% of the fiber volume runs along %s, across the slicing axis (a cross ply or a tow "
-                    "lying in the slices): %s (%d fibers); trace.off_axis: %s", 100 * info["volume_fraction"],
-                    ax, info["action"], info["fibers"], "drop leaves it out" if mode == "trace"
+                    "lying in the slices): %s (%d fibers%s); trace.off_axis: %s", 100 * info["volume_fraction"],
+                    ax, info["action"], info["fibers"], oblique, "drop leaves it out" if mode == "trace"
                     else "trace follows it")
 
 
@@ -335,6 +336,8 @@ def run_trace_chunked(cfg: Config, mask_path: Path, out: Path, *, truth_path: Pa
     with connect(cfg.chunks.scheduler) as client:
         kw = dict(expected_radius_m=t.expected_radius or cfg.fiber.radius, block=cfg.chunks.slices,
                   scheduler=client, grey=grey, join=join, **opts)
+        if method == "dense" and grey is not None:
+            kw["radius_from"] = "grey"
         if split:
             fibers = _trace_regions_chunked(cfg, src, vs, axis, Path(out).with_name("trace_regions.tmp.h5"), kw)
         else:
@@ -367,12 +370,13 @@ def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Pat
 
     from fiberpipe.imaging._util import voxel_size_zyx
     from fiberpipe.imaging.regions_chunked import RegionSource, axis_labels_chunked
-    from fiberpipe.imaging.trace import combine_region_parts
+    from fiberpipe.imaging.trace import add_oblique, combine_region_parts, region_info
     from fiberpipe.imaging.trace_chunked import SliceSource, trace_chunked
     from fiberpipe.stages._chunks import create_volume_dataset
 
     t, grey = cfg.trace, kw.get("grey")
-    r_vox = float(kw["expected_radius_m"]) / float(voxel_size_zyx(voxel_size).min())
+    r_vox = (None if kw.get("expected_radius_m") is None
+             else float(kw["expected_radius_m"]) / float(voxel_size_zyx(voxel_size).min()))
     try:
         with h5py.File(scratch, "w") as f:
             ds = create_volume_dataset(f, "labels", src.shape, np.uint8, "1")
@@ -383,14 +387,17 @@ def _trace_regions_chunked(cfg: Config, src, voxel_size, axis: int, scratch: Pat
         labels = SliceSource(scratch, "labels")
         parts = [trace_chunked(RegionSource(src, labels, [c for c in range(3) if c not in others]), voxel_size,
                                axis=axis, **kw)]
+        if kw.get("expected_radius_m") is None and kw.get("radius_from") == "grey":
+            # as in memory: the other regions traced at the main region's grey radius
+            in_plane = float(np.delete(np.asarray(voxel_size_zyx(voxel_size), dtype=float), axis).min())
+            kw = dict(kw, expected_radius_m=float(parts[0].meta["radius_vox_estimate"]) * in_plane)
         info = {}
         for b in others:
             if t.off_axis == "trace":
                 parts.append(trace_chunked(RegionSource(src, labels, [b]), voxel_size, axis=b, **kw))
-            info["zyx"[b]] = {"volume_fraction": round(float(fr[b]), 4),
-                              "fibers": int(parts[-1].n_fibers) if t.off_axis == "trace" else 0,
-                              "action": "traced along its own axis" if t.off_axis == "trace" else "left out"}
+            info["zyx"[b]] = region_info(fr[b], parts[-1] if t.off_axis == "trace" else None)
         labels.close()
+        add_oblique(info, parts)
         return combine_region_parts(parts, info) if info else parts[0]
     finally:
         scratch.unlink(missing_ok=True)

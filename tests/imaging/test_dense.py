@@ -12,20 +12,42 @@ from fiberpipe.imaging.segment import segment
 from fiberpipe.imaging.trace import _GreySlices, _refine_centroids, detect_slice, estimate_radius_vox, fit_centres, trace
 
 
-@pytest.mark.parametrize("radius_vox", [3.0, 5.0])
-def test_the_grey_radius_of_a_merged_pack_is_within_ten_percent(radius_vox):
-    """The mask of a v_f 0.6 pack overestimates the radius (its EDT measures the merged region);
-    the least-squares disk model of the grey slices recovers it within 10 %."""
-    vol, truth = make_dense_phantom(shape=(30, 80, 80), radius_vox=radius_vox, fiber_volume_fraction=0.6,
-                                    contrast_to_noise=3.0, cross_ply_fraction=0.0, seed=2)
+def _grey_radius(radius_vox, blur_sigma_vox, contrast_to_noise, seed, shape=(40, 80, 80)):
+    vol, _ = make_dense_phantom(shape=shape, radius_vox=radius_vox, fiber_volume_fraction=0.55,
+                                contrast_to_noise=contrast_to_noise, blur_sigma_vox=blur_sigma_vox,
+                                cross_ply_fraction=0.0, seed=seed)
     mask, _ = segment(vol)
     samp = np.ones(2)
     r_mask = estimate_radius_vox(mask, samp)
+
     def detect(sl, g, r):
         return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
 
-    r_grey = estimate_radius_grey(_GreySlices(vol, mask, samp), mask, samp, r_mask, detect)
-    assert abs(r_grey / radius_vox - 1) <= 0.10, (r_mask, r_grey)
+    return estimate_radius_grey(_GreySlices(vol, mask, samp), mask, samp, r_mask, detect), r_mask
+
+
+#: Tolerance of the grey radius on a v_f 0.55 pack, blur up to 2 voxels (r = 2.5: up to 1.5).
+GREY_RADIUS_TOLERANCE = 0.15
+
+
+@pytest.mark.parametrize("radius_vox, blur_sigma_vox, contrast_to_noise", [(3.0, 1.5, 2.0), (5.0, 0.8, 5.0)])
+def test_the_grey_radius_of_a_merged_pack_holds_across_blur(radius_vox, blur_sigma_vox, contrast_to_noise):
+    """The mask of a v_f 0.55 pack overestimates the radius (its EDT measures the merged region,
+    8 voxels for r = 3 blurred by 1.5); the cross-validated disk model of the grey slices recovers it
+    within GREY_RADIUS_TOLERANCE (a model scored on the pixels it was fitted to reads 1.3 there)."""
+    r_grey, r_mask = _grey_radius(radius_vox, blur_sigma_vox, contrast_to_noise, seed=1)
+    assert abs(r_grey / radius_vox - 1) <= GREY_RADIUS_TOLERANCE, (r_mask, r_grey)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("radius_vox, blur_sigma_vox, contrast_to_noise",
+                         [(r, b, c) for r in (2.5, 3.0, 4.0, 5.0) for b in (0.8, 1.5, 2.0) for c in (2.0, 5.0)
+                          if not (r == 2.5 and b == 2.0)])
+def test_the_grey_radius_across_radii_blur_and_noise(radius_vox, blur_sigma_vox, contrast_to_noise):
+    """r = 2.5-5 voxels, blur 0.8-2 voxels, CNR 2 and 5: within GREY_RADIUS_TOLERANCE (blur up to
+    0.6 r: at r = 2.5 under a blur of 2 voxels touching fibers no longer separate in the grey)."""
+    r_grey, r_mask = _grey_radius(radius_vox, blur_sigma_vox, contrast_to_noise, seed=1)
+    assert abs(r_grey / radius_vox - 1) <= GREY_RADIUS_TOLERANCE, (r_mask, r_grey)
 
 
 def test_the_joint_disk_fit_removes_the_centroid_bias_of_touching_fibers():
@@ -90,7 +112,7 @@ def test_the_trace_stage_picks_the_dense_tracer_with_only_the_voxel_size(tmp_pat
     run_pipeline(cfg, tmp_path / "run", to_stage="trace")
     tr = json.loads((tmp_path / "run" / "summary.json").read_text())["stages"]["trace"]
     assert tr["method"] == "dense" and tr["off_axis"]["x"]["fibers"] >= 0.9 * truth.meta["n_cross"]
-    assert abs(tr["median_radius_m"] / vs / 3.5 - 1) <= 0.1
+    assert abs(tr["median_radius_m"] / vs / 3.5 - 1) <= GREY_RADIUS_TOLERANCE
     assert abs(tr["fibers"] - truth.n_fibers) <= 0.05 * truth.n_fibers
 
 
@@ -151,3 +173,51 @@ def test_tracks_more_than_30_degrees_off_the_slicing_axis_are_left_out_and_count
     assert info["fibers"] == 1 and info["length_vox"] == pytest.approx(40.0, abs=1e-6)
     kept, info = drop_oblique(Polylines.from_list([along, oblique], 2 * vs), np.full(3, vs), 0, max_tilt_deg=45)
     assert kept.n_fibers == 2 and info["fibers"] == 0
+
+
+def test_the_grey_structure_around_a_track_gives_its_ply_direction():
+    """A ply of r = 2.5 fibers 40 degrees off z (x-z plane) beside a ply along z, CNR 4: the
+    structure tensor in the tube around a straight line along z through the tilted ply reads the
+    ply's 40 degrees (within 5), around a fiber of the z ply less than 5 degrees; the dense tracer's
+    second test leaves out a z-parallel track through the tilted ply and keeps the z fiber."""
+    from fiberpipe.imaging.dense import structure_direction
+    from fiberpipe.imaging.phantom import render_polylines
+    from fiberpipe.imaging.trace import drop_oblique_into_meta
+    from fiberpipe.polylines import Polylines
+
+    vs, r, shape = 1e-6, 2.5, (48, 40, 72)
+    z = np.linspace(-30, 78, 109)
+    tilt = np.tan(np.radians(40))
+    lines = [np.column_stack([np.full_like(z, x), np.full_like(z, y), z]) for x in (4, 10, 16, 22) for y in (6, 13, 20, 27, 34)]
+    lines += [np.column_stack([x0 + tilt * z, np.full_like(z, y), z]) for x0 in range(8, 80, 7) for y in (6, 13, 20, 27, 34)]
+    z_ply, tilted_ply = lines[:20], lines[20:]
+    vol = render_polylines(Polylines.from_list([p * vs for p in tilted_ply], r * vs), shape, vs, blur_sigma_vox=0.8,
+                           contrast_to_noise=4.0, seed=5)
+    # the z ply at x < 30, the tilted one beyond
+    vol[:, :, :30] = render_polylines(Polylines.from_list([p * vs for p in z_ply], r * vs), shape, vs,
+                                      blur_sigma_vox=0.8, contrast_to_noise=4.0, seed=6)[:, :, :30]
+    k = np.arange(4.0, 44.0)
+    through_ply = np.column_stack([k, np.full_like(k, 20.0), np.full_like(k, 52.0)])  # z y x, voxels
+    along_z = np.column_stack([k, np.full_like(k, 20.0), np.full_like(k, 10.0)])
+    angle = lambda d: np.degrees(np.arccos(abs(d[0]) / np.linalg.norm(d)))  # noqa: E731
+    assert abs(angle(structure_direction(vol, through_ply, r, np.full(3, vs))) - 40.0) <= 5.0
+    assert angle(structure_direction(vol, along_z, r, np.full(3, vs))) <= 5.0
+    tracks = Polylines.from_list([p[:, ::-1] * vs for p in (through_ply, along_z)], r * vs)
+    kept = drop_oblique_into_meta(tracks, np.full(3, vs), 0, grey=vol, radius_vox=r)
+    assert kept.n_fibers == 1 and np.allclose(kept.fiber(0), along_z[:, ::-1] * vs)
+    assert kept.meta["oblique"]["fibers"] == 1 and kept.meta["oblique"]["by_structure"] == 1
+
+
+def test_a_region_whose_tracks_all_run_off_its_axis_is_reported_with_a_count():
+    """off_axis for a region along y whose every track the 30-degree limit left out: no fiber,
+    and the count of tracks left out; a region traced normally reports no such count."""
+    from fiberpipe.imaging.trace import region_info
+    from fiberpipe.polylines import Polylines
+
+    empty = Polylines.from_list([], 0.0)
+    empty.meta["oblique"] = {"fibers": 7, "length_vox": 70.0, "action": "left out"}
+    info = region_info(0.09, empty)
+    assert info == {"volume_fraction": 0.09, "fibers": 0, "action": "traced along its own axis", "oblique": 7}
+    line = Polylines.from_list([np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])], 0.1)
+    assert "oblique" not in region_info(0.2, line) and region_info(0.2, line)["fibers"] == 1
+    assert region_info(0.2, None)["action"] == "left out"

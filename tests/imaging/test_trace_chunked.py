@@ -114,3 +114,30 @@ def test_blocks_across_x_when_the_fibers_run_along_x(on_disk, tmp_path):
     assert back.n_fibers == ref.n_fibers
     acc = trace_accuracy(back, ref, voxel_size_m=vs)
     assert acc["recall"] == 1.0 and acc["precision"] == 1.0 and acc["mean_error_vox"] <= 0.05, acc
+
+
+def test_the_chunked_dense_tracer_leaves_an_oblique_ply_out_and_counts_it():
+    """Fibers along z beside a ply 40 degrees off z (x-z plane): the chunked dense tracer (blocks of
+    16 slices, grey detection) keeps the z fibers, leaves the ply's tracks out and reports them in
+    ``meta["oblique"]``, as the in-memory tracer does; no kept track is more than 30 degrees off z."""
+    from fiberpipe.imaging.phantom import render_polylines
+    from fiberpipe.polylines import Polylines
+
+    vs, r, shape = 1e-6, 2.5, (48, 40, 64)
+    z = np.linspace(-2, 49, 52)
+    lines = [np.column_stack([np.full_like(z, x), np.full_like(z, y), z]) for x in (4, 10, 16, 22) for y in (6, 14, 22, 30)]
+    tilt = np.tan(np.radians(40))
+    lines += [np.column_stack([x0 + tilt * z, np.full_like(z, y), z]) for x0 in (36, 44) for y in (6, 14, 22, 30)]
+    fibers = Polylines.from_list([p * vs for p in lines], r * vs)
+    vol = render_polylines(fibers, shape, vs, blur_sigma_vox=0.8, contrast_to_noise=6.0, seed=3)
+    mask = vol > 0.5
+    ref = trace(mask, voxel_size_m=vs, method="dense", grey=vol, expected_radius_m=r * vs, off_axis="none")
+    got = trace_chunked(mask, vs, expected_radius_m=r * vs, block=16, grey=vol, radius_from="grey", axis=0)
+    for out in (ref, got):
+        assert out.meta["oblique"]["fibers"] >= 4, out.meta.get("oblique")
+        for i in range(out.n_fibers):
+            d = out.fiber(i)[-1] - out.fiber(i)[0]
+            assert np.degrees(np.arccos(abs(d[2]) / np.linalg.norm(d))) <= 30.0
+    assert got.meta["method"] == "dense"
+    z_ply = [i for i in range(got.n_fibers) if got.fiber(i)[:, 0].mean() / vs < 28]
+    assert len(z_ply) == 16 and got.n_fibers == ref.n_fibers == 16, (got.n_fibers, ref.n_fibers)

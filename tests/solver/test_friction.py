@@ -131,7 +131,7 @@ def test_plane_friction_stick_and_slip():
     n = 300
     for step in range(n):
         data.ff[:] = 0.0
-        diss += plane_friction(v, planes, data, DT, step)[0]
+        diss += plane_friction(v, data, DT, step)[0]
     assert np.allclose(data.ff[:, 0], -MU * fn, rtol=1e-12) and data.tforce[0, 0] == pytest.approx(MU * fn.sum())
     # the stick length μF_n/k_t is shorter than a step's travel (100 nm): the force jumps from 0 to
     # μF_n in the first step, whose work the step loop books with the trapezoid, half of μF_n·Δu; the
@@ -153,7 +153,7 @@ def test_plane_friction_forgets_a_node_that_left_the_plane():
         x = x_on + [0.0, 0.0, 1e-5] if 3 <= step < 5 else x_on
         _plane_pass(m, planes, x, v)
         data.ff[:] = 0.0
-        plane_friction(v, planes, data, DT, step)
+        plane_friction(v, data, DT, step)
         forces.append(data.ff[:, 0].copy())
         if 3 <= step < 5:
             assert np.all(data.ff == 0.0) and np.all(data.hist[:, 0, :3] == 0.0)

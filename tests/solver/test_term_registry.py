@@ -137,3 +137,49 @@ def test_a_term_block_is_validated_by_its_section(springs_term, tmp_path):
     res = cli("run", cfg, "--out", tmp_path / "run")
     assert res.exit_code != 0
     assert "scene.springs.stiffnes_per_kg" in res.output and "Traceback" not in res.output
+
+
+@njit(cache=False)
+def _allocating_springs_eval(x, q, v, w, f, mom, acc, t, dt, data):
+    """The springs' eval computing its displacements into a fresh array (an allocation)."""
+    d = x - data.x0
+    for i in range(x.shape[0]):
+        for c in range(3):
+            f[i, c] -= data.stiffness[i] * d[i, c]
+    return 0
+
+
+def test_an_eval_that_does_not_choose_reference_counts_gets_a_copy_that_keeps_them():
+    """The step loop's body runs without numba's reference counts, which a callee inherits unless it
+    chooses its own: a term's eval that does not choose is called through a copy that keeps them
+    (so it may allocate); one that chooses (the contact term's) or is inlined is called as it is."""
+    from fiberpipe.solver._kernels_integrate import _with_counts
+    from fiberpipe.solver.terms.contact import contact_step
+    from fiberpipe.solver.terms.planes import eval_plane_friction
+
+    copy = _with_counts(_allocating_springs_eval, "allocating_springs_counted")
+    assert copy is not _allocating_springs_eval and copy.targetoptions["_nrt"] is True
+    assert copy.py_func.__code__ is _allocating_springs_eval.py_func.__code__
+    assert _with_counts(contact_step, "contact") is contact_step
+    assert _with_counts(eval_plane_friction, "plane_friction") is eval_plane_friction
+
+
+@pytest.mark.slow
+def test_a_term_eval_that_allocates_runs_in_the_step_loop():
+    """The step loop's body runs without numba's reference counts; a term's eval that allocates (and
+    does not choose them itself) still compiles and runs, and gives the same forces as one that does
+    not (the same positions to the last bit after the fiber falls under gravity against them)."""
+    from fiberpipe.solver import Gravity, Material, SimulationSettings, build_model, simulate
+
+    s = np.linspace(0.0, 1.0, 6)[:, None]
+    model = build_model(s * np.array([3e-3, 0.0, 0.0]), np.array([0, 6]), 0.25e-3, Material(15e9, 1380.0, 0.3))
+
+    class AllocatingSprings(Springs):
+        eval = staticmethod(_allocating_springs_eval)
+
+    finals = []
+    for term in (Springs(RATE), AllocatingSprings(RATE)):
+        result = simulate(model, [Gravity((0.0, -G, 0.0)), term], SimulationSettings(end_time_s=2e-6, output_frames=2))
+        finals.append(result.frames_positions[-1])
+    assert np.abs(finals[0] - model.nodes_m).max() > 0.0  # the nodes moved
+    assert np.array_equal(finals[0], finals[1])

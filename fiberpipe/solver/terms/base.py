@@ -282,10 +282,15 @@ def no_eval(x, q, v, w, f, mom, acc, t, dt, data):
     return 0
 
 
-@njit(cache=True)
+#: the step loop's owner data when no term hands its forces to the update (:func:`no_forces`)
+NO_OWNER = np.zeros((0, 3))
+
+
+@njit(cache=True, inline="always")
 def no_forces(data):
-    """The force array of a term that adds its forces to ``f`` itself: an empty (0, 3) array."""
-    return np.zeros((0, 3))
+    """The owner's force array when no term hands its forces to the update: the owner data is then
+    :data:`NO_OWNER`, an empty (0, 3) array, returned as it is (the step loop allocates nothing)."""
+    return data
 
 
 #: the terms a scene may list (``scene.effects``), by config name: one class each, added by

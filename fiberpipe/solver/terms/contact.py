@@ -232,7 +232,7 @@ def _statistics(data, rec, n_active):
     st.n_active[0] = n_active
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def contact_forces_of(data):
     """The force array (N, 3) [N] :func:`contact_step` leaves its forces in (the hook's ``forces_of``):
     the step loop's update adds it to the nodes, books its work ``Δt f_n·v̄_n`` (``v̄_n`` the mean

@@ -420,7 +420,7 @@ class PlaneFrictionData(NamedTuple):
     friction_returned_J: np.ndarray  # (1,) J, the scene's friction's energy given back (SceneArrays.friction_returned)
 
 
-@njit(**_FLAGS)
+@njit(inline="always", **_FLAGS)
 def eval_plane_friction(x, q, v, w, f, mom, acc, t, dt, data):
     """The planes' friction at t_n (the signature of every term's eval, ``terms.base``): the planes'
     velocities over the step, the tangential forces of the nodes the plane pass found touching
@@ -436,7 +436,7 @@ def eval_plane_friction(x, q, v, w, f, mom, acc, t, dt, data):
         data.vel[p, 1] = 0.0
         data.vel[p, 2] = 0.0
         data.vel[p, planes.axis[p]] = vel
-    _, e_springs, back = plane_friction(v, planes, data, dt, calls)
+    _, e_springs, back = plane_friction(v, data, dt, calls)
     data.friction_returned_J[0] += back
     diss = -(e_springs - data.e_spring_J[0])
     data.e_spring_J[0] = e_springs
