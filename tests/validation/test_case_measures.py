@@ -34,6 +34,12 @@ def test_loop_figures_take_the_terms_from_the_turning_point_on():
     assert f["stored_change_J"] == pytest.approx(20.0) and f["force_at_turn_N"] == pytest.approx(2.0)
 
 
+def test_turning_row_is_the_first_turn_when_its_row_falls_short_of_the_end():
+    travel = np.array([0.0, 1.0, 2.0 * (1 - 2e-8), 1.5, 1.2, 1.6, 2.0])  # the turn's row sampled just before it
+    run = synthetic_run(travel, np.linspace(0, 6, 7))
+    assert turning_row(run) == 2
+
+
 def test_cycle_path_goes_to_the_strain_back_to_0_6_and_again():
     o = cycle_overrides(0.6, 10e-3)
     assert o["scene.loading.path"] == pytest.approx([6e-3, 3.6e-3, 6e-3])
@@ -60,3 +66,49 @@ def test_janssen_ratio_from_the_measured_lateral_coefficient():
     assert f["K"] == pytest.approx(sigma_h / sigma_v)
     assert f["ratio_measured"] == pytest.approx(1.0 / 1.1)
     assert f["ratio_janssen"] == pytest.approx(math.exp(-2 * 0.2 * f["K"] * 4e-3 / 2e-3))
+
+
+def test_kinetic_sources_split_the_carried_fibers_from_an_event():
+    from fiberpipe.validation.quasi_static import carried_kinetic_energy, kinetic_sources
+
+    n = 101
+    travel = np.linspace(0, 1e-3, n)
+    force = np.where(travel > 0.5e-3, travel * 1e4, 0.0)  # the load starts at row 51
+    strain = np.where(travel > 0.5e-3, (travel - 0.5e-3) * 10.0, 0.0)
+    config = SimpleNamespace(material=SimpleNamespace(density=1000.0), fiber=SimpleNamespace(radius=1e-3),
+                             solver=SimpleNamespace(mass_scaling=4.0), scene=SimpleNamespace(
+                                 loading=SimpleNamespace(velocity=0.5), friction=SimpleNamespace(mu=0.2)))
+    spec = {"generator": {"n_fibers": 10}, "length_m": 0.01}
+    run = synthetic_run(travel, force, specimen=spec)
+    run.config = config
+    carried = 0.5 * 10 * 1000.0 * math.pi * 1e-6 * 0.01 * 4.0 * 0.25
+    assert carried_kinetic_energy(run) == pytest.approx(carried)
+    kinetic = np.full(n, 0.3 * carried)
+    kinetic[80] = 5 * carried  # an event: more than every fiber at the plate's speed
+    run.simulation.energy.update({"kinetic": kinetic, "strain": strain})
+    k = kinetic_sources(run)
+    assert k["start_carried_share"] == pytest.approx(0.3)
+    assert k["start_ratio"] == pytest.approx(0.3 * carried / strain[51])
+    assert k["largest_over_carried"] == pytest.approx(5.0)
+
+
+def test_refinement_row_compares_the_halved_mesh_fit_with_the_case_s(monkeypatch):
+    import fiberpipe.validation.compaction_runs as runs
+    from fiberpipe.validation.network_cases import refinement_row
+
+    def fitted(beta, r2):
+        return SimpleNamespace(seed=0, config=SimpleNamespace(mesh=SimpleNamespace(element_length=5e-4)),
+                               summary={"mesoscale_laws": {"gutowski": {"beta": beta, "r2_log": r2}}})
+
+    asked = {}
+
+    def fake_compact(name, seed, work=None, overrides=None):
+        asked.update(overrides)
+        return fitted(110.0, 0.95)
+
+    monkeypatch.setattr(runs, "compact", fake_compact)
+    row = refinement_row("4", "wavy-bundle.yaml", fitted(100.0, 0.97), "gutowski", "beta", 0.3)
+    assert asked == {"mesh.element_length": pytest.approx(2.5e-4)}
+    assert row.reference == 100.0 and row.error == pytest.approx(0.1) and row.passed
+    monkeypatch.setattr(runs, "compact", lambda *a, **k: fitted(110.0, 0.5))  # the fine fit does not hold
+    assert not refinement_row("4", "wavy-bundle.yaml", fitted(100.0, 0.97), "gutowski", "beta", 0.3).passed
