@@ -222,7 +222,7 @@ specimen-400: setup
 .PHONY: yarn-1000 yarn-4000
 yarn-1000 yarn-4000: yarn-%: setup
 	$(FP) specimen configs/specimens/yarn-$*.yaml --out runs/specimens/yarn-$*
-	$(FP) run runs/specimens/yarn-$*/config.yaml --out runs/yarn-$*
+	NUMBA_NUM_THREADS=2 $(FP) run runs/specimens/yarn-$*/config.yaml --out runs/yarn-$*
 
 # the writers and post on 24 synthetic frames of the 4000-fiber yarn (docs/benchmarks.md)
 .PHONY: bench-output-4000

@@ -31,15 +31,12 @@ from fiberpipe.benchmarks.scenes import scene_and_state
 
 def _bench_scene(n_fibers: int, contact: bool, pitch_r: float):
     """The bench bundle of ``n_fibers`` at grid pitch ``pitch_r`` radii: (model, effects, dt, state at rest)."""
-    from fiberpipe.benchmarks.bench_solver import bundle
-    from fiberpipe.solver import Clamp, Clamps, Damping, Gravity, State
+    from fiberpipe.benchmarks.bench_solver import bench_effects, bundle
+    from fiberpipe.solver import State
     from fiberpipe.solver.integrator import SimulationSettings, choose_time_step
 
     m = bundle(n_fibers, pitch_r=pitch_r)
-    effects = [Clamps([Clamp(i, "start") for i in range(n_fibers)]), Damping(1e5), Gravity([0, -9.81, 0])]
-    if contact:
-        from fiberpipe.benchmarks.scenes import default_contact
-        effects.append(default_contact(m, friction=True))
+    effects = bench_effects(m, n_fibers, contact, pitch_r)
     dt, _ = choose_time_step(m, effects, SimulationSettings())
     return m, effects, dt, State.at_rest(m)
 

@@ -318,11 +318,15 @@ def remap_history(old_keys, old_n, old_hist, new_keys, new_n, new_hist):
     sorted ascending (as :func:`fiberpipe.solver.neighbours.build_pairs` writes them). Returns the
     number of histories carried over.
     """
+    # both lists sorted: one merge walk, O(old_n + new_n) in memory order (a binary search per pair
+    # cost 100 ns at 286 000 pairs, half a rebuild, in cache misses)
     kept = 0
-    ok = old_keys[:old_n]
+    m = 0
     for k in range(new_n):
-        m = np.searchsorted(ok, new_keys[k])
-        if m < old_n and ok[m] == new_keys[k]:
+        key = new_keys[k]
+        while m < old_n and old_keys[m] < key:
+            m += 1
+        if m < old_n and old_keys[m] == key:
             for c in range(new_hist.shape[1]):
                 new_hist[k, c] = old_hist[m, c]
             kept += 1

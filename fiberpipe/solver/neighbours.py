@@ -19,7 +19,9 @@ Rule (``docs/contact.md``):
 Output: ``pairs (P, 2) int64`` with ``i < j``, sorted by the key ``i·E + j`` (so friction history can
 be carried across rebuilds by ``searchsorted``, see :mod:`fiberpipe.solver.friction`). The kernel
 writes into a preallocated buffer and returns ``−needed`` when it is too small; :class:`VerletList`
-grows it and retries.
+grows it and retries. ``build_pairs_threads`` (``solver.threads`` > 1) lists the same pairs from
+``prange`` tasks of consecutive segments, each segment's partners sorted as they are found, so the
+tasks' lists joined in task order are the list in key order (no sort of the whole list).
 """
 
 from __future__ import annotations
@@ -27,8 +29,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from .._tasks import task_count
+from ._specialise import specialise
 from .geometry import segment_distance2
 
 
@@ -92,8 +96,7 @@ def pair_key(i, j, ne):
     return i * ne + j
 
 
-@njit(cache=True, error_model="numpy")
-def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
+def _build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pairs_out, keys_out):
     """Build the Verlet list of candidate segment pairs.
 
     Parameters
@@ -107,6 +110,11 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     Returns
     -------
     n : int — number of pairs written (sorted by key ``i·E + j``), or ``−needed`` if C < needed.
+
+    ``build_pairs`` runs the segments in one task; ``build_pairs_threads`` (``solver.threads`` > 1)
+    in ``prange`` tasks of consecutive segments once there are ``SEGMENT_TASK_MIN`` for each, with
+    the same list: each task lists its segments' pairs in key order into its own share of
+    ``pairs_out``, and the shares are joined in task order.
     """
     ne = seg_nodes.shape[0]
     if ne == 0:
@@ -122,6 +130,65 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     h, nc, tot = _cell_grid(lo, hi, lmax + 2.0 * rmax + skin, ne)
     cell_of, start, items = _bin_segments(mid, lo, h, nc, tot)
     cap = pairs_out.shape[0]
+    # a prange body takes tuples built here, not ones nested in another structure
+    segs = (seg_nodes, seg_radius, seg_fiber, seg_arc)
+    grid = (cell_of, start, items, nc, h * h)
+    cuts = (skin, s_excl)
+    n_tasks = task_count(ne, SEGMENT_TASK_MIN, SEGMENT_TASKS) if _THREADS else 1
+    if n_tasks == 1:
+        n = _pairs_of_segments((0, ne), x, segs, mid, grid, cuts, pairs_out, (0, cap))
+        if n > cap:
+            return -n
+    else:
+        share = cap // n_tasks
+        counts = np.empty(n_tasks, np.int64)
+        _pairs_in_tasks(x, segs, mid, grid, cuts, pairs_out, share, counts)
+        n = 0
+        most = 0
+        for task in range(n_tasks):
+            n += counts[task]
+            most = max(most, counts[task])
+        if most > share:  # a capacity whose every share holds the fullest task's pairs
+            return -max(n, most * n_tasks)
+        n = _join_shares(pairs_out, counts, share)
+    for k in range(n):
+        keys_out[k] = pair_key(pairs_out[k, 0], pairs_out[k, 1], ne)
+    return n
+
+
+def _pairs_in_tasks(x, segs, mid, grid, cuts, pairs_out, share, counts):
+    """:func:`_pairs_of_segments` in ``counts.shape[0]`` ``prange`` tasks of consecutive segments,
+    task k into rows ``k·share …`` of ``pairs_out``, its count into ``counts[k]``."""
+    n_tasks = counts.shape[0]
+    ne = segs[0].shape[0]
+    for task in prange(n_tasks):
+        counts[task] = _pairs_of_segments((task * ne // n_tasks, (task + 1) * ne // n_tasks), x, segs, mid, grid,
+                                          cuts, pairs_out, (task * share, share))
+
+
+@njit(cache=True, error_model="numpy")
+def _join_shares(pairs, counts, share):
+    """The tasks' pairs, task after task from row 0 (each share moves down or stays: rows are read
+    before they are overwritten); returns their number."""
+    n = 0
+    for task in range(counts.shape[0]):
+        base = task * share
+        for k in range(counts[task]):
+            pairs[n, 0] = pairs[base + k, 0]
+            pairs[n, 1] = pairs[base + k, 1]
+            n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
+def _pairs_of_segments(span, x, segs, mid, grid, cuts, pairs_out, share):
+    """The pairs (i, j), j > i, of the segments i in ``span = (first, end)``, in key order, into
+    rows ``base … base + capacity − 1`` of ``pairs_out`` (``share = (base, capacity)``); returns
+    their number (beyond the capacity: counted, not written)."""
+    seg_nodes, seg_radius, seg_fiber, seg_arc = segs
+    cell_of, start, items, nc, h2 = grid
+    skin, s_excl = cuts
+    base, cap = share
     n = 0
     ta = np.empty(3)
     tb = np.empty(3)
@@ -129,8 +196,8 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
     a1 = np.empty(3)
     b0 = np.empty(3)
     b1 = np.empty(3)
-    h2 = h * h
-    for i in range(ne):
+    for i in range(span[0], span[1]):
+        first = n
         cid = cell_of[i]
         iz = cid % nc[2]
         iy = (cid // nc[2]) % nc[1]
@@ -179,14 +246,25 @@ def build_pairs(x, seg_nodes, seg_radius, seg_fiber, seg_arc, skin, s_excl, pair
                         d2, s, t = segment_distance2(a0, a1, b0, b1, ta, tb)
                         if d2 < cut * cut:
                             if n < cap:
-                                pairs_out[n, 0] = i
-                                pairs_out[n, 1] = j
-                                keys_out[n] = pair_key(i, j, ne)
+                                pairs_out[base + n, 0] = i
+                                pairs_out[base + n, 1] = j
                             n += 1
-    if n > cap:
-        return -n
-    _sort_by_key(pairs_out, keys_out, n, ne)
+        if n <= cap:
+            _sort_partners(pairs_out, base + first, base + n)
     return n
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _sort_partners(pairs, first, end):
+    """Rows ``first … end − 1`` (one segment's pairs, a few dozen at most) in ascending order of
+    their second segment: an insertion sort (numba's ``np.sort`` costs seconds of compile time)."""
+    for k in range(first + 1, end):
+        j = pairs[k, 1]
+        m = k - 1
+        while m >= first and pairs[m, 1] > j:
+            pairs[m + 1, 1] = pairs[m, 1]
+            m -= 1
+        pairs[m + 1, 1] = j
 
 
 @njit(cache=True, error_model="numpy")
@@ -254,36 +332,23 @@ def _bin_segments(mid, lo, h, nc, tot):
     return cell_of, start, items
 
 
-@njit(cache=True, error_model="numpy")
-def _sort_by_key(pairs, keys, n, ne):
-    """Rows ``0 … n − 1`` of ``pairs`` and ``keys`` in ascending order of the key ``i·E + j``.
-
-    Strategy: a counting sort by the first segment i (E buckets), then an insertion sort by j within
-    each bucket (a segment has a few dozen candidates at most). The keys are unique (a pair is listed
-    once), so the order is the one any sort gives; numba's ``np.argsort`` gives it too, at seconds of
-    compile time."""
-    start = np.zeros(ne + 1, np.int64)
-    for k in range(n):
-        start[pairs[k, 0] + 1] += 1
-    for e in range(ne):
-        start[e + 1] += start[e]
-    tmp = pairs[:n].copy()
-    fill = start[:ne].copy()
-    for k in range(n):
-        i = tmp[k, 0]
-        pairs[fill[i], 0] = i
-        pairs[fill[i], 1] = tmp[k, 1]
-        fill[i] += 1
-    for e in range(ne):
-        for k in range(start[e] + 1, start[e + 1]):
-            j = pairs[k, 1]
-            m = k - 1
-            while m >= start[e] and pairs[m, 1] > j:
-                pairs[m + 1, 1] = pairs[m, 1]
-                m -= 1
-            pairs[m + 1, 1] = j
-    for k in range(n):
-        keys[k] = pair_key(pairs[k, 0], pairs[k, 1], ne)
+#: segments per task of the threaded build at least (fewer: one task); a task of 2048 segments
+#: takes about 1.5 ms, far above the cost of starting it
+SEGMENT_TASK_MIN = 2048
+#: tasks of the threaded build at most (numba deals a parallel loop's tasks out to its threads up
+#: front: 8 tasks leave a thread whose core is busy less to catch up than 2)
+SEGMENT_TASKS = 8
+_THREADS = False
+# Not cached: a parfor kernel linked into a step loop compiled in another process crashes its cache
+# entry (see _kernels_beam.beam_pass_fibers); only the solver.threads > 1 contact step uses them. The
+# parallel loop is kept to its own small function: numba's parfor passes take seconds on a large one.
+# The serial build binds the tasks' loop compiled serially (prange as range), never the parfor.
+_pairs_in_tasks_parallel = njit(cache=False, error_model="numpy", parallel=True)(_pairs_in_tasks)
+_pairs_in_tasks = njit(cache=True, error_model="numpy")(_pairs_in_tasks)
+build_pairs = njit(cache=True, error_model="numpy")(_build_pairs)
+build_pairs_threads = specialise(_build_pairs, "build_pairs_threads",
+                                 {"_THREADS": True, "_pairs_in_tasks": _pairs_in_tasks_parallel}, cache=False,
+                                 error_model="numpy")
 
 
 def segment_arclength(seg_nodes: np.ndarray, seg_fiber: np.ndarray, x_ref: np.ndarray) -> np.ndarray:

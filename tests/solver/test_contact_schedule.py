@@ -177,17 +177,19 @@ _THREADS_ENV = "FIBERPIPE_TEST_THREADS"
 
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs two CPUs")
 def test_tasks_on_two_threads_equal_the_serial_passes():
-    """The threaded contact pass's check above and the threaded friction's
-    (tests/solver/test_friction.py) with two threads running the tasks, in a process of their own:
-    the suite itself runs numba on one thread (tests/conftest.py), where the tasks run in turn."""
+    """The threaded contact pass's check above, the threaded friction's (tests/solver/test_friction.py)
+    and the threaded neighbour build's (tests/solver/test_neighbours.py) with two threads running the
+    tasks, in a process of their own: the suite itself runs numba on one thread (tests/conftest.py),
+    where the tasks run in turn."""
     env = dict(os.environ, NUMBA_NUM_THREADS="2", **{_THREADS_ENV: "2"})
     here = Path(__file__)
     tests = [f"{here}::test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit",
-             f"{here.with_name('test_friction.py')}::test_friction_in_tasks_gives_the_serial_forces_and_histories_bit_for_bit"]
+             f"{here.with_name('test_friction.py')}::test_friction_in_tasks_gives_the_serial_forces_and_histories_bit_for_bit",
+             f"{here.with_name('test_neighbours.py')}::test_threaded_build_lists_the_serial_builds_pairs"]
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], env=env,
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
-    assert "2 passed" in r.stdout
+    assert "3 passed" in r.stdout
 
 
 def _pair_in_contact(delta):

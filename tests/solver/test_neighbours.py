@@ -1,5 +1,7 @@
 """Cell list + Verlet list against a brute-force all-pairs reference (the code never loops over all pairs)."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -118,26 +120,31 @@ def test_scales_linearly():
     assert times[1] < 3.0 * times[0]
 
 
-@pytest.mark.parametrize("n", [0, 1, 37, 500])
-def test_pairs_sorted_by_key_as_argsort_sorts_them(n):
-    from fiberpipe.solver.neighbours import _sort_by_key
+@pytest.mark.skipif(not os.environ.get("FIBERPIPE_TEST_THREADS"),
+                    reason="runs on two threads in test_contact_schedule's process of its own (one compile)")
+def test_threaded_build_lists_the_serial_builds_pairs():
+    """solver.threads > 1 builds the list in prange tasks of consecutive segments, each into its own
+    share of the buffer, joined in task order: the same pairs and keys as the serial build, bit for
+    bit, with two threads running the tasks; a buffer too small for the fullest task's share asks for
+    enough (−needed), and a buffer of that size gets the list."""
+    import numba
 
-    ne = 40
-    rng = np.random.default_rng(n)
-    allp = np.array([(i, j) for i in range(ne) for j in range(i + 1, ne)], np.int64)
-    pairs = allp[rng.permutation(len(allp))[:n]].copy()
-    if n == 500:  # one segment with many candidates, given in descending order
-        pairs[:30, 0] = 3
-        pairs[:30, 1] = np.arange(39, 9, -1)
-        pairs = np.unique(pairs, axis=0)[rng.permutation(len(np.unique(pairs, axis=0)))]
-    m = len(pairs)
-    keys = np.full(m + 5, -7, np.int64)
-    buf = np.vstack([pairs, np.full((5, 2), -9, np.int64)])
-    _sort_by_key(buf, keys, m, ne)
-    order = np.argsort(pairs[:, 0] * ne + pairs[:, 1])
-    assert np.array_equal(buf[:m], pairs[order])
-    assert np.array_equal(keys[:m], pairs[order, 0] * ne + pairs[order, 1])
-    assert np.all(buf[m:] == -9) and np.all(keys[m:] == -7)  # rows beyond n untouched
+    from fiberpipe.solver.neighbours import SEGMENT_TASK_MIN, SEGMENT_TASKS, build_pairs_threads
+
+    assert numba.get_num_threads() == int(os.environ["FIBERPIPE_TEST_THREADS"])
+    n_fib = SEGMENT_TASKS * SEGMENT_TASK_MIN // 40
+    x, seg, rad, fib = random_bundle(n_fib, 40, 4, box=2.5e-3 * np.sqrt(n_fib / 14))
+    arc = segment_arclength(seg, fib, x)
+    lists = []
+    for build in (build_pairs, build_pairs_threads):
+        n = build(x, seg, rad, fib, arc, 0.05e-3, 0.5e-3, np.zeros((8, 2), np.int64), np.zeros(8, np.int64))
+        assert n < -8
+        pairs, keys = np.full((-n, 2), -1, np.int64), np.zeros(-n, np.int64)
+        n = build(x, seg, rad, fib, arc, 0.05e-3, 0.5e-3, pairs, keys)
+        lists.append((pairs[:n], keys[:n]))
+    (p1, k1), (p2, k2) = lists
+    assert len(p1) > 4 * len(seg) // 10 and np.array_equal(p1, p2) and np.array_equal(k1, k2)
+    assert np.all(np.diff(k1) > 0)
 
 
 def test_the_cell_grid_is_bounded_by_the_segment_count_however_far_apart_the_segments():

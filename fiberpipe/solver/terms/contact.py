@@ -50,7 +50,7 @@ from ..contact_state import (ContactData, ContactParams, Segments, borrowed_item
 from ..friction import friction_forces_ex, friction_forces_tasks, remap_history
 from ..geometry import pair_gap
 from ..layout import ACC_FD, ACC_PW, ACC_STORED, ACC_V2_MAX, ACC_WK
-from ..neighbours import build_pairs, max_displacement2, max_displacement2_speed2
+from ..neighbours import build_pairs, build_pairs_threads, max_displacement2, max_displacement2_speed2
 
 DEFAULT_SKIN_FACTOR = 0.2          # skin = 0.2 r_max (0.05 r_max: 22 % fewer pairs, no measurable gain)
 DEFAULT_PAIRS_PER_SEGMENT = 16     # initial capacity per segment (grown by the kernel if needed)
@@ -392,16 +392,18 @@ def _potential_pass(forces, tag: str):
                       inline="always", **_SPEC)
 
 
-def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass):
+def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass, update_neighbours=_update_neighbours):
     """A copy of :func:`contact_step` with ``normal_pass`` as its normal pass, ``friction_pass`` as its
-    friction and ``overlaps`` recording the initial overlaps (not cached)."""
+    friction, ``overlaps`` recording the initial overlaps and ``update_neighbours`` keeping the Verlet
+    list (not cached)."""
     forces = specialise(_step_forces, f"_step_forces_{tag}",
                         {"_normal_forces": normal_pass, "_friction_pass": friction_pass}, cache=False,
                         **_NO_COUNTS, **_SPEC)
     first = specialise(_first_steps, f"_first_steps_{tag}",
                        {"_step_forces_pass": forces, "_record_initial_overlaps": overlaps}, cache=False, _nrt=True,
                        **_SPEC)
-    return specialise(contact_step, f"contact_step_{tag}", {"_step_forces_pass": forces, "_first_steps_pass": first},
+    return specialise(contact_step, f"contact_step_{tag}", {"_step_forces_pass": forces, "_first_steps_pass": first,
+                                                           "_update_neighbours": update_neighbours},
                       cache=False, **_NO_COUNTS, **_SPEC)
 
 
@@ -412,9 +414,15 @@ def _step_with(normal_pass, tag: str, overlaps, friction_pass=_friction_pass):
 _friction_pass_threads = specialise(_friction_pass, "_friction_pass_threads",
                                     {"friction_forces_ex": friction_forces_tasks}, cache=False, inline="always",
                                     **_SPEC)
+# and the Verlet list's build (neighbours.build_pairs_threads: the same list)
+_rebuild_threads = specialise(_rebuild, "_rebuild_threads", {"build_pairs": build_pairs_threads}, cache=False,
+                              error_model="numpy", _nrt=True)
+_update_neighbours_threads = specialise(_update_neighbours, "_update_neighbours_threads",
+                                        {"_rebuild": _rebuild_threads}, cache=False, inline="always", **_SPEC)
 contact_step_potential_threads = _step_with(_potential_pass(contact_forces_pot_threads, "potential_threads"),
                                             "potential_threads", _record_initial_overlaps,
-                                            friction_pass=_friction_pass_threads)
+                                            friction_pass=_friction_pass_threads,
+                                            update_neighbours=_update_neighbours_threads)
 
 
 def contact_kernel_for(law, threads: bool = False):
@@ -432,12 +440,12 @@ def contact_kernel_for(law, threads: bool = False):
         # the initial overlaps, recorded once, by the law's serial pass (also with threads)
         overlaps = specialise(_record_initial_overlaps, f"_record_initial_overlaps_{tag}", {"_normal_forces": nf},
                               cache=False, **_SPEC)
-        friction = _friction_pass
+        friction, update = _friction_pass, _update_neighbours
         if threads:
             tag += "_threads"
             nf = _potential_pass(potential_kernels_for(law, threads=True), tag)
-            friction = _friction_pass_threads
-        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, friction_pass=friction)
+            friction, update = _friction_pass_threads, _update_neighbours_threads
+        _CUSTOM_KERNELS[key] = _step_with(nf, tag, overlaps, friction_pass=friction, update_neighbours=update)
     return _CUSTOM_KERNELS[key], None
 
 
