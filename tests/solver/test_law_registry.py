@@ -88,6 +88,7 @@ def _pressed_pair(stiffness: float, line_load: float) -> dict:
     }
 
 
+@pytest.mark.slow  # compiles the contact pass and a step loop for the toy law: ~40 s (make test-all)
 def test_registered_law_runs_from_yaml_and_gives_its_formula(toy_law, tmp_path):
     from _scenes import cli
 
