@@ -962,13 +962,18 @@ def drop_oblique(fibers: Polylines, voxel_size_zyx_m, axis: int, max_tilt_deg: f
             keep.append(i)
     info = {"fibers": fibers.n_fibers - len(keep), "length_vox": round(dropped_length, 1),
             "action": f"left out (tracks more than {max_tilt_deg:g} deg off the slicing axis: a ply the slices cannot follow)"}
+    return _kept(fibers, keep), info
+
+
+
+def _kept(fibers: Polylines, keep: list) -> Polylines:
+    """The fibers ``keep`` of ``fibers`` (``fibers`` itself when it keeps them all), with its meta."""
     if len(keep) == fibers.n_fibers:
-        return fibers, info
+        return fibers
     radii = np.broadcast_to(np.asarray(fibers.radius_m, dtype=np.float64), (fibers.n_fibers,))[keep]
     out = Polylines.from_list([fibers.fiber(i) for i in keep], radii if len(keep) else 0.0)
     out.meta.update(fibers.meta)
-    return out, info
-
+    return out
 
 def drop_oblique_into_meta(fibers: Polylines, voxel_size_zyx_m, axis: int, grey=None,
                            radius_vox: float | None = None) -> Polylines:
@@ -1006,12 +1011,7 @@ def _drop_oblique_structure(fibers: Polylines, grey, voxel_size_zyx_m, axis: int
         else:
             keep.append(i)
     info = {"fibers": fibers.n_fibers - len(keep), "length_vox": round(dropped_length, 1)}
-    if len(keep) == fibers.n_fibers:
-        return fibers, info
-    radii = np.broadcast_to(np.asarray(fibers.radius_m, dtype=np.float64), (fibers.n_fibers,))[keep]
-    out = Polylines.from_list([fibers.fiber(i) for i in keep], radii if len(keep) else 0.0)
-    out.meta.update(fibers.meta)
-    return out, info
+    return _kept(fibers, keep), info
 
 
 def combine_region_parts(parts: list, info: dict, **meta) -> Polylines:
