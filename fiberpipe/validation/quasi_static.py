@@ -61,9 +61,9 @@ def carried_kinetic_energy(run) -> float:
     (scaled) mass. The fibers the plate pushes ahead of the load carry a share of it into the loaded
     phase, where the strain energy starts from nearly nothing."""
     cfg = run.config
-    spec = run.specimen
-    mass_kg = (spec["generator"]["n_fibers"] * float(cfg.material.density) * math.pi * float(cfg.fiber.radius) ** 2
-               * spec["length_m"] * float(cfg.solver.mass_scaling))
+    specimen = run.specimen
+    mass_kg = (specimen["generator"]["n_fibers"] * float(cfg.material.density) * math.pi
+               * float(cfg.fiber.radius) ** 2 * specimen["length_m"] * float(cfg.solver.mass_scaling))
     return 0.5 * mass_kg * float(cfg.scene.loading.velocity) ** 2
 
 
