@@ -73,7 +73,12 @@ def _child(a) -> None:
     from fiberpipe.benchmarks.scenes import scene_and_state
     from fiberpipe.solver.integrator import Integrator
 
-    model, effects, dt, state = scene_and_state(a.state, a.config)
+    if a.bench_fibers:  # the thread bench's bundle (fiberpipe.benchmarks.bench_threads)
+        from fiberpipe.benchmarks.bench_threads import _bench_scene
+
+        model, effects, dt, state = _bench_scene(a.bench_fibers, True, a.pitch)
+    else:
+        model, effects, dt, state = scene_and_state(a.state, a.config)
     integrator = Integrator(model, effects, dt, history_rows=10, history_every=10**9, threads=a.threads)
     print(f"PID {os.getpid()}", flush=True)  # the map's name, for the parent to remove it
     if integrator.advance(state, a.warmup)[0] != 0:
@@ -148,6 +153,9 @@ def main(argv=None) -> list[str]:
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--warmup", type=int, default=300)
     ap.add_argument("--frequency", type=int, default=1999, help="samples per second and thread")
+    ap.add_argument("--bench-fibers", type=int, default=0,
+                    help="the thread bench's bundle of this many fibers instead of a config's scene")
+    ap.add_argument("--pitch", type=float, default=1.98, help="its grid pitch in radii (with --bench-fibers)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
@@ -179,7 +187,8 @@ def _record(a) -> tuple[str, float, int, str, str]:
         cmd = ["perf", "record", "-k", "CLOCK_MONOTONIC", "-e", "cycles:u", "-F", str(a.frequency), "-o",
                str(data), "--", sys.executable, str(Path(__file__).resolve()), "--child",
                "--threads", str(a.threads), "--steps", str(a.steps), "--warmup", str(a.warmup)]
-        for flag, value in (("--state", a.state), ("--config", a.config)):
+        for flag, value in (("--state", a.state), ("--config", a.config),
+                            ("--bench-fibers", a.bench_fibers and str(a.bench_fibers)), ("--pitch", str(a.pitch))):
             if value:
                 cmd += [flag, value]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)

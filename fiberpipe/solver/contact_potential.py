@@ -752,6 +752,8 @@ PAIR_TASK_MIN = 32
 # tasks of the threaded pass: more than the threads, so a task that meets many contacts is
 # balanced by the others
 _PAIR_TASKS = 8
+# look-list entries per chunk of the threaded pass: result rows of 2.4 MB
+_PAIR_CHUNK = 8192
 
 
 def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
@@ -760,12 +762,13 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
     (``span = (lo, hi, reach)``), with one task's scratch (``rec``, ``geo``, ``blk``, ``gbuf``, ``jgeo``
     of :func:`_pass_work`): each pair merged at once (``_THREADS`` False; returns the energy and the
     count of pairs in contact), or (``_THREADS``) each pair's records written in place (``sink =
-    (rows, touch, recs)``: ``recs`` the records built from their arrays in the task, as a structure
-    passed into it loses its writes) and a pair with a force or an energy written to its result row
-    ``rows[kk]`` and listed in ``touch[lo:]`` for the merge after the tasks, which adds the forces and
-    lists the pairs in contact in order (returns zero energy and the length of that list)."""
+    (rows, touch, recs, base)``: ``recs`` the records built from their arrays in the task, as a
+    structure passed into it loses its writes) and a pair with a force or an energy written to its
+    result row ``rows[kk − base]`` and listed in ``touch[lo − base:]`` for the merge after the tasks,
+    which lists the pairs in contact in order and adds their forces (returns zero energy and the
+    length of that list)."""
     lo, hi, reach = span
-    rows, touch, recs = sink
+    rows, touch, recs, base = sink
     n_touch = 0
     rec, geo, blk, gbuf, jgeo = scratch
     use_list = out.active.shape[0] > 0
@@ -784,7 +787,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
     loc = (0, 1, 2, 3)  # the block's rows: the pair's nodes a0, a1, b0, b1
     for kk in range(lo, hi):
         k = look[kk] if compact else kk
-        ri = kk if _THREADS else 0  # the pair's result row
+        ri = kk - base if _THREADS else 0  # the pair's result row (rows from the chunk's first entry on)
         # the positions of the pairs a few places ahead, on their way while this one is evaluated
         # (fiberpipe._prefetch; a hint, without effect on the results)
         if kk + 2 * _AHEAD < hi:
@@ -887,7 +890,7 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             if outcome == _TOUCHING or e != 0.0:
                 rows[ri, _R_OUTCOME] = outcome
                 rows[ri, _R_ENERGY] = e
-                touch[lo + n_touch] = kk
+                touch[lo - base + n_touch] = ri
                 n_touch += 1
         else:  # one task: merged at once, in the same order
             n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, ri, outcome, n_active, use_list,
@@ -899,10 +902,12 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
 
 
 def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off, reach,
-                n_look, work):
+                chunk, work):
     """The pairs of the look list (:func:`_look_list`) of :func:`contact_forces_pot`: one task
-    (``_THREADS`` False), or ``prange`` tasks of consecutive pairs, merged after them in order.
-    ``work``: the pass's scratch arrays (:func:`_pass_work`), one set per task."""
+    (``_THREADS`` False; ``chunk = (0, n_look, 0.0, 0)``), or the entries ``lo … hi − 1`` of
+    ``chunk = (lo, hi, energy, n_active)`` (the sums of the chunks before) in ``prange`` tasks of
+    consecutive pairs, merged after them in order. ``work``: the pass's scratch arrays
+    (:func:`_pass_work`), one set per task."""
     # Strategy: each pair writes only its own result row (its forces summed in a 4-node block, its
     # records, its new skip threshold) and the rows are merged in the order of the pairs, at once
     # (one task) or after the tasks, so the sums are the same whichever task evaluated a pair. A task
@@ -915,25 +920,28 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     # prange body takes its counts once per task, not per pair and Gauss point.
     rows, t_rec, t_geo, t_blk, t_gbuf, t_jgeo, touch, n_touch = work
     fn, normal, s, t, phi, delta, share, fsum, gap, active = out
+    base, end, energy_before, n_active_before = chunk
     if not _THREADS:
         return _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
-                               c_off, (0, n_look, reach), (rows, touch, out),
+                               c_off, (0, end, reach), (rows, touch, out, 0),
                                (t_rec[0], t_geo[0], t_blk[0], t_gbuf[0], t_jgeo[0]))
     n_tasks = t_rec.shape[0]
+    n_rows = end - base
     for task in prange(n_tasks):
         n_touch[task] = _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds,
                                         f_out, out, c_off,
-                                        (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach),
+                                        (base + task * n_rows // n_tasks, base + (task + 1) * n_rows // n_tasks, reach),
                                         (rows, touch, PairRecords(fn, normal, s, t, phi, delta, share, fsum, gap,
-                                                                  active)),
+                                                                  active), base),
                                         (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))[1]
-    energy, n_active = _merge_rows(out, rows, (touch, n_touch, n_look))
+    listed = (touch, n_touch, n_rows, base)
+    energy, n_active = _merge_rows(out, rows, listed, (energy_before, n_active_before))
     # the forces in pair order, each task adding those on its share of the nodes (every node's
     # additions in the serial pass's order: the same sums bit for bit)
     n_nodes = f_out.shape[0]
     n_owners = get_num_threads()
     for owner in prange(n_owners):
-        _scatter_owned(f_out, seg_nodes, pairs, rows, (touch, n_touch, n_look),
+        _scatter_owned(f_out, seg_nodes, pairs, rows, listed,
                        (owner * n_nodes // n_owners, (owner + 1) * n_nodes // n_owners))
     return energy, n_active
 
@@ -942,23 +950,24 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
 def _scatter_owned(f_out, seg_nodes, pairs, rows, listed, owned):
     """The forces of the pairs in contact that :func:`_merge_rows` listed (``listed``, its pair
     indices in the rows' ``_R_PAIR`` column), in pair order, onto the nodes ``owned = (lo, hi)``."""
-    touch, n_touch, n_look = listed
+    touch, n_touch, n_rows, _ = listed
     n_tasks = n_touch.shape[0]
     for task in range(n_tasks):
-        lo = task * n_look // n_tasks
+        lo = task * n_rows // n_tasks
         for m in range(lo, lo + n_touch[task]):
-            kk = touch[m]
-            if rows[kk, _R_OUTCOME] == _TOUCHING:
-                _merge_forces(f_out, seg_nodes, pairs, int(rows[kk, _R_PAIR]), rows, kk, owned)
+            r = touch[m]
+            if rows[r, _R_OUTCOME] == _TOUCHING:
+                _merge_forces(f_out, seg_nodes, pairs, int(rows[r, _R_PAIR]), rows, r, owned)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _merge_rows(out, rows, listed):
+def _merge_rows(out, rows, listed, sums):
     """The threaded pass's merge after its tasks (:func:`_pairs_pass`): the result rows its tasks
-    listed (``listed = (touch, n_touch, n_look)``: each task's rows from its first look-list entry
-    on, ``n_touch`` per task) into the list of pairs in contact, in pair order (the tasks wrote the
-    records), each row's pair index into its ``_R_PAIR`` column for the forces' scatter
-    (:func:`_scatter_owned`); returns ``(energy, n_active)``. The pairs the tasks did not list add
+    listed (``listed = (touch, n_touch, n_rows, base)``: each task's rows from its first entry of
+    the chunk on, ``n_touch`` per task; row r is the look list's entry ``base + r``) into the list of
+    pairs in contact, in pair order (the tasks wrote the records), each row's pair index into its
+    ``_R_PAIR`` column for the forces' scatter (:func:`_scatter_owned`); returns ``(energy,
+    n_active)`` continued from ``sums`` (those of the chunks before). The pairs the tasks did not list add
     nothing: no force, and an energy of 0, which leaves the sum's bits as they are.
     Compiled without reference counts, as the serial pass (a count per pair for the row slice it
     hands to the records otherwise; LLVM removes most of them, and the threaded pass measured the
@@ -966,21 +975,20 @@ def _merge_rows(out, rows, listed):
     use_list = out.active.shape[0] > 0
     look = out.active
     compact = _compact_look(out)
-    touch, n_touch, n_look = listed
+    touch, n_touch, n_rows, base = listed
     n_tasks = n_touch.shape[0]
-    energy = 0.0
-    n_active = 0
+    energy, n_active = sums
     for task in range(n_tasks):
-        lo = task * n_look // n_tasks
+        lo = task * n_rows // n_tasks
         for m in range(lo, lo + n_touch[task]):
-            kk = touch[m]
-            k = look[kk] if compact else kk
-            rows[kk, _R_PAIR] = k
-            if rows[kk, _R_OUTCOME] == _TOUCHING:  # in contact: its records are written (record_pair's count)
+            r = touch[m]
+            k = look[base + r] if compact else base + r
+            rows[r, _R_PAIR] = k
+            if rows[r, _R_OUTCOME] == _TOUCHING:  # in contact: its records are written (record_pair's count)
                 if use_list:
                     out.active[n_active] = k
                 n_active += 1
-            energy += rows[kk, _R_ENERGY]
+            energy += rows[r, _R_ENERGY]
     return energy, n_active
 
 
@@ -1024,11 +1032,20 @@ def _contact_forces_pot(x, seg_nodes, seg_radius, seg_arc, pairs, n_pairs, law_i
     forces, records and energy bit for bit."""
     n_look = _look_list(out, n_pairs, reach)
     if _THREADS and n_look >= 2 * PAIR_TASK_MIN:
-        work = _pass_work(n_look, task_count(n_look, PAIR_TASK_MIN, _PAIR_TASKS), gxi.shape[0])
-        return _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
-                            c_off, reach, n_look, work)
+        # chunks of the look list: the result rows stay a few MB, which the allocator reuses from step
+        # to step (a larger block is mapped afresh each step, and its first writes fault every page:
+        # a squeezed 1000-fiber bundle ran no faster on two threads than on one)
+        n_chunk = min(n_look, _PAIR_CHUNK)
+        work = _pass_work(n_chunk, task_count(n_chunk, PAIR_TASK_MIN, _PAIR_TASKS), gxi.shape[0])
+        energy = 0.0
+        n_active = 0
+        for lo in range(0, n_look, n_chunk):
+            energy, n_active = _pairs_tasks(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds,
+                                            f_out, out, c_off, reach,
+                                            (lo, min(n_look, lo + n_chunk), energy, n_active), work)
+        return energy, n_active
     return _pairs_serial(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
-                         reach, n_look, _pass_work(0, 1, gxi.shape[0]))
+                         reach, (0, n_look, 0.0, 0), _pass_work(0, 1, gxi.shape[0]))
 
 
 @njit(cache=True, _nrt=True)

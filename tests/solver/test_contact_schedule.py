@@ -142,6 +142,8 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     blocks in the serial order, so forces, energy, records and the list of pairs in contact equal the
     serial pass's bit for bit at every step of a bundle squeezed and let go (records kept from step to
     step; pairs that come apart are reset in the tasks)."""
+    from fiberpipe.solver import contact_potential
+    from fiberpipe.solver._specialise import specialise
     from fiberpipe.solver.contact_potential import PAIR_TASK_MIN, contact_forces_pot, contact_forces_pot_threads
     from fiberpipe.solver.contact_state import new_records
 
@@ -158,7 +160,11 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     rng = np.random.default_rng(7)
     x, seg, rad, pairs, arc, law, gxi, gw = _potential_bundle(rng)
     n = len(pairs)
-    kept = [new_records(n), new_records(n)]
+    # the threaded pass in chunks of 40 look-list entries (a large bundle's look list runs in chunks)
+    chunked = specialise(contact_potential._contact_forces_pot, "contact_forces_pot_chunked",
+                         {"_THREADS": True, "_PAIR_CHUNK": 40}, cache=False, fastmath=True, error_model="numpy",
+                         _nrt=True)
+    kept = [new_records(n), new_records(n), new_records(n)]
     for r in kept:
         r.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]
     most_looked = 0
@@ -167,19 +173,20 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
         fn_before = kept[1].fn[:n].copy()
         most_looked = max(most_looked, int(np.sum(kept[0].gap[:n] <= reach)))
         res = []
-        for kernel, r in zip((contact_forces_pot, contact_forces_pot_threads), kept):
+        for kernel, r in zip((contact_forces_pot, contact_forces_pot_threads, chunked), kept):
             f = np.zeros_like(x)
             e, na = kernel(x, seg, rad, arc, pairs, n, law.law_id, law.params(), gxi, gw, 1e-9, f, r, np.zeros(0),
                            reach)
             res.append((f, e, na))
-        (f1, e1, na1), (f2, e2, na2) = res
-        assert np.array_equal(f1, f2) and e1 == e2 and na1 == na2
-        for name in ("fn", "normal", "s", "t", "phi", "delta", "share", "fsum", "gap"):
-            assert np.array_equal(getattr(kept[0], name), getattr(kept[1], name)), name
-        assert np.array_equal(kept[0].active[:na1], kept[1].active[:na2])
+        f1, e1, na1 = res[0]
+        for (f2, e2, na2), other in zip(res[1:], kept[1:]):
+            assert np.array_equal(f1, f2) and e1 == e2 and na1 == na2
+            for name in ("fn", "normal", "s", "t", "phi", "delta", "share", "fsum", "gap"):
+                assert np.array_equal(getattr(kept[0], name), getattr(other, name)), name
+            assert np.array_equal(kept[0].active[:na1], other.active[:na2])
         opened += int(np.sum((fn_before > 0) & (kept[1].fn[:n] == 0)))
     assert na1 > 0 and opened > 0
-    assert most_looked >= 2 * PAIR_TASK_MIN  # two tasks or more ran
+    assert most_looked >= max(2 * PAIR_TASK_MIN, 80)  # two tasks or more ran; two chunks or more
 
 
 # set by test_tasks_on_two_threads_equal_the_serial_passes, which checks that its run got them
