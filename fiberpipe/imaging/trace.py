@@ -225,7 +225,7 @@ def _local_maxima(img: np.ndarray, min_distance: int, threshold: float, within: 
 def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
                  peak_threshold: float, seeds: np.ndarray | None = None, refine: bool = True,
                  smooth_edt: bool = True, seed_nms: float = 1.2, peak_nms: float = 1.0,
-                 grey: np.ndarray | None = None):
+                 grey: np.ndarray | None = None, min_spacing_radii: float | None = None):
     """Fiber centres in one 2D mask slice (or, given ``grey``, in the grey slice within the mask).
 
     Parameters
@@ -255,6 +255,10 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
         grey-weighted centroids, and ``peak_threshold`` is in units of the contrast. For dense
         packs, where the binary mask merges touching fibers into one region and its EDT has no
         maximum per fiber.
+    min_spacing_radii : float, optional
+        On grey, the closest two refined centres may lie (radii; default
+        :data:`MIN_CENTRE_SPACING_RADII`); 0: only converged duplicates dropped (the grey radius
+        estimate's detection, :func:`grey_radius_of_slices`).
 
     Returns
     -------
@@ -302,10 +306,13 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     source = np.concatenate([seed_idx, -np.ones(len(pk), dtype=np.int64)])
     if len(cand) == 0:
         return empty
+    spacing = 0.0
+    if grey is not None:  # no two fibers closer than MIN_CENTRE_SPACING_RADII (see there)
+        spacing = MIN_CENTRE_SPACING_RADII if min_spacing_radii is None else float(min_spacing_radii)
     rad = np.where(source >= 0, seed_nms * r_vox, peak_nms * r_vox)
     keep = _nms(cand, rad, samp)
     cand, source = cand[keep], source[keep]
-    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine) if refine else (cand, source)
+    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine, spacing) if refine else (cand, source)
     ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
     ridge = edt[ci[:, 0], ci[:, 1]]
     ok = (ridge >= thr) & sl[ci[:, 0], ci[:, 1]]
@@ -314,6 +321,14 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     return c[ok], ridge[ok], source[ok]
 
 
+#: The closest two centres of the grey detection may lie, in fiber radii. Fibers do not overlap, so
+#: the centres of two touching fibers of radius r lie 2 r apart; 1.5 r still keeps two fibers each a
+#: quarter thinner than the estimate (which runs 3-13 % low on dense packs). Two maxima closer than
+#: this are one fiber seen twice: where the scan's noise is correlated across the slice (streaks
+#: along x over about two voxels on the real cross-ply example), a streak through a fiber of r ~ 2.5
+#: splits its Laplacian response into two maxima about 1.2-1.5 r apart, and a track following each
+#: leaves the fiber in two pieces side by side, one of which ends where the other goes on.
+MIN_CENTRE_SPACING_RADII = 1.5
 #: Scale of the Laplacian-of-Gaussian blob filter of the grey detection, in fiber radii.
 LOG_SIGMA_RADII = 0.5
 #: In-slice blur (pixels) of the grey level that a centre must reach (``peak_threshold``).
@@ -340,13 +355,20 @@ def _grey_candidates(grey, sl, r_vox: float, samp, peak_threshold: float):
     return pk[np.argsort(-response[pk[:, 0], pk[:, 1]], kind="stable")], response, level
 
 
-def _refine(sl, grey, cand, source, r_vox: float, samp, refine):
+def _refine(sl, grey, cand, source, r_vox: float, samp, refine, spacing_radii: float = 0.0):
     """Sub-voxel centres of the candidates (:func:`detect_slice`): the centroids of their Voronoi
-    cells, then (``refine="fit"``, grey) the joint disk fit, fitted disks below
-    :data:`MIN_FIT_AMPLITUDE` dropped; candidates that converged onto an earlier (higher-priority)
-    one are duplicates and dropped."""
+    cells; on grey, centroids closer than ``spacing_radii`` radii are one fiber, so the
+    later (lower-response) one is dropped and the others' centroids taken again without its cut; then
+    (``refine="fit"``, grey) the joint disk fit, fitted disks below :data:`MIN_FIT_AMPLITUDE` dropped;
+    candidates that converged onto an earlier (higher-priority) one are duplicates and dropped."""
     w = sl if grey is None else np.clip(grey, 0.0, 1.0)
     c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
+    if grey is not None and spacing_radii > 0 and len(c):
+        # on the refined centres, not the raw maxima: a maximum in the gap between three touching
+        # fibers lies 2 / sqrt(3) = 1.15 r from each and, at the higher response, would suppress them
+        apart = _nms(c, np.full(len(c), spacing_radii * r_vox), samp)
+        if not apart.all():
+            c, source = _refine_centroids(w, c[apart], r_vox + 1.0, samp), source[apart]
     if refine == "fit" and grey is not None and len(c):
         # the grey of another region (a cross ply beside this one) is no fiber of this slice's model
         near = ndi.binary_dilation(sl, iterations=2)
@@ -869,7 +891,10 @@ def grey_radius_of_slices(mask_t, grey_t, samp: np.ndarray, levels=None) -> floa
     r0 = estimate_radius_vox(mask_t, samp)
 
     def detect(sl, g, r):
-        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
+        # every maximum a radius apart: a trial radius below the fibers' shows two per fiber, and the
+        # score must see them to reject it (a minimum spacing would hide them)
+        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g,
+                            min_spacing_radii=0.0)[0]
 
     return estimate_radius_grey(_GreySlices(grey_t, mask_t, samp, levels=levels), mask_t, samp, r0, detect)
 
