@@ -630,11 +630,50 @@ def _drop_outliers(piece, samp, max_offset_vox: float, window: int):
     return k[ok], p[ok], r[ok]
 
 
+#: The most slices cut from either end of a piece before pieces are merged (:func:`_trim_ends`):
+#: the slices a track may miss before it ends (the slices tracer's ``max_skip``).
+MAX_END_TRIM = 3
+
+
+def _trim_ends(piece, samp, max_offset_vox: float, n_fit: int, max_trim: int = MAX_END_TRIM):
+    """The piece (k, p, r) without its last (and first) points that lie farther than
+    ``max_offset_vox`` from the line through the ``n_fit`` points before them, up to ``max_trim``
+    at each end, and the number cut at the start and at the end.
+
+    Why: a track ends because its detections left its fiber: where the scan's noise is correlated
+    across the slice, a noise streak moves the fiber's detection by half a radius to a radius for
+    two or three slices, the track follows it (the alpha-beta filter halves each error, it does not
+    ignore it), and ends there; a new track picks the fiber up, its first detections as displaced.
+    Those few points are the majority of the few a running median sees at a track's end, so
+    :func:`_drop_outliers` keeps them, and they tilt the line each end is extrapolated along (on a
+    dense phantom with such noise, 3 of 4 split fibers were pieces one slice apart whose last or
+    first two or three points lay 1-2.5 voxels off the fiber). The fiber's own course before them,
+    straight over a few radii, shows which points left it."""
+    k, p, r = piece
+    if len(k) < n_fit + max_trim + 2:
+        return piece, 0, 0
+
+    def off_line(body: slice, tail: slice) -> np.ndarray:
+        slope, offset = np.polyfit(k[body].astype(np.float64), p[body], 1)
+        return np.linalg.norm((p[tail] - (np.outer(k[tail], slope) + offset)) * samp, axis=1) > max_offset_vox
+
+    n = len(k)
+    end_off = off_line(slice(n - max_trim - n_fit, n - max_trim), slice(n - max_trim, n))
+    hi = n - max_trim + int(np.argmax(end_off)) if end_off.any() else n
+    start_off = off_line(slice(max_trim, max_trim + n_fit), slice(0, max_trim))
+    lo = int(np.flatnonzero(start_off)[-1]) + 1 if start_off.any() else 0
+    if hi - lo < 2:
+        return piece, 0, 0
+    return (k[lo:hi], p[lo:hi], r[lo:hi]), lo, n - hi
+
+
 def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max_overlap: int = MERGE_MAX_OVERLAP,
-                 outlier_vox: float | None = None):
+                 outlier_vox: float | None = None, max_trim: int = MAX_END_TRIM):
     """Join track pieces whose end and start continue each other (after a detection gap, or
     overlapping by up to ``max_overlap`` slices), after dropping every point farther than
-    ``outlier_vox`` from its track's running median (:func:`_drop_outliers`) when given.
+    ``outlier_vox`` from its track's running median (:func:`_drop_outliers`) and up to
+    ``max_trim`` end points that left the track's course (:func:`_trim_ends`) when given (the gap
+    then counted from the points before the cut).
 
     Returns a list of (k (m,), p (m, 2), r (m,)) arrays, one per merged track.
     """
@@ -644,9 +683,15 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max
     # piece cut before it. Pairs are accepted greedily by increasing cost under max_dist, each end
     # and start at most once, then chained.
     arr = [(np.asarray(t.k), np.asarray(t.p), np.asarray(t.r)) for t in tracks]
+    n = len(arr)
+    cut_start, cut_end = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
     if outlier_vox is not None:
         arr = [_drop_outliers(a, samp, outlier_vox, fit_n) for a in arr]
-    n = len(arr)
+        if max_trim > 0:
+            trimmed = [_trim_ends(a, samp, outlier_vox, fit_n, max_trim) for a in arr]
+            arr = [t[0] for t in trimmed]
+            cut_start[:] = [t[1] for t in trimmed]
+            cut_end[:] = [t[2] for t in trimmed]
     if n == 0:
         return []
     k0 = np.array([a[0][0] for a in arr])
@@ -660,10 +705,11 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max
     ps_all = np.array([st[0] for st in starts]) * samp
     tree = cKDTree(ps_all)
     for i in range(n):
-        R = 2.0 * max_dist * (1.0 + 0.1 * max_gap) + float(np.linalg.norm(ends[i][1] * samp)) * max_gap
+        reach = max_gap + 2 * max_trim
+        R = 2.0 * max_dist * (1.0 + 0.1 * reach) + float(np.linalg.norm(ends[i][1] * samp)) * reach
         for j in tree.query_ball_point(ends[i][0] * samp, R):
             g = k0[j] - k1[i]
-            if g > max_gap or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
+            if g > max_gap + cut_end[i] + cut_start[j] or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
                 continue
             pe, se = ends[i]
             if g < 1:  # overlap: the earlier piece's end fitted on its slices before the later start
