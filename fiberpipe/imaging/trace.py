@@ -709,7 +709,8 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max
         R = 2.0 * max_dist * (1.0 + 0.1 * reach) + float(np.linalg.norm(ends[i][1] * samp)) * reach
         for j in tree.query_ball_point(ends[i][0] * samp, R):
             g = k0[j] - k1[i]
-            if g > max_gap + cut_end[i] + cut_start[j] or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
+            too_far = g > max_gap + cut_end[i] + cut_start[j]  # the gap before the end points were cut
+            if too_far or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
                 continue
             pe, se = ends[i]
             if g < 1:  # overlap: the earlier piece's end fitted on its slices before the later start
