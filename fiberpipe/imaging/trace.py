@@ -326,7 +326,7 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
 #: quarter thinner than the estimate (which runs 3-13 % low on dense packs). Two maxima closer than
 #: this are one fiber seen twice: where the scan's noise is correlated across the slice (streaks
 #: along x over about two voxels on the real cross-ply example), a streak through a fiber of r ~ 2.5
-#: splits its Laplacian response into two maxima about 1.2-1.5 r apart, and a track following each
+#: splits its Laplacian response into two maxima about 1.0-1.6 r apart, and a track following each
 #: leaves the fiber in two pieces side by side, one of which ends where the other goes on.
 MIN_CENTRE_SPACING_RADII = 1.5
 #: Scale of the Laplacian-of-Gaussian blob filter of the grey detection, in fiber radii.
