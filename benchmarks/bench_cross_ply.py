@@ -3,7 +3,7 @@ on the package index) through ``fiberpipe run`` to the trace stage with only ``v
 
 Usage (from the repository root)::
 
-    python benchmarks/bench_cross_ply.py [--cache DIR] [--pictures DIR] [--out FILE.md]
+    python benchmarks/bench_cross_ply.py [--cache DIR] [--pictures DIR] [--out FILE.md] [--chunked]
 
 The volume is fetched with ``pip download --no-deps qim3d==1.5.3`` into ``--cache`` (default
 ``~/.cache/fiberpipe``) and read from the wheel; it is not part of the repository. Reported: the
@@ -11,6 +11,8 @@ tracer ``auto`` chose, the regions along other axes, the traced radius, and for 
 (the slicing axis) that cross the middle slice, how many run over at least 80 % of the depth and
 their median length. ``--pictures`` copies the run's ``trace_slices.png`` and
 ``trace_midlines.png`` there (as ``cross_ply_*.png``) with three orthogonal slices of the volume.
+``--chunked`` runs the stages chunk by chunk (``chunks.mode: on``, 32-slice blocks) on a copy of the
+volume as HDF5.
 """
 
 from __future__ import annotations
@@ -121,6 +123,7 @@ def main(argv=None) -> None:
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "fiberpipe")
     ap.add_argument("--pictures", type=Path)
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--chunked", action="store_true", help="chunks.mode: on (32-slice blocks), the volume as HDF5")
     a = ap.parse_args(argv)
     from fiberpipe.artifacts import read_fibers
     from fiberpipe.config import load_config
@@ -129,7 +132,15 @@ def main(argv=None) -> None:
     volume = fetch_volume(a.cache)
     with tempfile.TemporaryDirectory() as tmp:
         cfg_path = Path(tmp) / "cross_ply.yaml"
-        cfg_path.write_text(f"input: {{volume: {volume}, voxel_size: 1.3 um}}\nskeletonize: {{enabled: false}}\n")
+        source, chunks = volume, ""
+        if a.chunked:
+            import h5py
+            import tifffile
+
+            source, chunks = Path(tmp) / "volume.h5", "chunks: {mode: on, slices: 32}\n"
+            with h5py.File(source, "w") as f:
+                f.create_dataset("volume", data=tifffile.imread(volume), chunks=(16, 150, 150))
+        cfg_path.write_text(f"input: {{volume: {source}, voxel_size: 1.3 um}}\nskeletonize: {{enabled: false}}\n{chunks}")
         t0 = time.perf_counter()
         run_pipeline(load_config(cfg_path), Path(tmp) / "run", to_stage="trace")
         wall = time.perf_counter() - t0
@@ -151,7 +162,8 @@ def main(argv=None) -> None:
                     + (f" ({v['oblique']} tracks off its axis left out)" if v.get("oblique") else "")
                     for ax, v in tr["off_axis"].items() if ax != "oblique")
     oblique = tr["off_axis"].get("oblique", {"fibers": 0, "length_vox": 0.0})
-    lines = [f"# Real cross-ply CT (qim3d fibers_150x150x150.tif, 1.3 um), only voxel_size given\n",
+    lines = [f"# Real cross-ply CT (qim3d fibers_150x150x150.tif, 1.3 um), only voxel_size given"
+             f"{' (chunked: 32-slice blocks, HDF5)' if a.chunked else ''}\n",
              f"- segment + trace: {wall:.1f} s; tracer chosen by auto: {tr['method']}; traced radius "
              f"{tr['median_radius_m'] / VOXEL_SIZE_M:.2f} voxels; {tr['fibers']} fibers",
              f"- regions along other axes: {off or 'none'}",
