@@ -225,7 +225,7 @@ def _local_maxima(img: np.ndarray, min_distance: int, threshold: float, within: 
 def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance: int,
                  peak_threshold: float, seeds: np.ndarray | None = None, refine: bool = True,
                  smooth_edt: bool = True, seed_nms: float = 1.2, peak_nms: float = 1.0,
-                 grey: np.ndarray | None = None):
+                 grey: np.ndarray | None = None, min_spacing_radii: float | None = None):
     """Fiber centres in one 2D mask slice (or, given ``grey``, in the grey slice within the mask).
 
     Parameters
@@ -255,6 +255,10 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
         grey-weighted centroids, and ``peak_threshold`` is in units of the contrast. For dense
         packs, where the binary mask merges touching fibers into one region and its EDT has no
         maximum per fiber.
+    min_spacing_radii : float, optional
+        On grey, the closest two refined centres may lie (radii; default
+        :data:`MIN_CENTRE_SPACING_RADII`); 0: only converged duplicates dropped (the grey radius
+        estimate's detection, :func:`grey_radius_of_slices`).
 
     Returns
     -------
@@ -302,10 +306,13 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     source = np.concatenate([seed_idx, -np.ones(len(pk), dtype=np.int64)])
     if len(cand) == 0:
         return empty
+    spacing = 0.0
+    if grey is not None:  # no two fibers closer than MIN_CENTRE_SPACING_RADII (see there)
+        spacing = MIN_CENTRE_SPACING_RADII if min_spacing_radii is None else float(min_spacing_radii)
     rad = np.where(source >= 0, seed_nms * r_vox, peak_nms * r_vox)
     keep = _nms(cand, rad, samp)
     cand, source = cand[keep], source[keep]
-    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine) if refine else (cand, source)
+    c, source = _refine(sl, grey, cand, source, r_vox, samp, refine, spacing) if refine else (cand, source)
     ci = np.clip(np.rint(c).astype(np.int64), [0, 0], [H - 1, W - 1])
     ridge = edt[ci[:, 0], ci[:, 1]]
     ok = (ridge >= thr) & sl[ci[:, 0], ci[:, 1]]
@@ -314,6 +321,14 @@ def detect_slice(sl: np.ndarray, r_vox: float, samp: np.ndarray, *, min_distance
     return c[ok], ridge[ok], source[ok]
 
 
+#: The closest two centres of the grey detection may lie, in fiber radii. Fibers do not overlap, so
+#: the centres of two touching fibers of radius r lie 2 r apart; 1.5 r still keeps two fibers each a
+#: quarter thinner than the estimate (which runs 3-13 % low on dense packs). Two maxima closer than
+#: this are one fiber seen twice: where the scan's noise is correlated across the slice (streaks
+#: along x over about two voxels on the real cross-ply example), a streak through a fiber of r ~ 2.5
+#: splits its Laplacian response into two maxima about 1.0-1.6 r apart, and a track following each
+#: leaves the fiber in two pieces side by side, one of which ends where the other goes on.
+MIN_CENTRE_SPACING_RADII = 1.5
 #: Scale of the Laplacian-of-Gaussian blob filter of the grey detection, in fiber radii.
 LOG_SIGMA_RADII = 0.5
 #: In-slice blur (pixels) of the grey level that a centre must reach (``peak_threshold``).
@@ -340,13 +355,20 @@ def _grey_candidates(grey, sl, r_vox: float, samp, peak_threshold: float):
     return pk[np.argsort(-response[pk[:, 0], pk[:, 1]], kind="stable")], response, level
 
 
-def _refine(sl, grey, cand, source, r_vox: float, samp, refine):
+def _refine(sl, grey, cand, source, r_vox: float, samp, refine, spacing_radii: float = 0.0):
     """Sub-voxel centres of the candidates (:func:`detect_slice`): the centroids of their Voronoi
-    cells, then (``refine="fit"``, grey) the joint disk fit, fitted disks below
-    :data:`MIN_FIT_AMPLITUDE` dropped; candidates that converged onto an earlier (higher-priority)
-    one are duplicates and dropped."""
+    cells; on grey, centroids closer than ``spacing_radii`` radii are one fiber, so the
+    later (lower-response) one is dropped and the others' centroids taken again without its cut; then
+    (``refine="fit"``, grey) the joint disk fit, fitted disks below :data:`MIN_FIT_AMPLITUDE` dropped;
+    candidates that converged onto an earlier (higher-priority) one are duplicates and dropped."""
     w = sl if grey is None else np.clip(grey, 0.0, 1.0)
     c = _refine_centroids(w, cand, r_vox + (2.0 if grey is None else 1.0), samp)
+    if grey is not None and spacing_radii > 0 and len(c):
+        # on the refined centres, not the raw maxima: a maximum in the gap between three touching
+        # fibers lies 2 / sqrt(3) = 1.15 r from each and, at the higher response, would suppress them
+        apart = _nms(c, np.full(len(c), spacing_radii * r_vox), samp)
+        if not apart.all():
+            c, source = _refine_centroids(w, c[apart], r_vox + 1.0, samp), source[apart]
     if refine == "fit" and grey is not None and len(c):
         # the grey of another region (a cross ply beside this one) is no fiber of this slice's model
         near = ndi.binary_dilation(sl, iterations=2)
@@ -608,11 +630,50 @@ def _drop_outliers(piece, samp, max_offset_vox: float, window: int):
     return k[ok], p[ok], r[ok]
 
 
+#: The most slices cut from either end of a piece before pieces are merged (:func:`_trim_ends`):
+#: the slices a track may miss before it ends (the slices tracer's ``max_skip``).
+MAX_END_TRIM = 3
+
+
+def _trim_ends(piece, samp, max_offset_vox: float, n_fit: int, max_trim: int = MAX_END_TRIM):
+    """The piece (k, p, r) without its last (and first) points that lie farther than
+    ``max_offset_vox`` from the line through the ``n_fit`` points before them, up to ``max_trim``
+    at each end, and the number cut at the start and at the end.
+
+    Why: a track ends because its detections left its fiber: where the scan's noise is correlated
+    across the slice, a noise streak moves the fiber's detection by half a radius to a radius for
+    two or three slices, the track follows it (the alpha-beta filter halves each error, it does not
+    ignore it), and ends there; a new track picks the fiber up, its first detections as displaced.
+    Those few points are the majority of the few a running median sees at a track's end, so
+    :func:`_drop_outliers` keeps them, and they tilt the line each end is extrapolated along (on a
+    dense phantom with such noise, 3 of 4 split fibers were pieces one slice apart whose last or
+    first two or three points lay 1-2.5 voxels off the fiber). The fiber's own course before them,
+    straight over a few radii, shows which points left it."""
+    k, p, r = piece
+    if len(k) < n_fit + max_trim + 2:
+        return piece, 0, 0
+
+    def off_line(body: slice, tail: slice) -> np.ndarray:
+        slope, offset = np.polyfit(k[body].astype(np.float64), p[body], 1)
+        return np.linalg.norm((p[tail] - (np.outer(k[tail], slope) + offset)) * samp, axis=1) > max_offset_vox
+
+    n = len(k)
+    end_off = off_line(slice(n - max_trim - n_fit, n - max_trim), slice(n - max_trim, n))
+    hi = n - max_trim + int(np.argmax(end_off)) if end_off.any() else n
+    start_off = off_line(slice(max_trim, max_trim + n_fit), slice(0, max_trim))
+    lo = int(np.flatnonzero(start_off)[-1]) + 1 if start_off.any() else 0
+    if hi - lo < 2:
+        return piece, 0, 0
+    return (k[lo:hi], p[lo:hi], r[lo:hi]), lo, n - hi
+
+
 def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max_overlap: int = MERGE_MAX_OVERLAP,
-                 outlier_vox: float | None = None):
+                 outlier_vox: float | None = None, max_trim: int = MAX_END_TRIM):
     """Join track pieces whose end and start continue each other (after a detection gap, or
     overlapping by up to ``max_overlap`` slices), after dropping every point farther than
-    ``outlier_vox`` from its track's running median (:func:`_drop_outliers`) when given.
+    ``outlier_vox`` from its track's running median (:func:`_drop_outliers`) and up to
+    ``max_trim`` end points that left the track's course (:func:`_trim_ends`) when given (the gap
+    then counted from the points before the cut).
 
     Returns a list of (k (m,), p (m, 2), r (m,)) arrays, one per merged track.
     """
@@ -622,9 +683,15 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max
     # piece cut before it. Pairs are accepted greedily by increasing cost under max_dist, each end
     # and start at most once, then chained.
     arr = [(np.asarray(t.k), np.asarray(t.p), np.asarray(t.r)) for t in tracks]
+    n = len(arr)
+    cut_start, cut_end = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
     if outlier_vox is not None:
         arr = [_drop_outliers(a, samp, outlier_vox, fit_n) for a in arr]
-    n = len(arr)
+        if max_trim > 0:
+            trimmed = [_trim_ends(a, samp, outlier_vox, fit_n, max_trim) for a in arr]
+            arr = [t[0] for t in trimmed]
+            cut_start[:] = [t[1] for t in trimmed]
+            cut_end[:] = [t[2] for t in trimmed]
     if n == 0:
         return []
     k0 = np.array([a[0][0] for a in arr])
@@ -638,10 +705,12 @@ def merge_pieces(tracks, samp, *, max_gap: int, max_dist: float, fit_n: int, max
     ps_all = np.array([st[0] for st in starts]) * samp
     tree = cKDTree(ps_all)
     for i in range(n):
-        R = 2.0 * max_dist * (1.0 + 0.1 * max_gap) + float(np.linalg.norm(ends[i][1] * samp)) * max_gap
+        reach = max_gap + 2 * max_trim
+        R = 2.0 * max_dist * (1.0 + 0.1 * reach) + float(np.linalg.norm(ends[i][1] * samp)) * reach
         for j in tree.query_ball_point(ends[i][0] * samp, R):
             g = k0[j] - k1[i]
-            if g > max_gap or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
+            too_far = g > max_gap + cut_end[i] + cut_start[j]  # the gap before the end points were cut
+            if too_far or g < 1 - max_overlap or j == i or k1[j] <= k1[i] or k0[j] <= k0[i] + 1:
                 continue
             pe, se = ends[i]
             if g < 1:  # overlap: the earlier piece's end fitted on its slices before the later start
@@ -869,7 +938,10 @@ def grey_radius_of_slices(mask_t, grey_t, samp: np.ndarray, levels=None) -> floa
     r0 = estimate_radius_vox(mask_t, samp)
 
     def detect(sl, g, r):
-        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g)[0]
+        # every maximum a radius apart: a trial radius below the fibers' shows two per fiber, and the
+        # score must see them to reject it (a minimum spacing would hide them)
+        return detect_slice(sl, r, samp, min_distance=max(1, int(round(0.75 * r))), peak_threshold=0.5, grey=g,
+                            min_spacing_radii=0.0)[0]
 
     return estimate_radius_grey(_GreySlices(grey_t, mask_t, samp, levels=levels), mask_t, samp, r0, detect)
 

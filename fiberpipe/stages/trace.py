@@ -230,23 +230,34 @@ DENSE_MIN_AXIS_ALIGNED_FRACTION = 0.5
 def dense_pack(mask, orient: dict) -> bool:
     """Whether a quasi-parallel scan is a dense pack of thin fibers (``trace.method: auto`` then
     picks ``dense``): the mask's volume fraction and its radius across the dominant axis
-    (:func:`fiberpipe.imaging.dense.is_dense_pack`). A chunked mask (a dataset on disk, not an
-    array) is not judged: False."""
+    (:func:`fiberpipe.imaging.dense.is_dense_pack`). ``mask``: an array, or a chunked mask's
+    :class:`fiberpipe.imaging.trace_chunked.StridedSample`, read by strided boxes and 16 slices
+    across the axis, so the chunked stage judges as the in-memory one (the same slices, the same
+    sample up to the volume of :data:`DENSE_SAMPLE_VOXELS`)."""
     from fiberpipe.imaging.dense import is_dense_pack
     from fiberpipe.imaging.trace import estimate_radius_vox
+    from fiberpipe.imaging.trace_chunked import _Block
 
-    if not isinstance(mask, np.ndarray):
-        return False
     ax = {"z": 0, "y": 1, "x": 2}.get(orient.get("nearest_volume_axis"), 0)
-    mask_t = mask.transpose((ax,) + tuple(i for i in range(3) if i != ax))
-    fraction = float(np.count_nonzero(mask[::2, ::2, ::2])) / max(1, mask[::2, ::2, ::2].size)
+    step = max(2, int(np.ceil((float(np.prod(mask.shape)) / DENSE_SAMPLE_VOXELS) ** (1.0 / 3.0))))
+    sample = np.asarray(mask[::step, ::step, ::step])
+    fraction = float(np.count_nonzero(sample)) / max(1, sample.size)
     if fraction < 0.3:
         return False
+    if isinstance(mask, np.ndarray):
+        mask_t = mask.transpose((ax,) + tuple(i for i in range(3) if i != ax))
+    else:  # the slices across the axis, read one at a time from the dataset on disk
+        mask_t = _Block(mask.arr, 0, mask.shape[ax], axis=ax, read_ahead=1)
     try:
         radius = estimate_radius_vox(mask_t, np.ones(2))
     except InputError:
         return False
     return is_dense_pack(fraction, radius)
+
+
+#: The volume fraction of :func:`dense_pack` is read on a strided sample of at most about this many
+#: voxels (every second voxel along each axis below it).
+DENSE_SAMPLE_VOXELS = 16_000_000
 
 
 def split_folds_for_mesh(cfg: Config, fibers, radius_m: float):

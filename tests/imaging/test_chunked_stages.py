@@ -260,3 +260,26 @@ def test_a_cross_ply_is_split_by_region_when_chunked(tmp_path, off_axis):
     # the 16-slice blocks do not break the touching fibers (each block's tracks start 16 slices early)
     assert acc["n_split"] == 0 and on["fibers"] == off["fibers"], (acc, on["fibers"], off["fibers"])
     assert not (tmp_path / "on" / "trace_regions.tmp.h5").exists()
+
+
+def test_auto_judges_a_dense_pack_alike_when_chunked(tmp_path):
+    """``trace.method: auto`` asks the same question of a mask on disk (the chunked stage reads it as
+    a strided sample) as of one in memory: a dense pack of thin fibers (mask volume fraction >= 0.35,
+    radius <= 8 voxels) is one, along z and along x, and a loose bundle of thick fibers is not."""
+    from fiberpipe.imaging.orientation import mask_orientation
+    from fiberpipe.imaging.phantom_dense import make_dense_phantom
+    from fiberpipe.imaging.segment import segment
+    from fiberpipe.imaging.trace_chunked import StridedSample
+    from fiberpipe.stages.trace import dense_pack
+
+    vol, _ = make_dense_phantom(seed=2, shape=(24, 40, 40), radius_vox=3.0, contrast_to_noise=4.0,
+                                cross_ply_fraction=0.0)
+    dense, _ = segment(vol)
+    loose, _ = segment(make_phantom(n_fibers=3, shape=(24, 64, 64), radius_vox=8.0, seed=2)[0])
+    for mask, expected in ((dense, True), (np.ascontiguousarray(dense.transpose(2, 1, 0)), True), (loose, False)):
+        with h5py.File(tmp_path / "mask.h5", "w") as f:
+            f.create_dataset("mask", data=mask, chunks=(8,) + mask.shape[1:])
+        with h5py.File(tmp_path / "mask.h5", "r") as f:
+            sample = StridedSample(f["mask"])
+            orient = mask_orientation(sample, 1.0)
+            assert dense_pack(sample, orient) is dense_pack(mask, mask_orientation(mask, 1.0)) is expected

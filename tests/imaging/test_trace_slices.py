@@ -126,3 +126,33 @@ def test_pieces_overlapping_by_a_slice_with_a_stray_end_point_are_merged():
     assert np.allclose(p[:, 1], 20.0) and np.allclose(p[:, 0], 10.0 + 0.05 * k)
     # without the outlier drop, the stray end point still chains (the overlap is cut), but it stays
     assert len(merge_pieces([first, second], np.ones(2), max_gap=9, max_dist=2.0, fit_n=6)) == 1
+
+
+def test_pieces_whose_last_and_first_points_left_the_fiber_are_merged():
+    """A fiber tracked as two pieces one slice apart, as on a dense phantom under noise correlated
+    across the slice: the first piece's last three points drift 1.4-2 voxels off the fiber, the
+    second's first two start 2.5 and 1.4 voxels off. Each piece's end points that left the line of
+    its course before them are cut (at most three), the gap counted from the points before the cut,
+    and the pieces chain into one track on the fiber; the running-median outlier drop alone
+    (``max_trim=0``) keeps those points and leaves two pieces."""
+    from fiberpipe.imaging.trace import _Track, merge_pieces
+
+    def piece(ks, offsets):
+        t = _Track(ks[0], np.array([10.0 + 0.05 * ks[0], 20.0]), 2.5)
+        for k in ks[1:]:
+            t.k.append(k)
+            t.p.append(np.array([10.0 + 0.05 * k, 20.0]))
+            t.r.append(2.5)
+        for index, dy in offsets.items():
+            t.p[index] = t.p[index] + np.array([dy, 0.0])
+        return t
+
+    first = piece(list(range(0, 51)), {-3: -1.4, -2: -1.6, -1: -2.0})
+    second = piece(list(range(51, 100)), {0: 2.5, 1: 1.4})
+    kw = dict(max_gap=7, max_dist=2.0, fit_n=5, outlier_vox=1.25)
+    merged = merge_pieces([first, second], np.ones(2), **kw)
+    assert len(merged) == 1
+    k, p, _ = merged[0]
+    assert np.allclose(p[:, 0], 10.0 + 0.05 * k) and np.allclose(p[:, 1], 20.0)
+    assert set(range(0, 48)) | set(range(53, 100)) <= set(k.tolist())
+    assert len(merge_pieces([first, second], np.ones(2), max_trim=0, **kw)) == 2
