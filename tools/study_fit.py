@@ -138,7 +138,8 @@ def table_markdown(rows: list[dict], grid: dict, best: dict, laws: dict | None, 
             lines.append(f"| {values} | {len(seeds)} | not run: {row['error']} | | | | |")
             continue
         mark = " **(best)**" if row is best else ""
-        lines.append(f"| {values}{mark} | {len(row['final_load_N'])} | {', '.join(f'{v:.3g}' for v in row['final_load_N'])} | "
+        left = "".join(f" (seed {d['seed']} diverged in the {d['stage']}, left out)" for d in row.get("diverged", []))
+        lines.append(f"| {values}{mark} | {len(row['final_load_N'])}{left} | {', '.join(f'{v:.3g}' for v in row['final_load_N'])} | "
                      f"{row['mean_N']:.3g} ± {row['sd_N']:.2g} | {row['mean_at_0.55mm_N']:.3g} | {row['rms_N']:.3g} | "
                      f"{100 * row['rms_N'] / 12:.0f} % |")
     if laws is not None:
@@ -231,7 +232,8 @@ def main(argv=None) -> int:
             rows.append({"point": point, "folder": str(folder), "error": result["error"]})
             continue
         loads = result["final_load_N"]
-        rows.append({"point": point, "folder": str(folder), "final_load_N": loads, "v_f0": result["v_f0"],
+        rows.append({"point": point, "folder": str(folder), "seeds": result["seeds"], "diverged": result.get("diverged", []),
+                     "final_load_N": loads, "v_f0": result["v_f0"],
                      "mean_N": float(np.mean(loads)), "sd_N": float(np.std(loads, ddof=1)), "runs": result["runs"],
                      **objective(folder)})
     done = [r for r in rows if "error" not in r]
@@ -248,13 +250,17 @@ def main(argv=None) -> int:
         else:
             parallel = run_ensembles({"parallel": (_with(_with(raw, changed_values(family["point"], raw)), PARALLEL), seeds,
                                                    folder)}, workers=args.workers, specimen_store=prediction / "specimens",
-                                     where=args.config)["parallel"]
+                                     where=args.config, keep_going=True)["parallel"]
     if laws is None and "error" not in parallel:
-        laws = {"seeds": seeds, "point": family["point"], "oblique_N": family["final_load_N"],
-                "parallel_N": parallel["final_load_N"],
-                "ratio": [p / o for p, o in zip(parallel["final_load_N"], family["final_load_N"])],
-                "oblique_penetration_m": penetrations(family["runs"]), "parallel_penetration_m": penetrations(parallel["runs"]),
-                "parallel_runs": parallel["runs"]}
+        both = [s for s in family["seeds"] if s in parallel["seeds"]]  # a seed either law diverged in: left out
+        oblique = {s: (load, run) for s, load, run in zip(family["seeds"], family["final_load_N"], family["runs"])}
+        other = {s: (load, run) for s, load, run in zip(parallel["seeds"], parallel["final_load_N"], parallel["runs"])}
+        laws = {"seeds": both, "point": family["point"], "oblique_N": [oblique[s][0] for s in both],
+                "parallel_N": [other[s][0] for s in both],
+                "ratio": [other[s][0] / oblique[s][0] for s in both],
+                "oblique_penetration_m": penetrations([oblique[s][1] for s in both]),
+                "parallel_penetration_m": penetrations([other[s][1] for s in both]),
+                "parallel_runs": [other[s][1] for s in both], "parallel_diverged": parallel.get("diverged", [])}
     summary = {"grid": grid, "seeds": seeds, "evaluations": len(rows), "settings": "fast: " + ", ".join(f"{k} = {v}" for k, v in FAST.items()),
                "points": rows, "best": best, "laws": laws}
     write_json_atomic(out / "fit.json", summary)
@@ -266,5 +272,17 @@ def main(argv=None) -> int:
     return 0
 
 
+def cli(argv=None) -> int:
+    """:func:`main` with a problem the user can fix (an ensemble none of whose seeds finished, bad
+    input) as one line on stderr, as ``fiberpipe`` prints it."""
+    from fiberpipe.errors import FiberpipeError
+
+    try:
+        return main(argv)
+    except FiberpipeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cli())

@@ -70,3 +70,55 @@ def test_the_wall_friction_variants_keep_the_fibers_mu_and_the_plate_variant_is_
     plates = validate_config(study_prediction._with(base, variants["plate-6mm"])).scene.plates
     # axis y: [along x (across the 3 mm cassette), along z (the fibers, 15 mm)]
     assert plates.axis == "y" and plates.size == pytest.approx([3e-3, 6e-3])
+
+
+def _run_with_curve(folder: Path, scale_N: float) -> str:
+    """A finished run's curve F = scale (U / 1.15 mm)², sampled as the post stage writes it."""
+    import numpy as np
+
+    U = np.linspace(0.0, 1.15e-3, 47)
+    (folder / "post").mkdir(parents=True)
+    rows = ["time_s,U_m,load_N"] + [f"{u:.9g},{u:.9g},{scale_N * (u / 1.15e-3) ** 2:.9g}" for u in U]
+    (folder / "post" / "force_displacement.csv").write_text("\n".join(rows) + "\n")
+    return str(folder)
+
+
+def test_the_fast_settings_error_compares_the_seeds_both_ensembles_finished(tmp_path):
+    import numpy as np
+
+    from fiberpipe.studies.fit import read_target
+
+    diverged = {"seed": 1, "stage": "compaction", "step": 70028, "time_s": 0.0596,
+                "diagnosis": "simulation diverged at t = 0.0596 s (step 70028): a node moved faster than the speed limit; node 1"}
+    fast = {"seeds": [0, 2], "runs": [_run_with_curve(tmp_path / "f0", 20.0), _run_with_curve(tmp_path / "f2", 30.0)],
+            "solver_wall_time_s": [60.0, 61.0], "diverged": [diverged]}
+    study = {"seeds": [0, 1], "runs": [_run_with_curve(tmp_path / "s0", 40.0), _run_with_curve(tmp_path / "s1", 45.0)],
+             "solver_wall_time_s": [600.0, 610.0], "diverged": []}
+    error = study_prediction.fast_settings_error(fast, study)
+    (row,) = error["seeds"]  # seed 1 diverged at the fast settings: no pair
+    assert row["seed"] == 0 and row["final_load_difference_N"] == pytest.approx(-20.0, rel=1e-6)
+    assert row["final_load_difference"] == pytest.approx(-0.5, rel=1e-6)
+    U_t, _ = read_target(study_prediction.TARGET)  # the difference -20 (U/1.15 mm)² at the study's points
+    expected = float(np.sqrt(np.mean((20.0 * (U_t / 1.15e-3) ** 2) ** 2)))
+    assert row["curve_points_rms_difference_N"] == pytest.approx(expected, rel=1e-4)
+    assert error["study_settings_solver_wall_time_s"] == [600.0] and error["fast_solver_wall_time_s"] == [60.0]
+    assert error["diverged"]["fast"] == [diverged]
+    summary = {**fast, "settings": "fast", "final_load_N": [20.0, 30.0], "fast_settings_error": error,
+               "final_load_statistics": {"n": 2, "mean_N": 25.0, "sd_N": 7.07, "mean_ci95_half_width_N": 63.5},
+               "against_study": {"rms_N": 9.0, "rms_over_12N": 0.75, "mean_at_0.55mm_N": 5.7}}
+    text = study_prediction.doc_markdown(summary, "make study-prediction")
+    assert text.startswith(study_prediction.BEGIN) and text.endswith(study_prediction.END)
+    assert "seed 1 diverged in the compaction at step 70028 (t = 0.0596 s), left out (a node moved faster than the " \
+           "speed limit)" in text
+    assert "| 0 | 40 | 20 | -20 (-50 %) |" in text
+
+
+def test_the_prediction_with_no_seed_finished_is_one_line(monkeypatch, capsys, tmp_path):
+    from fiberpipe.studies import ensemble
+
+    message = f"{tmp_path}/fast: every member diverged (seed 0 diverged in the compaction at step 5 (t = 1e-06 s): ...)"
+    monkeypatch.setattr(ensemble, "run_ensembles", lambda ensembles, **_: {
+        "fast": {"error": message, "seeds": [0], "diverged": [{"seed": 0}]}})
+    assert study_prediction.cli(["--seeds", "1", "--fast-only", "--out", str(tmp_path)]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {message}"]
