@@ -12,7 +12,7 @@ and ``summary.json``.
 # scheduler at ``--scheduler ADDRESS``), each by the ordinary cached pipeline into
 # ``OUT/seed-<s>/``; the specimens are built into ``OUT/specimens/seed-<s>-<key>/``, the key a hash
 # of everything the deposit and the settling read (not the compaction's loading, plates, damping,
-# mass scaling, nor its contact law when ``specimen.settle.contact`` gives the settling's own), so
+# mass scaling, step scheme, nor its contact law when ``specimen.settle.contact`` gives the settling's own), so
 # variants that differ only in how they compact share their specimens. A worker
 # killed mid-run loses nothing: Dask runs its tasks again on another worker, and a task run again
 # finds the specimen and the pipeline stages its first attempt finished (content hashes) and redoes
@@ -48,7 +48,7 @@ from fiberpipe.errors import ConfigError, FiberpipeError, InputError, Simulation
 _COMPACTION_ONLY = {
     None: ("name", "input", "post"),
     "scene": ("loading", "plates", "walls", "damping", "constraints", "clamps", "loads", "drives"),
-    "solver": ("mass_scaling", "end_time", "output_frames", "checkpoint_every", "settle_time"),
+    "solver": ("mass_scaling", "stable_step", "end_time", "output_frames", "checkpoint_every", "settle_time"),
     "specimen": ("seeds", "strain"),
 }
 

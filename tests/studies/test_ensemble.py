@@ -100,7 +100,14 @@ def test_variants_that_differ_only_in_their_compaction_share_specimens():
     other["scene"]["loading"]["displacement"] = "0.1 mm"
     other["scene"]["damping"]["alpha"] = "1e3 1/s"
     other["solver"]["mass_scaling"] = 100
+    other["solver"]["stable_step"] = "adaptive"
     assert specimen_key(other) == specimen_key(TINY)
+    from fiberpipe.model.specimen_settle import settle_scene  # what the key leaves out, the settling does not read
+
+    stepped = yaml.safe_load(yaml.safe_dump(TINY))
+    stepped["solver"]["stable_step"] = "adaptive"
+    settings = dict(width_m=1.5e-3, alpha_per_s=300.0, time_s=0.1, mu=0.2, lock="all", frames=3, mass_scaling=100.0)
+    assert settle_scene(stepped, **settings) == settle_scene(TINY, **settings)
     for key, value in (("specimen.n_fibers", 5), ("specimen.seed", 3), ("scene.contact", {"law": "linear"}),
                        ("mesh.element_length", "0.5 mm")):
         changed = yaml.safe_load(yaml.safe_dump(TINY))
