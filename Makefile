@@ -264,7 +264,8 @@ reproduce: reproduce-fit
 .PHONY: study-prediction study-sensitivity
 study-prediction: setup
 	$(PY) tools/study_prediction.py --out runs/study-prediction --figure docs/img/study_prediction.png \
-	    $(if $(SEEDS),--seeds $(SEEDS)) $(if $(FAST),--fast-only)
+	    $(if $(SEEDS),--seeds $(SEEDS)) $(if $(FAST),--fast-only) --doc docs/results.md \
+	    --command "make study-prediction$(if $(SEEDS), SEEDS=$(SEEDS))$(if $(FAST), FAST=1)"
 
 # each unknown of the study in turn on the prediction's first four seeds (SEEDS=N to change), the tornado
 # plot and the table of docs/results.md; ONLY="bow-4m vf-35" runs those variants alone

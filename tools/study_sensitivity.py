@@ -113,11 +113,18 @@ def _statistics(ensemble: dict, folder: Path) -> dict:
     from study_prediction import against_study
 
     loads = ensemble["final_load_N"]
-    return {"seeds": [int(v) for v in ensemble["seeds"]], "stopped": ensemble.get("stopped", {}),
+    stopped = {**ensemble.get("stopped", {}), **{d["seed"]: _diverged_reason(d) for d in ensemble.get("diverged", [])}}
+    return {"seeds": [int(v) for v in ensemble["seeds"]], "stopped": stopped,
             "final_load_N": loads, "v_f0": ensemble["v_f0"], "mean_N": float(np.mean(loads)),
             "sd_N": float(np.std(loads, ddof=1)) if len(loads) > 1 else 0.0,
             "closing_residual_load_N": ensemble.get("closing_residual_load_N"),
             "rms_N": against_study(folder)["rms_N"]}
+
+
+def _diverged_reason(record: dict) -> str:
+    """A diverged member's reason as the table gives it: ``diverged at step 70028 (a node moved ...)``."""
+    at = f" at step {record['step']}" if record.get("step") is not None else ""
+    return f"diverged in the {record['stage']}{at} ({record['diagnosis'].split(': ', 1)[-1].split(';')[0]})"
 
 
 def _stop_reason(run: Path) -> str | None:
@@ -207,22 +214,24 @@ def main(argv=None) -> int:
     chosen = [v for v in VARIANTS if not args.only or v[0] in args.only]
     rows = run_variants(raw, chosen, seeds, out, prediction_dir, args.workers, args.config, args.collect)
     prediction = json.loads((prediction_dir / "ensemble.json").read_text())  # the baseline: its first seeds
-    missing = [s for s in seeds if s not in prediction["seeds"]]
+    diverged = {d["seed"] for d in prediction.get("diverged", [])}
+    missing = [s for s in seeds if s not in prediction["seeds"] and s not in diverged]
     if missing:
         raise SystemExit(f"{prediction_dir}/ensemble.json has no run of seed(s) {missing}: run make study-prediction "
                          f"SEEDS={len(seeds)} first")
-    index = [prediction["seeds"].index(s) for s in seeds]
+    base_seeds = [s for s in seeds if s in prediction["seeds"]]  # a seed the prediction left out (diverged): not here
+    index = [prediction["seeds"].index(s) for s in base_seeds]
     base_loads = [prediction["final_load_N"][k] for k in index]
-    baseline = {"final_load_N": base_loads, "v_f0": [prediction["v_f0"][k] for k in index],
-                "mean_N": float(np.mean(base_loads)), "sd_N": float(np.std(base_loads, ddof=1)) if len(seeds) > 1 else 0.0,
+    baseline = {"seeds": base_seeds, "final_load_N": base_loads, "v_f0": [prediction["v_f0"][k] for k in index],
+                "mean_N": float(np.mean(base_loads)), "sd_N": float(np.std(base_loads, ddof=1)) if len(base_loads) > 1 else 0.0,
                 "rms_N": rms_of_runs([prediction["runs"][k] for k in index])}
     # the rows after the prediction's rerun by this version change from the rerun (the same code)
-    # (a variant with a stopped seed: from the reference's mean over the same seeds)
-    reference = {**baseline, "seeds": seeds}
+    # (a variant or a reference with a stopped seed: from the reference's mean over the seeds both finished)
+    reference = baseline
     for row in rows:
         if "error" not in row:
             loads = dict(zip(reference["seeds"], reference["final_load_N"]))
-            row["reference_mean_N"] = float(np.mean([loads[s] for s in row["seeds"]]))
+            row["reference_mean_N"] = float(np.mean([loads[s] for s in row["seeds"] if s in loads] or [np.nan]))
             row["change_N"] = row["mean_N"] - row["reference_mean_N"]
             if row["name"] == RERUN:
                 reference = row
@@ -235,5 +244,17 @@ def main(argv=None) -> int:
     return 0
 
 
+def cli(argv=None) -> int:
+    """:func:`main` with a problem the user can fix (an ensemble none of whose seeds finished, bad
+    input) as one line on stderr, as ``fiberpipe`` prints it."""
+    from fiberpipe.errors import FiberpipeError
+
+    try:
+        return main(argv)
+    except FiberpipeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cli())

@@ -51,9 +51,11 @@ def settle_scene(raw: dict, *, width_m: float, alpha_per_s: float, time_s: float
     given = (sc.get("gravity") or {}).get("acceleration")
     g = float(np.linalg.norm([to_si(a, "acceleration") for a in (given or GravityConfig().acceleration)]))
     sc["gravity"] = {"acceleration": [0.0, -g * float(gravity_scale or 1.0), 0.0]}
-    # the compaction's mass scaling is a speed setting of the compaction: the settling has its own
+    # the compaction's mass scaling and its step scheme (solver.stable_step) are settings of the
+    # compaction: the settling has its own mass scaling and the element step, so that compactions
+    # that differ in them share their specimens
     solver = {k: v for k, v in (raw.get("solver") or {}).items()
-              if k not in ("checkpoint_every", "settle_time", "mass_scaling")}
+              if k not in ("checkpoint_every", "settle_time", "mass_scaling", "stable_step")}
     raw["solver"] = {**solver, "end_time": float(time_s), "output_frames": int(frames)}
     if mass_scaling is not None and mass_scaling != 1.0:
         raw["solver"]["mass_scaling"] = float(mass_scaling)

@@ -12,11 +12,15 @@ and ``summary.json``.
 # scheduler at ``--scheduler ADDRESS``), each by the ordinary cached pipeline into
 # ``OUT/seed-<s>/``; the specimens are built into ``OUT/specimens/seed-<s>-<key>/``, the key a hash
 # of everything the deposit and the settling read (not the compaction's loading, plates, damping,
-# mass scaling, nor its contact law when ``specimen.settle.contact`` gives the settling's own), so
+# mass scaling, step scheme, nor its contact law when ``specimen.settle.contact`` gives the settling's own), so
 # variants that differ only in how they compact share their specimens. A worker
 # killed mid-run loses nothing: Dask runs its tasks again on another worker, and a task run again
 # finds the specimen and the pipeline stages its first attempt finished (content hashes) and redoes
 # only the rest. A rerun of the command does the same for the whole ensemble.
+# A member whose simulation diverges (its settling, closing or compaction) is one chaotic trajectory
+# the explicit step did not hold: it is reported (seed, step, time, the solver's diagnosis; in
+# ``ensemble.json``'s ``diverged`` and its run folder's ``diverged.json``) and left out of the mean
+# and band, and the other members run to their end; only an ensemble with no member left is an error.
 """
 
 from __future__ import annotations
@@ -27,7 +31,9 @@ import hashlib
 import json
 import math
 import os
+import re
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -35,14 +41,14 @@ import yaml
 
 from fiberpipe.artifacts import write_json_atomic
 from fiberpipe.config import PATH_KEYS, check_seeds, set_dotted, validate_config
-from fiberpipe.errors import ConfigError, InputError
+from fiberpipe.errors import ConfigError, FiberpipeError, InputError, SimulationDiverged
 
 # what the deposit and the settling do not read: the compaction's own settings
 # (fiberpipe.model.specimen_settle.settle_scene replaces or drops these)
 _COMPACTION_ONLY = {
     None: ("name", "input", "post"),
     "scene": ("loading", "plates", "walls", "damping", "constraints", "clamps", "loads", "drives"),
-    "solver": ("mass_scaling", "end_time", "output_frames", "checkpoint_every", "settle_time"),
+    "solver": ("mass_scaling", "stable_step", "end_time", "output_frames", "checkpoint_every", "settle_time"),
     "specimen": ("seeds", "strain"),
 }
 
@@ -144,7 +150,11 @@ def run_member(raw: dict, run_dir: str, where: str, specimen_store: str) -> dict
     os.environ.setdefault("NUMBA_NUM_THREADS", numba_threads([raw]))
     specimen_dir = Path(specimen_store) / f"seed-{int(raw['specimen'].get('seed', 0))}-{specimen_key(raw)}"
     specimen_dir.parent.mkdir(parents=True, exist_ok=True)
-    info = build_member_specimen(raw, specimen_dir, where)
+    try:
+        info = build_member_specimen(raw, specimen_dir, where)
+    except SimulationDiverged as exc:
+        exc.stage = "specimen"  # its settling or closing, not the compaction
+        raise
     result = _run_point(member_config(raw, specimen_dir, info, where), run_dir, where)
     closing = info.get("closing") or {}
     return {**result, "specimen_dir": str(specimen_dir), "v_f0": float(info["volume_fraction"]),
@@ -162,15 +172,54 @@ def member_jobs(raw: dict, seeds: list[int], out: Path) -> list[tuple[str, dict,
     return jobs
 
 
-def member_or_error(raw: dict, run_dir: str, where: str, specimen_store: str, member=None) -> dict:
-    """``member`` (:func:`run_member` unless given), or ``{"error": its one-line message}`` when the
-    member's input is bad (a :class:`fiberpipe.errors.FiberpipeError`: a v_f0 its pile cannot reach)."""
-    from fiberpipe.errors import FiberpipeError
+DIVERGED_FILE = "diverged.json"  # in a member's run folder: why its last attempt diverged
+_DIVERGED_AT = re.compile(r"at t = ([-+0-9.eE]+) s \(step (\d+)\)")  # the solver's diagnosis names both
 
+
+def divergence_record(seed: int, diagnosis: str, stage: str) -> dict:
+    """A diverged member as ``ensemble.json`` lists it: the seed, the stage that diverged (the
+    specimen's settling or closing, or the compaction), the step and time the solver names, and the
+    solver's diagnosis (its first line)."""
+    first = diagnosis.splitlines()[0] if diagnosis else "simulation diverged"
+    found = _DIVERGED_AT.search(first)
+    return {"seed": int(seed), "stage": stage, "step": int(found.group(2)) if found else None,
+            "time_s": float(found.group(1)) if found else None, "diagnosis": first}
+
+
+def member_outcome(raw: dict, run_dir: str, where: str, specimen_store: str, member=None,
+                   keep_going: bool = False) -> dict:
+    """``member`` (:func:`run_member` unless given); ``{"diverged": divergence_record}`` (also
+    written to ``run_dir/diverged.json``) when its simulation diverges; with ``keep_going``,
+    ``{"error": its one-line message}`` when the member's input is bad (another
+    :class:`fiberpipe.errors.FiberpipeError`: a v_f0 its pile cannot reach), which without it ends the pass."""
+    record_path = Path(run_dir) / DIVERGED_FILE
+    record_path.unlink(missing_ok=True)  # the record of an earlier attempt: this one decides
+    started = time.perf_counter()
     try:
         return (member or run_member)(raw, run_dir, where, specimen_store=specimen_store)
+    except SimulationDiverged as exc:
+        record = divergence_record(int(raw["specimen"].get("seed", 0)), str(exc), getattr(exc, "stage", "compaction"))
+        record_path.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(record_path, record)
+        return {"diverged": record, "wall_time_s": time.perf_counter() - started}
     except FiberpipeError as exc:
-        return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__, "wall_time_s": 0.0}
+        if not keep_going:
+            raise
+        return {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__,
+                "wall_time_s": time.perf_counter() - started}
+
+
+def _diverged_text(record: dict) -> str:
+    """``seed 3 diverged in the compaction at step 70028 (t = 0.0596 s)``."""
+    at = f" at step {record['step']} (t = {record['time_s']:.4g} s)" if record.get("step") is not None else ""
+    return f"seed {record['seed']} diverged in the {record['stage']}{at}"
+
+
+def _all_diverged(out: Path, seeds: list[int], diverged: list[dict]) -> dict:
+    """An ensemble none of whose members finished: the one-line error naming the first divergence."""
+    first = diverged[0]
+    return {"error": f"{out}: every member diverged ({_diverged_text(first)}: {first['diagnosis']})",
+            "seeds": [int(s) for s in seeds], "diverged": diverged}
 
 
 def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers: int | None = None,
@@ -182,7 +231,11 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
     ``member``: the members' task, ``member(raw, run_dir, where, specimen_store)``, :func:`run_member`
     unless given (a function the workers can import or unpickle). ``keep_going``: an ensemble whose
     member stops on bad input returns ``{"error": the first member's message, "seeds": ...}`` (and
-    writes nothing) while the others finish; without it the first such error ends the pass."""
+    writes nothing) while the others finish; without it the first such error ends the pass. A
+    member that diverges is left out of its ensemble (listed in ``diverged``) while the others
+    finish; an ensemble whose every member diverged is an error the same way (with ``keep_going``
+    its ``{"error": ...}``, without it a one-line :class:`SimulationDiverged` once the pass has
+    written the others)."""
     from fiberpipe.studies.runner import execute
 
     names = list(ensembles)
@@ -195,8 +248,7 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
             owner[f"{name}/{job_id}"] = name
     n_workers = workers or max(1, min(len(jobs), os.cpu_count() or 1))
     echo(f"ensemble: {len(jobs)} runs ({', '.join(f'{n}: {len(ensembles[n][1])} seeds' for n in names)})")
-    task = (functools.partial(member_or_error, member=member, specimen_store=str(store.resolve())) if keep_going
-            else functools.partial(member or run_member, specimen_store=str(store.resolve())))
+    task = functools.partial(member_outcome, member=member, keep_going=keep_going, specimen_store=str(store.resolve()))
     results = execute(jobs, n_workers, scheduler, where, echo, fn=task)
     summaries = {}
     for name in names:
@@ -207,7 +259,15 @@ def run_ensembles(ensembles: dict[str, tuple[dict, list[int], Path]], *, workers
             echo(f"  {out}: not run ({errors[0]})")
             summaries[name] = {"error": errors[0], "seeds": [int(s) for s in seeds]}
             continue
-        summaries[name] = write_ensemble(Path(out), seeds, members, echo)
+        diverged = [members[f"seed-{s}"]["diverged"] for s in seeds if "diverged" in members[f"seed-{s}"]]
+        for record in diverged:
+            echo(f"  {out}: {_diverged_text(record)}, left out of the mean and band: {record['diagnosis']}")
+        finished = [s for s in seeds if "diverged" not in members[f"seed-{s}"]]
+        summaries[name] = (write_ensemble(Path(out), finished, members, echo, diverged=diverged) if finished
+                           else _all_diverged(Path(out), seeds, diverged))
+    failed = [summary["error"] for summary in summaries.values() if "error" in summary]
+    if failed and not keep_going:
+        raise SimulationDiverged(failed[0])
     return summaries
 
 
@@ -215,10 +275,14 @@ def collect_ensemble(out: Path, seeds: list[int], echo=print) -> dict:
     """An ensemble's outputs (:func:`write_ensemble`) from the member runs ``out/seed-<s>/`` an earlier
     pass finished, running nothing (a pass killed part way, or runs whose cache keys a change of the
     package's code has made stale); ``{"error": ...}`` naming the first seed without a finished run.
-    Each member's specimen is the one its run's ``config.yaml`` reads."""
-    members = {}
+    A member whose last attempt diverged (its ``diverged.json``) is left out, as :func:`run_ensembles`
+    leaves it out. Each member's specimen is the one its run's ``config.yaml`` reads."""
+    members, diverged = {}, []
     for seed in seeds:
         run = Path(out) / f"seed-{seed}"
+        if (run / DIVERGED_FILE).is_file():
+            diverged.append(json.loads((run / DIVERGED_FILE).read_text()))
+            continue
         if not (run / "post" / "force_displacement.csv").is_file():
             return {"error": f"seed {seed}: no finished run in {run}", "seeds": [int(s) for s in seeds]}
         fibers = (yaml.safe_load((run / "config.yaml").read_text()).get("input") or {}).get("fibers")
@@ -230,7 +294,10 @@ def collect_ensemble(out: Path, seeds: list[int], echo=print) -> dict:
         members[f"seed-{seed}"] = {"v_f0": float(info["volume_fraction"]), "specimen_dir": str(specimen_dir),
                                    "closing_residual_load_N": (info.get("closing") or {}).get("residual_load_N"),
                                    "solver_wall_time_s": simulate.get("solver_wall_time_s")}
-    return write_ensemble(Path(out), seeds, members, echo)
+    finished = [s for s in seeds if f"seed-{s}" in members]
+    if not finished:
+        return _all_diverged(Path(out), seeds, diverged)
+    return write_ensemble(Path(out), finished, members, echo, diverged=diverged)
 
 
 def run_ensemble(raw: dict, seeds: list[int], out: Path, **kwargs) -> dict:
@@ -263,8 +330,10 @@ def ensemble_curves(run_dirs: list[Path], samples: int = 201) -> tuple[np.ndarra
     return grid, np.array([np.interp(grid, U, F) for U, F in curves])
 
 
-def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=print) -> dict:
-    """``ensemble.csv``, ``ensemble.json``, ``summary.json`` and ``ensemble.png`` of the finished members."""
+def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=print,
+                   diverged: list[dict] | None = None) -> dict:
+    """``ensemble.csv``, ``ensemble.json``, ``summary.json`` and ``ensemble.png`` of the finished
+    members ``seeds``; ``diverged``: the members left out (:func:`divergence_record`), listed as they are."""
     from fiberpipe.post.tables import write_csv
 
     run_dirs = [out / f"seed-{s}" for s in seeds]
@@ -288,13 +357,16 @@ def write_ensemble(out: Path, seeds: list[int], members: dict[str, dict], echo=p
         "runs": [str(d) for d in run_dirs],
         "specimens": [members[f"seed-{s}"]["specimen_dir"] for s in seeds],
         "solver_wall_time_s": [members[f"seed-{s}"].get("solver_wall_time_s") for s in seeds],
+        "diverged": list(diverged or []),
     }
     write_json_atomic(out / "ensemble.json", summary)
     write_json_atomic(out / "summary.json", {"ensemble": summary})
     _plot(out / "ensemble.png", grid, loads, seeds)
     spread = f" ± {summary['final_load_sd_N']:.4g}" if len(seeds) > 1 else ""
     echo(f"  {out}: F(U = {max(summary['final_U_m']) * 1e3:.4g} mm) = {summary['final_load_mean_N']:.4g}{spread} N over "
-         f"{len(seeds)} seed(s) (min {min(finals):.4g}, max {max(finals):.4g}); ensemble.csv, ensemble.json, ensemble.png")
+         f"{len(seeds)} seed(s) (min {min(finals):.4g}, max {max(finals):.4g})"
+         + "".join(f"; seed {d['seed']} diverged, left out" for d in summary["diverged"])
+         + "; ensemble.csv, ensemble.json, ensemble.png")
     return summary
 
 
@@ -336,7 +408,9 @@ def study_ensemble_rows(spec, points: list[dict], reference: dict | None, out: P
     """``fiberpipe study --seeds``: every point (and the reference run) as an ensemble in
     ``out/points/<id>/`` (``out/reference/``), their specimens shared in ``out/specimens``; the
     errors are the points' ensemble-mean curves against the reference's (measures curve and
-    final_load). Returns the study table's rows and the reference's ensemble.json."""
+    final_load), each over its finished members (a diverged one left out: the row's ``seeds`` counts
+    the finished, ``diverged_seeds`` names the others). Returns the study table's rows and the
+    reference's ensemble.json."""
     from fiberpipe.post.curves import curve_error
 
     other = [m for m in spec.measures if m not in ("curve", "final_load")]
@@ -365,7 +439,8 @@ def study_ensemble_rows(spec, points: list[dict], reference: dict | None, out: P
             row["final_load_error"] = float(abs(mean[-1] - F_ref[-1]) / max(abs(F_ref[-1]), 1e-300))
         walls = [w for w in summary["solver_wall_time_s"] if w is not None]
         row.update(final_load_mean_N=summary["final_load_mean_N"], final_load_sd_N=summary["final_load_sd_N"],
-                   seeds=len(seeds), wall_time_s=float(np.mean(walls)) if walls else float("nan"), id=point["id"])
+                   seeds=len(summary["seeds"]), diverged_seeds=" ".join(str(d["seed"]) for d in summary["diverged"]),
+                   wall_time_s=float(np.mean(walls)) if walls else float("nan"), id=point["id"])
         rows.append(row)
     return rows, summaries["reference"]
 

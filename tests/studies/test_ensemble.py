@@ -100,7 +100,14 @@ def test_variants_that_differ_only_in_their_compaction_share_specimens():
     other["scene"]["loading"]["displacement"] = "0.1 mm"
     other["scene"]["damping"]["alpha"] = "1e3 1/s"
     other["solver"]["mass_scaling"] = 100
+    other["solver"]["stable_step"] = "adaptive"
     assert specimen_key(other) == specimen_key(TINY)
+    from fiberpipe.model.specimen_settle import settle_scene  # what the key leaves out, the settling does not read
+
+    stepped = yaml.safe_load(yaml.safe_dump(TINY))
+    stepped["solver"]["stable_step"] = "adaptive"
+    settings = dict(width_m=1.5e-3, alpha_per_s=300.0, time_s=0.1, mu=0.2, lock="all", frames=3, mass_scaling=100.0)
+    assert settle_scene(stepped, **settings) == settle_scene(TINY, **settings)
     for key, value in (("specimen.n_fibers", 5), ("specimen.seed", 3), ("scene.contact", {"law": "linear"}),
                        ("mesh.element_length", "0.5 mm")):
         changed = yaml.safe_load(yaml.safe_dump(TINY))
@@ -269,3 +276,49 @@ def test_study_with_seeds_compares_ensemble_means_on_shared_specimens(tmp_path, 
     assert float(row["curve_error"]) == pytest.approx(curve_error(U_ref, F_ref, U, F, scale=float(np.max(np.abs(F_ref)))),
                                                       rel=1e-5)
     assert float(row["curve_error"]) > 0  # α changes the curve
+
+
+def _diverges_at_seed_1(raw, run_dir, where, specimen_store):
+    """The member's task, but seed 1 is compacted under a gravity of 1e12 m/s² (a load wrong by
+    orders of magnitude): the solver stops it as diverged, with its own diagnosis."""
+    from fiberpipe.studies import ensemble
+
+    if raw["specimen"]["seed"] == 1:
+        raw = {**raw, "scene": {**raw["scene"], "gravity": {"acceleration": [0.0, -1e12, 0.0]}}}
+    return ensemble.run_member(raw, run_dir, where, specimen_store)
+
+
+def test_a_diverging_member_is_reported_and_left_out_while_the_others_finish(serial, tmp_path):
+    import shutil
+
+    from fiberpipe.errors import SimulationDiverged
+
+    out, reference = serial
+    copy = tmp_path / "ens"
+    shutil.copytree(out, copy)  # seeds 0 and 2 finished there: reused
+    lines = []
+    summary = run_ensemble(TINY, [0, 1, 2], copy, workers=1, echo=lines.append, member=_diverges_at_seed_1)
+    assert summary["seeds"] == [0, 2]
+    assert summary["final_load_N"] == pytest.approx([reference["final_load_N"][0], reference["final_load_N"][2]], rel=1e-9)
+    assert summary["final_load_mean_N"] == pytest.approx(np.mean(summary["final_load_N"]), rel=1e-12)
+    assert len(summary["v_f0"]) == 2
+    (record,) = summary["diverged"]
+    assert record["seed"] == 1 and record["stage"] == "compaction"
+    assert record["diagnosis"].startswith(f"simulation diverged at t = {record['time_s']:.6g} s (step {record['step']})")
+    assert record["step"] >= 1 and record["time_s"] > 0
+    assert json.loads((copy / "seed-1" / "diverged.json").read_text()) == record
+    assert json.loads((copy / "ensemble.json").read_text())["diverged"] == [record]
+    header = (copy / "ensemble.csv").read_text().splitlines()[0].split(",")
+    assert "load_seed_1_N" not in header and {"load_seed_0_N", "load_seed_2_N"} <= set(header)
+    assert any(line.startswith(f"  {copy}: seed 1 diverged in the compaction at step {record['step']}") for line in lines)
+    # the finished runs alone give the same ensemble, seed 1 left out again
+    collected = collect_ensemble(copy, [0, 1, 2], echo=lambda *_: None)
+    assert collected["seeds"] == [0, 2] and collected["diverged"] == [record]
+    # no member left: one line naming the seed (with keep_going, the ensemble's error)
+    with pytest.raises(SimulationDiverged) as caught:
+        run_ensembles({"alone": (TINY, [1], tmp_path / "alone")}, workers=1, echo=lambda *_: None,
+                      member=_diverges_at_seed_1, specimen_store=copy / "specimens")
+    assert "\n" not in str(caught.value) and "every member diverged (seed 1 diverged in the compaction" in str(caught.value)
+    kept = run_ensembles({"alone": (TINY, [1], tmp_path / "alone")}, workers=1, echo=lambda *_: None,
+                         member=_diverges_at_seed_1, specimen_store=copy / "specimens", keep_going=True)["alone"]
+    assert kept["error"] == str(caught.value) and kept["diverged"][0]["step"] == record["step"]
