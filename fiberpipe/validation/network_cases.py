@@ -232,7 +232,8 @@ def convergence_row(case: str, config_name: str, run, finer: dict, setting: str,
     base_value, fine_value = figure(run), figure(fine)
     note = (f"seed {run.seed}: {name} {base_value:.4g} at the case's settings, {fine_value:.4g} with {setting}; "
             f"F(U) change {curve_change(run, fine):.3g} of the largest load")
-    return ValidationRow(case, f"convergence: {name} with {setting}, change against the case's settings", 0.0,
+    scaled = f" over {scale:g} (the case's reference)" if scale != 1.0 else ""
+    return ValidationRow(case, f"convergence: the change of {name} with {setting}{scaled}, against the case's settings", 0.0,
                          [abs(fine_value - base_value) / scale], tolerance,
                          "convergence (the case's own figure at a finer setting as the reference)", relative=False,
                          note=note, data={"case_settings": base_value, "finer": fine_value})
