@@ -40,6 +40,13 @@ class CompactionRun(NamedTuple):
     seed: int
 
 
+def run_folder(config_name: str, seed: int, overrides: dict | None = None, work: Path | None = None) -> Path:
+    """The folder of ``config_name``'s run for ``seed`` with ``overrides``: named by the config, the
+    seed and the overrides' last key parts and values ("base" without any)."""
+    tag = "-".join(f"{k.split('.')[-1]}={v}" for k, v in sorted((overrides or {}).items())) or "base"
+    return (work or work_dir()) / f"{Path(config_name).stem}-seed{seed}-{tag}".replace("/", "_").replace(" ", "")
+
+
 def compact(config_name: str, seed: int, work: Path | None = None, overrides: dict | None = None) -> CompactionRun:
     """Build ``config_name``'s specimen for ``seed`` with ``overrides`` (dotted keys) and compact it
     (or read the run of the same name already in ``work``)."""
@@ -53,8 +60,7 @@ def compact(config_name: str, seed: int, work: Path | None = None, overrides: di
     raw = load_raw(str(path))
     for key, value in (overrides or {}).items():
         set_dotted(raw, key, value)
-    tag = "-".join(f"{k.split('.')[-1]}={v}" for k, v in sorted((overrides or {}).items())) or "base"
-    folder = (work or work_dir()) / f"{path.stem}-seed{seed}-{tag}".replace("/", "_").replace(" ", "")
+    folder = run_folder(config_name, seed, overrides, work)
     run_dir = folder / "run"
     if (run_dir / "post" / "summary.json").exists() and (folder / "specimen.json").exists():
         specimen = read_json_mapping(folder / "specimen.json")

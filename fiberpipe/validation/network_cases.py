@@ -104,6 +104,27 @@ def _exponent_row(case: str, runs: list, reference: float, source: str, quick: b
                          bounds=QUICK_BOUNDS["exponent"] if quick else None)
 
 
+def contacts_against_toll(run) -> tuple[float, float]:
+    """(contacts per fiber counted in the last frame, Toll's N_c with the run's own f, g and final v_f)."""
+    from ..model.specimen_networks import toll_contacts_per_fiber
+
+    averages = final_orientation_averages(run)
+    predicted = toll_contacts_per_fiber(final_volume_fraction(run), run.specimen["aspect_ratio"],
+                                        averages["f_mean_abs_sin"], averages["g_mean_abs_cos"])
+    return final_contacts_per_fiber(run), predicted
+
+
+def contacts_ratio(run) -> float:
+    """Contacts per fiber at the end over Toll's N_c (case 2's second figure)."""
+    counted, predicted = contacts_against_toll(run)
+    return counted / predicted
+
+
+def exponent_of(run) -> float:
+    """The run's fitted van Wyk/Toll exponent n; nan when its fit has R² < :data:`MIN_FIT_R2` on log p."""
+    return fitted_values([_fit(run, "toll")], "n", False)[0]
+
+
 def validate_network_3d(quick: bool = False) -> list[ValidationRow]:
     """Case 2: the exponent against 3 and the final contacts per fiber against Toll's formula."""
     runs = runs_of("network-3d.yaml", quick)
@@ -111,13 +132,9 @@ def validate_network_3d(quick: bool = False) -> list[ValidationRow]:
     rows = [_exponent_row(case, runs, 3.0, VAN_WYK, quick)]
     measured, predicted = [], []
     for run in runs:
-        averages = final_orientation_averages(run)
-        vf = final_volume_fraction(run)
-        aspect = run.specimen["aspect_ratio"]
-        from ..model.specimen_networks import toll_contacts_per_fiber
-
-        predicted.append(toll_contacts_per_fiber(vf, aspect, averages["f_mean_abs_sin"], averages["g_mean_abs_cos"]))
-        measured.append(final_contacts_per_fiber(run))
+        counted, toll = contacts_against_toll(run)
+        measured.append(counted)
+        predicted.append(toll)
     ratios = [m / p for m, p in zip(measured, predicted)]
     rows.append(ValidationRow(case, "contacts per fiber at the end / Toll's N_c (own f, g, v_f)", 1.0, ratios,
                               CONTACTS_TOLERANCE, TOLL_CONTACTS,
@@ -128,9 +145,30 @@ def validate_network_3d(quick: bool = False) -> list[ValidationRow]:
     return rows
 
 
+#: the physical mass with the study's damping: the finer setting the mat's mass scaling is checked against
+PHYSICAL_MASS = {"solver.mass_scaling": 1, "scene.damping.alpha": "1e5 1/s"}
+
+
 def validate_planar_mat(quick: bool = False) -> list[ValidationRow]:
-    """Case 3: the planar mat's exponent against Toll's 5."""
-    return [_exponent_row("3 planar random mat", runs_of("planar-mat.yaml", quick), 5.0, TOLL_PLANAR, quick)]
+    """Case 3: the planar mat's exponent against Toll's 5; in the full case, on the first seed, the
+    exponent's change at the physical mass (the case runs with mass scaling 4) and with the element
+    length halved, each within the case's tolerance on Toll's scale (1/3 of 5)."""
+    from .compaction_runs import MissingRun
+
+    case = "3 planar random mat"
+    runs = runs_of("planar-mat.yaml", quick)
+    rows = [_exponent_row(case, runs, 5.0, TOLL_PLANAR, quick)]
+    if quick or not runs:
+        return rows
+    half = float(runs[0].config.mesh.element_length) / 2
+    for finer, setting in ((PHYSICAL_MASS, "the physical mass (α 1e5 1/s)"),
+                           ({"mesh.element_length": half}, f"{1e3 * half:.3g} mm elements")):
+        try:
+            rows.append(convergence_row(case, "planar-mat.yaml", runs[0], finer, setting, exponent_of, "n",
+                                        EXPONENT_TOLERANCE, scale=5.0))
+        except MissingRun:  # --reuse without the finer run: left out, as a seed without a run is
+            pass
+    return rows
 
 
 def validate_wavy_bundle(quick: bool = False) -> list[ValidationRow]:
@@ -176,6 +214,29 @@ def refinement_row(case: str, config_name: str, run, law: str, key: str, toleran
             f"(R² {fine_fit.get('r2_log', float('nan')):.2f}) at {1e3 * half:.3g} mm")
     return ValidationRow(case, f"refinement: {key} with the element length halved, against the case's mesh", base,
                          [refined], tolerance, "mesh convergence (the case's own fit as the reference)", note=note)
+
+
+def convergence_row(case: str, config_name: str, run, finer: dict, setting: str, figure, name: str,
+                    tolerance: float, scale: float = 1.0) -> ValidationRow:
+    """The case's ``figure`` (a function of a run) at the case's settings against a finer setting on
+    ``run``'s specimen (its seed): ``finer`` are the overrides (the physical mass, the element length
+    halved). The row's value is |figure(finer) − figure(case)| / ``scale``, within the case's
+    ``tolerance`` (``scale``: the case's reference, so the change is judged on the case's own scale);
+    a figure without a value (a fit below :data:`MIN_FIT_R2`) fails the row. The note gives both
+    figures and the load-cell curve's change between the two, case 7's measure (window means of
+    F(U) over the largest load)."""
+    from .compaction_runs import compact
+    from .quasi_static import curve_change
+
+    fine = compact(config_name, run.seed, overrides=finer)
+    base_value, fine_value = figure(run), figure(fine)
+    note = (f"seed {run.seed}: {name} {base_value:.4g} at the case's settings, {fine_value:.4g} with {setting}; "
+            f"F(U) change {curve_change(run, fine):.3g} of the largest load")
+    scaled = f" over {scale:g} (the case's reference)" if scale != 1.0 else ""
+    return ValidationRow(case, f"convergence: the change of {name} with {setting}{scaled}, against the case's settings", 0.0,
+                         [abs(fine_value - base_value) / scale], tolerance,
+                         "convergence (the case's own figure at a finer setting as the reference)", relative=False,
+                         note=note, data={"case_settings": base_value, "finer": fine_value})
 
 
 def validate(quick: bool = False) -> list[ValidationRow]:

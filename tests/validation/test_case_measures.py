@@ -112,3 +112,35 @@ def test_refinement_row_compares_the_halved_mesh_fit_with_the_case_s(monkeypatch
     assert row.reference == 100.0 and row.error == pytest.approx(0.1) and row.passed
     monkeypatch.setattr(runs, "compact", lambda *a, **k: fitted(110.0, 0.5))  # the fine fit does not hold
     assert not refinement_row("4", "wavy-bundle.yaml", fitted(100.0, 0.97), "gutowski", "beta", 0.3).passed
+
+
+def test_convergence_row_judges_the_figure_s_change_on_the_case_s_scale(monkeypatch):
+    import fiberpipe.validation.compaction_runs as runs
+    from fiberpipe.validation.network_cases import convergence_row, exponent_of
+
+    travel = np.linspace(0, 1e-3, 101)
+
+    def fitted(n, r2, scale=1.0):
+        run = synthetic_run(travel, 10 * travel * scale)
+        run.seed = 0
+        run.summary = {"mesoscale_laws": {"toll": {"n": n, "r2_log": r2}}}
+        return run
+
+    asked = {}
+
+    def fake_compact(name, seed, work=None, overrides=None):
+        asked.update(overrides)
+        return fitted(5.5, 0.99, scale=1.02)
+
+    monkeypatch.setattr(runs, "compact", fake_compact)
+    row = convergence_row("3", "planar-mat.yaml", fitted(5.0, 0.99), {"solver.mass_scaling": 1}, "the physical mass",
+                          exponent_of, "n", 1 / 3, scale=5.0)
+    assert asked == {"solver.mass_scaling": 1}
+    assert row.measured == pytest.approx(0.1) and row.passed  # |5.5 − 5| / 5 within 1/3
+    assert "F(U) change 0.0" in row.note  # 2 % of the load, the last window's mean 0.95 of the largest
+    monkeypatch.setattr(runs, "compact", lambda *a, **k: fitted(7.0, 0.99))
+    assert not convergence_row("3", "planar-mat.yaml", fitted(5.0, 0.99), {}, "x", exponent_of, "n", 1 / 3,
+                               scale=5.0).passed  # |7 − 5| / 5 = 0.4
+    monkeypatch.setattr(runs, "compact", lambda *a, **k: fitted(5.0, 0.5))  # the finer fit does not hold
+    assert not convergence_row("3", "planar-mat.yaml", fitted(5.0, 0.99), {}, "x", exponent_of, "n", 1 / 3,
+                               scale=5.0).passed
