@@ -239,7 +239,7 @@ YARN100_SEEDS := 0 1 2 3
 yarn-100-accuracy: setup
 	for seed in $(YARN100_SEEDS); do $(FP) specimen configs/specimens/yarn-100.yaml --seed $$seed \
 		--out runs/specimens/yarn-100-s$$seed || exit 1; done
-	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_fast_ensemble.py --out runs/bench/yarn-100-accuracy --runs 1 \
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_fast_ensemble.py --out runs/bench/yarn-100-accuracy --runs 1 --window-mm 0.2378 \
 		--reference-specimens 1 $(foreach seed,$(YARN100_SEEDS),--config runs/specimens/yarn-100-s$(seed)/config.yaml) \
 		--setting "study:solver.mass_scaling=1,scene.damping.alpha=1e5 1/s,solver.stable_step=element,solver.dt_safety=0.95" \
 		--setting "fast:"
