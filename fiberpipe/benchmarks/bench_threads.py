@@ -52,11 +52,12 @@ def measure(n_fibers: int, steps: int, rounds: int, threads: int = 2, contact: b
         else:
             m, effects, dt, saved_state = _bench_scene(n_fibers, contact, pitch_r)
         integrator = Integrator(m, effects, dt, history_rows=steps * (rounds + 1) // 100 + 2, history_every=100, threads=th)
-        integrator.advance(saved_state, 300 if config else 10)  # compile (from rest: past the first contacts)
+        integrator.advance(saved_state, 300 if config and not state else 10)  # compile (from rest: past the first contacts)
         runs[th] = (integrator, saved_state, m.n_elements)
     # the row's label: the bench bundle's fiber count, or the scene and where it starts
     if config:
-        label = f"{m.n_fibers} ({os.path.basename(os.path.dirname(os.path.abspath(config)))} from rest)"
+        start = f"state {os.path.basename(state)}" if state else "from rest"
+        label = f"{m.n_fibers} ({os.path.basename(os.path.dirname(os.path.abspath(config)))} {start})"
     elif state:
         label = f"{m.n_fibers} (paper-40 state {os.path.basename(state)})"
     else:
@@ -104,11 +105,13 @@ def main(argv=None):
     ap.add_argument("--no-contact", action="store_true",
                     help="beams, clamps, damping and gravity only: the part that runs in parallel")
     ap.add_argument("--state", nargs="+", default=[],
-                    help="paper-40 states saved by paper40_states (instead of the bench bundle)")
+                    help="states saved by paper40_states (paper-40) or yarn_states (with the --config they are of)")
     ap.add_argument("--config", nargs="+", default=[],
                     help="run configs whose scenes run from rest (instead of the bench bundle)")
     a = ap.parse_args(argv)
-    if a.config:
+    if a.config and a.state:  # the config's scene from each state
+        rows = [measure(0, a.steps, a.rounds, a.threads, state=s, config=a.config[0]) for s in a.state]
+    elif a.config:
         rows = [measure(0, a.steps, a.rounds, a.threads, config=p) for p in a.config]
     elif a.state:
         rows = [measure(0, a.steps, a.rounds, a.threads, state=p) for p in a.state]

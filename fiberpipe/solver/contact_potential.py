@@ -48,6 +48,7 @@ from .._prefetch import prefetch_row
 from .._tasks import task_count
 from ._specialise import specialise
 from .contact_pairs import record_pair
+from .contact_state import PairRecords
 from .geometry import apply_line_point, crossing_angle, segment_distance2_s
 from .laws import (LAW_HERTZ_ORIENTED, LAW_HERTZ_PARALLEL, P_LBLEND, P_PHI_HI, P_PHI_LO, P_XI_HI, P_XI_LO,
                    hertz_crossed_point_d, law_line, law_point, law_weight_point)
@@ -706,6 +707,28 @@ _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _merge_forces(f_out, seg_nodes, pairs, k, rows, r):
+    """Pair ``k``'s force block ``rows[r]`` onto its four nodes and, where the joint share's forces
+    reach them, the far nodes of their neighbouring segments."""
+    i = pairs[k, 0]
+    j = pairs[k, 1]
+    for c in range(3):
+        f_out[seg_nodes[i, 0], c] += rows[r, _R_BLOCK + c]
+        f_out[seg_nodes[i, 1], c] += rows[r, _R_BLOCK + 3 + c]
+        f_out[seg_nodes[j, 0], c] += rows[r, _R_BLOCK + 6 + c]
+        f_out[seg_nodes[j, 1], c] += rows[r, _R_BLOCK + 9 + c]
+    # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient (only
+    # with the point part in touch: zeros for the other pairs, most of a bundle's line contacts)
+    if rows[r, _R_FAR] == 0.0:
+        return
+    for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
+                           _next_node(seg_nodes, j))):
+        if n >= 0:
+            for c in range(3):
+                f_out[n, c] += rows[r, _R_BLOCK + 12 + 3 * q + c]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use_list, use_share):
     """Pair ``k``'s result row ``rows[r]`` into the records ``out`` and its force block onto its four
     nodes and the far nodes of their neighbouring segments (the pair's fn is reset first: 0 unless in
@@ -717,22 +740,7 @@ def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use
         return n_active
     if outcome != _TOUCHING:
         return n_active
-    i = pairs[k, 0]
-    j = pairs[k, 1]
-    for c in range(3):
-        f_out[seg_nodes[i, 0], c] += rows[r, _R_BLOCK + c]
-        f_out[seg_nodes[i, 1], c] += rows[r, _R_BLOCK + 3 + c]
-        f_out[seg_nodes[j, 0], c] += rows[r, _R_BLOCK + 6 + c]
-        f_out[seg_nodes[j, 1], c] += rows[r, _R_BLOCK + 9 + c]
-    # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient (only
-    # with the point part in touch: zeros for the other pairs, most of a bundle's line contacts)
-    if rows[r, _R_FAR] == 0.0:
-        return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
-    for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
-                           _next_node(seg_nodes, j))):
-        if n >= 0:
-            for c in range(3):
-                f_out[n, c] += rows[r, _R_BLOCK + 12 + 3 * q + c]
+    _merge_forces(f_out, seg_nodes, pairs, k, rows, r)
     return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
 
 
@@ -746,13 +754,18 @@ _PAIR_TASKS = 8
 
 
 def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
-                 span, rows, scratch):
+                 span, sink, scratch):
     """Entries ``lo`` … ``hi − 1`` of the look list (:func:`_look_list`) of :func:`contact_forces_pot`
     (``span = (lo, hi, reach)``), with one task's scratch (``rec``, ``geo``, ``blk``, ``gbuf``, ``jgeo``
     of :func:`_pass_work`): each pair merged at once (``_THREADS`` False; returns the energy and the
-    count of pairs in contact) or written to its result row ``rows[kk]`` for the merge after the
-    tasks (returns zeros)."""
+    count of pairs in contact), or (``_THREADS``) each pair's records written in place (``sink =
+    (rows, touch, recs)``: ``recs`` the records built from their arrays in the task, as a structure
+    passed into it loses its writes) and a pair with a force or an energy written to its result row
+    ``rows[kk]`` and listed in ``touch[lo:]`` for the merge after the tasks, which adds the forces and
+    lists the pairs in contact in order (returns zero energy and the length of that list)."""
     lo, hi, reach = span
+    rows, touch, recs = sink
+    n_touch = 0
     rec, geo, blk, gbuf, jgeo = scratch
     use_list = out.active.shape[0] > 0
     use_share = out.share.shape[0] > 0
@@ -802,7 +815,11 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             dist2, sc, tc = segment_distance2_s(a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2],
                                                  ta[0], ta[1], ta[2], tb[0], tb[1], tb[2])
             if dist2 >= rr * rr:
-                rows[ri, _R_GAP] = reach + math.sqrt(dist2) - rr
+                if _THREADS:  # settled here: the merge visits only the pairs with a force or an energy
+                    if recs.gap.shape[0] > 0:
+                        recs.gap[k] = reach + math.sqrt(dist2) - rr
+                else:
+                    rows[ri, _R_GAP] = reach + math.sqrt(dist2) - rr
                 outcome = _APART
                 break
             for c in range(8):
@@ -856,17 +873,27 @@ def _pairs_range(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, g
             for r in range(8):
                 for c in range(3):
                     rows[ri, _R_BLOCK + 3 * r + c] = blk[r, c]
-            for c in range(8):
-                rows[ri, _R_REC + c] = rec[c]
-            rows[ri, _R_PHI] = phi
+            if _THREADS:  # the records at once; the merge adds the forces and lists the pair
+                _record_pair(recs, k, rec, phi, 0, False, use_share)
+            else:
+                for c in range(8):
+                    rows[ri, _R_REC + c] = rec[c]
+                rows[ri, _R_PHI] = phi
             rows[ri, _R_FAR] = far
         if _THREADS:
-            rows[ri, _R_OUTCOME] = outcome
-            rows[ri, _R_ENERGY] = e
+            if outcome != _TOUCHING:
+                recs.fn[k] = 0.0
+            if outcome == _TOUCHING or e != 0.0:
+                rows[ri, _R_OUTCOME] = outcome
+                rows[ri, _R_ENERGY] = e
+                touch[lo + n_touch] = kk
+                n_touch += 1
         else:  # one task: merged at once, in the same order
             n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, ri, outcome, n_active, use_list,
                                    use_share)
             energy += e
+    if _THREADS:
+        return 0.0, n_touch
     return energy, n_active
 
 
@@ -877,42 +904,59 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     ``work``: the pass's scratch arrays (:func:`_pass_work`), one set per task."""
     # Strategy: each pair writes only its own result row (its forces summed in a 4-node block, its
     # records, its new skip threshold) and the rows are merged in the order of the pairs, at once
-    # (one task) or after the tasks, so the sums are the same whichever task evaluated a pair. The
+    # (one task) or after the tasks, so the sums are the same whichever task evaluated a pair. A task
+    # settles the pairs that add no force and no energy itself (most of a bundle's candidates: their
+    # fn reset, their new threshold), so the serial merge visits only the pairs in touch. The
     # records are written in the merge: an array reached through a structure passed into a prange
     # body, or through a tuple holding it, loses the body's writes (numba 0.68). A pair listed as in
     # contact is written at a slot of the look list the merge has already read (n_active ≤ kk).
     # Each task's pairs run in _pairs_range, compiled without reference counts in both passes: the
     # prange body takes its counts once per task, not per pair and Gauss point.
-    rows, t_rec, t_geo, t_blk, t_gbuf, t_jgeo = work
+    rows, t_rec, t_geo, t_blk, t_gbuf, t_jgeo, touch, n_touch = work
+    fn, normal, s, t, phi, delta, share, fsum, gap, active = out
     if not _THREADS:
         return _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out,
-                               c_off, (0, n_look, reach), rows, (t_rec[0], t_geo[0], t_blk[0], t_gbuf[0], t_jgeo[0]))
+                               c_off, (0, n_look, reach), (rows, touch, out),
+                               (t_rec[0], t_geo[0], t_blk[0], t_gbuf[0], t_jgeo[0]))
     n_tasks = t_rec.shape[0]
     for task in prange(n_tasks):
-        _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds, f_out, out, c_off,
-                        (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach), rows,
-                        (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))
-    return _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look)
+        n_touch[task] = _pairs_range_of(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gxi, gw, ds,
+                                        f_out, out, c_off,
+                                        (task * n_look // n_tasks, (task + 1) * n_look // n_tasks, reach),
+                                        (rows, touch, PairRecords(fn, normal, s, t, phi, delta, share, fsum, gap,
+                                                                  active)),
+                                        (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))[1]
+    return _merge_rows(f_out, seg_nodes, pairs, out, rows, (touch, n_touch, n_look))
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _merge_rows(f_out, seg_nodes, pairs, out, rows, n_look):
-    """The threaded pass's merge after its tasks (:func:`_pairs_pass`): the result rows of the look
-    list's pairs into the records and the forces, in pair order; returns ``(energy, n_active)``.
+def _merge_rows(f_out, seg_nodes, pairs, out, rows, listed):
+    """The threaded pass's merge after its tasks (:func:`_pairs_pass`): the result rows its tasks
+    listed (``listed = (touch, n_touch, n_look)``: each task's rows from its first look-list entry
+    on, ``n_touch`` per task) into the forces and the list of pairs in contact, in pair order (the
+    tasks wrote the records); returns ``(energy, n_active)``. The pairs the tasks did not list add
+    nothing: no force, and an energy of 0, which leaves the sum's bits as they are.
     Compiled without reference counts, as the serial pass (a count per pair for the row slice it
     hands to the records otherwise; LLVM removes most of them, and the threaded pass measured the
     same either way within ±4 % on the compacted 400-fiber bundle)."""
     use_list = out.active.shape[0] > 0
-    use_share = out.share.shape[0] > 0
     look = out.active
     compact = _compact_look(out)
+    touch, n_touch, n_look = listed
+    n_tasks = n_touch.shape[0]
     energy = 0.0
     n_active = 0
-    for kk in range(n_look):
-        k = look[kk] if compact else kk
-        n_active = _merge_pair(f_out, seg_nodes, pairs, out, k, rows, kk, int(rows[kk, _R_OUTCOME]), n_active, use_list,
-                               use_share)
-        energy += rows[kk, _R_ENERGY]
+    for task in range(n_tasks):
+        lo = task * n_look // n_tasks
+        for m in range(lo, lo + n_touch[task]):
+            kk = touch[m]
+            k = look[kk] if compact else kk
+            if rows[kk, _R_OUTCOME] == _TOUCHING:  # in contact: its records are written (record_pair's count)
+                _merge_forces(f_out, seg_nodes, pairs, k, rows, kk)
+                if use_list:
+                    out.active[n_active] = k
+                n_active += 1
+            energy += rows[kk, _R_ENERGY]
     return energy, n_active
 
 
@@ -968,11 +1012,13 @@ def _pass_work(n_rows, n_tasks, n_gauss):
     """Scratch arrays of :func:`_pairs_pass`: ``n_rows`` result rows kept for the merge after the tasks
     (0: one row, reused; the serial pass merges each pair at once), and per task a pair's accumulator,
     its segments' start nodes and tangents (a0, b0, ta, tb), its force block, its Gauss-point buffer
-    and its joint share's rivals (:func:`_joint_share`)."""
+    and its joint share's rivals (:func:`_joint_share`); the threaded pass's rows to merge (the look
+    list's entries with a force or an energy, per task from its first entry on) and their count per
+    task."""
     m = max(n_rows, 1)
     return (np.empty((m, N_ROW)), np.zeros((n_tasks, 8)),
             np.empty((n_tasks, 4, 3)), np.empty((n_tasks, 8, 3)), np.empty((n_tasks, 2 * n_gauss, N_GP_COLUMNS)),
-            np.empty((n_tasks, N_RIVALS, 8)))
+            np.empty((n_tasks, N_RIVALS, 8)), np.empty(m, np.int64), np.zeros(n_tasks, np.int64))
 
 
 _THREADS = False

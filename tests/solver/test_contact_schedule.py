@@ -36,14 +36,16 @@ def _bundle(rng):
     return x, seg, rad, pairs
 
 
-def _squeezed(rng, x, steps=60, d=1.5e-6):
+def _squeezed(rng, x, steps=60, d=1.5e-6, release=0):
     """``steps`` steps of motion, each node moving by at most d per step (the bundle squeezed
-    together, with noise): yields the positions and the reach 2D (D the path bound since the build)."""
+    together, with noise), then ``release`` steps of the bundle let go (moving apart): yields the
+    positions and the reach 2D (D the path bound since the build)."""
     path = 0.0
-    for _ in range(steps):
+    for step in range(steps + release):
         move = rng.normal(size=x.shape)
         move *= d / np.maximum(np.linalg.norm(move, axis=1), 1e-30)[:, None] * rng.uniform(0, 1, (len(x), 1))
-        move[:, 1:] -= 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))  # towards the middle
+        towards = 1.0 if step < steps else -1.0  # the middle, then away from it
+        move[:, 1:] -= towards * 0.5 * d * np.sign(x[:, 1:] - x[:, 1:].mean(axis=0))
         move *= d / max(np.linalg.norm(move, axis=1).max(), d)
         x = x + move
         path += np.linalg.norm(move, axis=1).max()
@@ -138,7 +140,8 @@ def test_potential_pass_visits_only_pairs_within_reach_and_keeps_their_records()
 def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     """solver.threads > 1: the potential pass evaluates its pairs in prange tasks and adds their force
     blocks in the serial order, so forces, energy, records and the list of pairs in contact equal the
-    serial pass's bit for bit at every step of a squeezed bundle (records kept from step to step)."""
+    serial pass's bit for bit at every step of a bundle squeezed and let go (records kept from step to
+    step; pairs that come apart are reset in the tasks)."""
     from fiberpipe.solver.contact_potential import PAIR_TASK_MIN, contact_forces_pot, contact_forces_pot_threads
     from fiberpipe.solver.contact_state import new_records
 
@@ -159,7 +162,9 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
     for r in kept:
         r.gap[:] = [pair_gap(x, seg, rad, pairs, k) for k in range(n)]
     most_looked = 0
-    for x, reach in _squeezed(rng, x, steps=40, d=2.5e-6):
+    opened = 0  # pairs in contact at one step and apart at the next: their fn reset in the tasks
+    for x, reach in _squeezed(rng, x, steps=40, d=2.5e-6, release=15):
+        fn_before = kept[1].fn[:n].copy()
         most_looked = max(most_looked, int(np.sum(kept[0].gap[:n] <= reach)))
         res = []
         for kernel, r in zip((contact_forces_pot, contact_forces_pot_threads), kept):
@@ -172,7 +177,8 @@ def test_threaded_potential_pass_equals_the_serial_pass_bit_for_bit():
         for name in ("fn", "normal", "s", "t", "phi", "delta", "share", "fsum", "gap"):
             assert np.array_equal(getattr(kept[0], name), getattr(kept[1], name)), name
         assert np.array_equal(kept[0].active[:na1], kept[1].active[:na2])
-    assert na1 > 0
+        opened += int(np.sum((fn_before > 0) & (kept[1].fn[:n] == 0)))
+    assert na1 > 0 and opened > 0
     assert most_looked >= 2 * PAIR_TASK_MIN  # two tasks or more ran
 
 
