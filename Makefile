@@ -20,7 +20,7 @@ help:
 	@echo "make test-benchmarks  the checks of the developer scripts in benchmarks/"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
 	@echo "make fast-ensemble  paper-40's fastest settings within 2 %, ensemble against ensemble, and the modal step's (≈ 14 min)"
-	@echo "make yarn-100-accuracy  the fast settings against the study settings on a 100-fiber yarn, against the seed spread (≈ 20 min)"
+	@echo "make yarn-100-accuracy  the fast settings against the study settings on a 100-fiber yarn, against the seed spread (≈ 8 min of CPU)"
 	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min with the specimen, two cores)"
 	@echo "make docs     build the documentation site into site/ (mkdocs-material, the docs extra)"
 
@@ -233,7 +233,7 @@ bench-output-4000: setup
 
 # accuracy at scale: the fast settings' curve on a 100-fiber sub-bundle of the yarn against the
 # study settings' on the same specimen (seed 0), and the fast curve's spread over specimen seeds 0-3
-# (docs/benchmarks.md, "Fast settings"; one core, ≈ 20 min, most of it the study settings' run)
+# X
 YARN100_SEEDS := 0 1 2 3
 .PHONY: yarn-100-accuracy
 yarn-100-accuracy: setup
