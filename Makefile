@@ -233,7 +233,7 @@ bench-output-4000: setup
 
 # accuracy at scale: the fast settings' curve on a 100-fiber sub-bundle of the yarn against the
 # study settings' on the same specimen (seed 0), and the fast curve's spread over specimen seeds 0-3
-# X
+# (docs/benchmarks.md, "Fast settings"; one core, ≈ 8 min of CPU, most of it the study settings' run)
 YARN100_SEEDS := 0 1 2 3
 .PHONY: yarn-100-accuracy
 yarn-100-accuracy: setup
