@@ -30,7 +30,7 @@ largest window mean, against the largest spread over the windows relative to tha
 largest window mean over the specimens (``make yarn-100-accuracy``):
 
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_fast_ensemble.py \\
-        --out runs/bench/yarn-100-accuracy --runs 1 --window-mm 0.2378 --reference-specimens 1 \\
+        --out runs/bench/yarn-100-accuracy --runs 1 --window-mm 0.2378 --reference-specimens 2 \\
         --config runs/specimens/yarn-100-s0/config.yaml ... --config runs/specimens/yarn-100-s3/config.yaml \\
         --setting "study:solver.mass_scaling=1,scene.damping.alpha=1e5 1/s,solver.stable_step=element,solver.dt_safety=0.95" \\
         --setting fast:
