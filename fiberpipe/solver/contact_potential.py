@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from .._prefetch import prefetch_row
 from .._tasks import task_count
@@ -699,31 +699,32 @@ _record_pair = njit(cache=True, fastmath=True, error_model="numpy", inline="alwa
 # (:func:`fiberpipe.solver.contact_pairs.record_pair`), its crossing angle, its new skip threshold, and
 # for the merge after the tasks its energy and its outcome, and whether the joint share's forces
 # reach the far nodes (rows 4–7 of the block; zeros otherwise, which the merge then skips)
-_R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME, _R_FAR = 0, 24, 32, 33, 34, 35, 36
-N_ROW = 37
+_R_BLOCK, _R_REC, _R_PHI, _R_GAP, _R_ENERGY, _R_OUTCOME, _R_FAR, _R_PAIR = 0, 24, 32, 33, 34, 35, 36, 37
+N_ROW = 38
 # what a pair's evaluation found: beyond reach (nothing to do), beyond touch (a new threshold in the
 # row), within touch but no force, in contact
 _SKIPPED, _APART, _CLOSE, _TOUCHING = 0, 1, 2, 3
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _merge_forces(f_out, seg_nodes, pairs, k, rows, r):
+def _merge_forces(f_out, seg_nodes, pairs, k, rows, r, owned):
     """Pair ``k``'s force block ``rows[r]`` onto its four nodes and, where the joint share's forces
-    reach them, the far nodes of their neighbouring segments."""
+    reach them, the far nodes of their neighbouring segments: those of the nodes ``owned = (lo, hi)``
+    (``lo ≤ n < hi``), each node's additions in the same order whatever the range."""
     i = pairs[k, 0]
     j = pairs[k, 1]
-    for c in range(3):
-        f_out[seg_nodes[i, 0], c] += rows[r, _R_BLOCK + c]
-        f_out[seg_nodes[i, 1], c] += rows[r, _R_BLOCK + 3 + c]
-        f_out[seg_nodes[j, 0], c] += rows[r, _R_BLOCK + 6 + c]
-        f_out[seg_nodes[j, 1], c] += rows[r, _R_BLOCK + 9 + c]
+    lo, hi = owned
+    for q, n in enumerate((seg_nodes[i, 0], seg_nodes[i, 1], seg_nodes[j, 0], seg_nodes[j, 1])):
+        if lo <= n < hi:
+            for c in range(3):
+                f_out[n, c] += rows[r, _R_BLOCK + 3 * q + c]
     # rows 4–7: the far nodes of the neighbouring segments, through the joint share's gradient (only
     # with the point part in touch: zeros for the other pairs, most of a bundle's line contacts)
     if rows[r, _R_FAR] == 0.0:
         return
     for q, n in enumerate((_prev_node(seg_nodes, i), _next_node(seg_nodes, i), _prev_node(seg_nodes, j),
                            _next_node(seg_nodes, j))):
-        if n >= 0:
+        if n >= 0 and lo <= n < hi:
             for c in range(3):
                 f_out[n, c] += rows[r, _R_BLOCK + 12 + 3 * q + c]
 
@@ -740,7 +741,7 @@ def _merge_pair(f_out, seg_nodes, pairs, out, k, rows, r, outcome, n_active, use
         return n_active
     if outcome != _TOUCHING:
         return n_active
-    _merge_forces(f_out, seg_nodes, pairs, k, rows, r)
+    _merge_forces(f_out, seg_nodes, pairs, k, rows, r, (0, f_out.shape[0]))
     return _record_pair(out, k, rows[r, _R_REC:_R_REC + 8], rows[r, _R_PHI], n_active, use_list, use_share)
 
 
@@ -926,15 +927,38 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
                                         (rows, touch, PairRecords(fn, normal, s, t, phi, delta, share, fsum, gap,
                                                                   active)),
                                         (t_rec[task], t_geo[task], t_blk[task], t_gbuf[task], t_jgeo[task]))[1]
-    return _merge_rows(f_out, seg_nodes, pairs, out, rows, (touch, n_touch, n_look))
+    energy, n_active = _merge_rows(out, rows, (touch, n_touch, n_look))
+    # the forces in pair order, each task adding those on its share of the nodes (every node's
+    # additions in the serial pass's order: the same sums bit for bit)
+    n_nodes = f_out.shape[0]
+    n_owners = get_num_threads()
+    for owner in prange(n_owners):
+        _scatter_owned(f_out, seg_nodes, pairs, rows, (touch, n_touch, n_look),
+                       (owner * n_nodes // n_owners, (owner + 1) * n_nodes // n_owners))
+    return energy, n_active
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
-def _merge_rows(f_out, seg_nodes, pairs, out, rows, listed):
+def _scatter_owned(f_out, seg_nodes, pairs, rows, listed, owned):
+    """The forces of the pairs in contact that :func:`_merge_rows` listed (``listed``, its pair
+    indices in the rows' ``_R_PAIR`` column), in pair order, onto the nodes ``owned = (lo, hi)``."""
+    touch, n_touch, n_look = listed
+    n_tasks = n_touch.shape[0]
+    for task in range(n_tasks):
+        lo = task * n_look // n_tasks
+        for m in range(lo, lo + n_touch[task]):
+            kk = touch[m]
+            if rows[kk, _R_OUTCOME] == _TOUCHING:
+                _merge_forces(f_out, seg_nodes, pairs, int(rows[kk, _R_PAIR]), rows, kk, owned)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", _nrt=False)
+def _merge_rows(out, rows, listed):
     """The threaded pass's merge after its tasks (:func:`_pairs_pass`): the result rows its tasks
     listed (``listed = (touch, n_touch, n_look)``: each task's rows from its first look-list entry
-    on, ``n_touch`` per task) into the forces and the list of pairs in contact, in pair order (the
-    tasks wrote the records); returns ``(energy, n_active)``. The pairs the tasks did not list add
+    on, ``n_touch`` per task) into the list of pairs in contact, in pair order (the tasks wrote the
+    records), each row's pair index into its ``_R_PAIR`` column for the forces' scatter
+    (:func:`_scatter_owned`); returns ``(energy, n_active)``. The pairs the tasks did not list add
     nothing: no force, and an energy of 0, which leaves the sum's bits as they are.
     Compiled without reference counts, as the serial pass (a count per pair for the row slice it
     hands to the records otherwise; LLVM removes most of them, and the threaded pass measured the
@@ -951,8 +975,8 @@ def _merge_rows(f_out, seg_nodes, pairs, out, rows, listed):
         for m in range(lo, lo + n_touch[task]):
             kk = touch[m]
             k = look[kk] if compact else kk
+            rows[kk, _R_PAIR] = k
             if rows[kk, _R_OUTCOME] == _TOUCHING:  # in contact: its records are written (record_pair's count)
-                _merge_forces(f_out, seg_nodes, pairs, k, rows, kk)
                 if use_list:
                     out.active[n_active] = k
                 n_active += 1

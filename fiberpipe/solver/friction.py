@@ -39,11 +39,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from .._tasks import task_count
 from .contact_state import PairRecords
-from .geometry import apply_pair_force, pair_nodes
+from .geometry import apply_pair_force, apply_pair_force_owned, pair_nodes
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -275,11 +275,7 @@ def _friction_tasks(v, seg_nodes, pairs, n_pairs, rec, mu, k_t, dt, hist, f_out,
     fpair = np.empty((n_visit, 3))
     sums = np.zeros((n_tasks, 3))
     _friction_task_pass(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step, lazy, n_visit, fpair, sums)
-    c_s, c_t, c_active = rec.s, rec.t, rec.active
-    for kk in range(n_visit):
-        k = c_active[kk] if lazy else kk
-        i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
-        apply_pair_force(f_out, (a0, a1, b0, b1), c_s[k], c_t[k], fpair[kk, 0], fpair[kk, 1], fpair[kk, 2])
+    _friction_scatter_pass(seg_nodes, pairs, rec, f_out, lazy, n_visit, fpair)
     diss = 0.0
     espring = 0.0
     returned = 0.0
@@ -303,6 +299,23 @@ def _friction_task_pass(v, seg_nodes, pairs, rec, mu, k_t, dt, hist, f_out, step
         sums[task, 0] = d
         sums[task, 1] = e
         sums[task, 2] = r
+
+
+@njit(cache=False, fastmath=True, error_model="numpy", parallel=True, _nrt=False)
+def _friction_scatter_pass(seg_nodes, pairs, rec, f_out, lazy, n_visit, fpair):
+    """The forces of :func:`_friction_tasks`'s rows onto the nodes in pair order, each task adding
+    those on its share of the nodes (every node's additions in the serial pass's order: the same
+    sums bit for bit). Not cached, as :func:`_friction_task_pass`."""
+    c_s, c_t, c_active = rec.s, rec.t, rec.active
+    n_nodes = f_out.shape[0]
+    n_owners = get_num_threads()
+    for owner in prange(n_owners):
+        owned = (owner * n_nodes // n_owners, (owner + 1) * n_nodes // n_owners)
+        for kk in range(n_visit):
+            k = c_active[kk] if lazy else kk
+            i, j, a0, a1, b0, b1 = pair_nodes(pairs, seg_nodes, k)
+            apply_pair_force_owned(f_out, (a0, a1, b0, b1), c_s[k], c_t[k], fpair[kk, 0], fpair[kk, 1],
+                                   fpair[kk, 2], owned)
 
 
 # Not cached: it links the parallel _friction_task_pass (see _kernels_beam.beam_pass_fibers's comment);

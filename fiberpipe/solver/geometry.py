@@ -141,6 +141,30 @@ def apply_pair_force(f_out, nodes4, s, t, f0, f1, f2):
 
 
 @njit(inline="always", cache=True, fastmath=True, error_model="numpy")
+def apply_pair_force_owned(f_out, nodes4, s, t, f0, f1, f2, owned):
+    """:func:`apply_pair_force` onto those of the four nodes in ``owned = (lo, hi)`` only, with the
+    same expression per node (the tasks of a scatter split by nodes add what one task adds)."""
+    na0, na1, nb0, nb1 = nodes4
+    lo, hi = owned
+    if lo <= na0 < hi:
+        f_out[na0, 0] += (1.0 - s) * f0
+        f_out[na0, 1] += (1.0 - s) * f1
+        f_out[na0, 2] += (1.0 - s) * f2
+    if lo <= na1 < hi:
+        f_out[na1, 0] += s * f0
+        f_out[na1, 1] += s * f1
+        f_out[na1, 2] += s * f2
+    if lo <= nb0 < hi:
+        f_out[nb0, 0] -= (1.0 - t) * f0
+        f_out[nb0, 1] -= (1.0 - t) * f1
+        f_out[nb0, 2] -= (1.0 - t) * f2
+    if lo <= nb1 < hi:
+        f_out[nb1, 0] -= t * f0
+        f_out[nb1, 1] -= t * f1
+        f_out[nb1, 2] -= t * f2
+
+
+@njit(inline="always", cache=True, fastmath=True, error_model="numpy")
 def apply_line_point(f_out, nodes4, s, t, f0, f1, f2, fm, delta, rec, sign):
     """One contact point of a pair (a Gauss point of a line part, or the point part's closest
     points): the force (f0, f1, f2) of magnitude ``fm`` as :func:`apply_pair_force`, and its share
