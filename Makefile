@@ -20,6 +20,7 @@ help:
 	@echo "make test-benchmarks  the checks of the developer scripts in benchmarks/"
 	@echo "make fast-settings  paper-40 fast settings vs the study settings (fiberpipe study, ≈ 3 min)"
 	@echo "make fast-ensemble  paper-40's fastest settings within 2 %, ensemble against ensemble, and the modal step's (≈ 14 min)"
+	@echo "make yarn-100-accuracy  the fast settings against the study settings on a 100-fiber yarn, against the seed spread (≈ 12 min of CPU)"
 	@echo "make fast-400 the 400-fiber specimen compacted at the study settings and with mass scaling 100 (≈ 35 min with the specimen, two cores)"
 	@echo "make docs     build the documentation site into site/ (mkdocs-material, the docs extra)"
 
@@ -229,6 +230,19 @@ yarn-1000 yarn-4000: yarn-%: setup
 bench-output-4000: setup
 	$(FP) specimen configs/specimens/yarn-4000.yaml --out runs/specimens/yarn-4000
 	$(PY) benchmarks/bench_output_scale.py runs/specimens/yarn-4000 --out runs/bench-output-4000
+
+# accuracy at scale: the fast settings' curve on a 100-fiber sub-bundle of the yarn against the
+# study settings' on the same specimens (seeds 0 and 1), and the fast curve's spread over specimen seeds 0-3
+# (docs/benchmarks.md, "Fast settings"; one core, ≈ 12 min of CPU, most of it the study settings' runs)
+YARN100_SEEDS := 0 1 2 3
+.PHONY: yarn-100-accuracy
+yarn-100-accuracy: setup
+	for seed in $(YARN100_SEEDS); do $(FP) specimen configs/specimens/yarn-100.yaml --seed $$seed \
+		--out runs/specimens/yarn-100-s$$seed || exit 1; done
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/bench_fast_ensemble.py --out runs/bench/yarn-100-accuracy --runs 1 --window-mm 0.2378 \
+		--reference-specimens 2 $(foreach seed,$(YARN100_SEEDS),--config runs/specimens/yarn-100-s$(seed)/config.yaml) \
+		--setting "study:solver.mass_scaling=1,scene.damping.alpha=1e5 1/s,solver.stable_step=element,solver.dt_safety=0.95" \
+		--setting "fast:"
 
 .PHONY: bench-400
 bench-400: specimen-400
