@@ -34,3 +34,17 @@ def replace_marked(page: Path, begin: str, end: str, text: str) -> None:
     tmp = page.with_suffix(page.suffix + ".tmp")
     tmp.write_text(doc[:i] + text + doc[j:])
     tmp.replace(page)
+
+
+def run_cli(main, argv=None) -> int:
+    """``main(argv)`` with a problem the user can fix (an ensemble none of whose seeds finished, bad
+    input) as one line on stderr, as ``fiberpipe`` prints it; returns the exit code."""
+    import sys
+
+    from fiberpipe.errors import FiberpipeError
+
+    try:
+        return main(argv)
+    except FiberpipeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code

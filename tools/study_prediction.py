@@ -257,15 +257,10 @@ def main(argv=None) -> int:
 
 
 def cli(argv=None) -> int:
-    """:func:`main` with a problem the user can fix (an ensemble none of whose seeds finished, bad
-    input) as one line on stderr, as ``fiberpipe`` prints it."""
-    from fiberpipe.errors import FiberpipeError
+    """:func:`main`, a problem the user can fix as one line (:func:`generated.run_cli`)."""
+    from generated import run_cli
 
-    try:
-        return main(argv)
-    except FiberpipeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return exc.exit_code
+    return run_cli(main, argv)
 
 
 if __name__ == "__main__":

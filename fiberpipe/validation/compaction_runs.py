@@ -159,3 +159,24 @@ def cell_height(cfg) -> float:
     from ..model.specimen_networks import cell_of
 
     return cell_of(cfg.specimen, float(cfg.fiber.radius)).height_m
+
+
+# windows of U over which two runs' curves are compared (their means)
+WINDOWS = 10
+
+
+def window_means(travel, force, edges) -> np.ndarray:
+    idx = np.digitize(travel, edges) - 1
+    return np.array([force[idx == k].mean() if np.any(idx == k) else np.nan for k in range(len(edges) - 1)])
+
+
+def curve_change(base, slow) -> float:
+    """Largest change of the window means of the upper plate's force between two runs over their
+    first loading, relative to the base run's largest force."""
+    def curve(run):
+        h = run.simulation.history
+        return np.asarray(h["plate_displacement"], float).sum(axis=1), np.asarray(h["plate_force"], float)[:, 1]
+
+    (u0, f0), (u1, f1) = curve(base), curve(slow)
+    edges = np.linspace(0.0, min(u0.max(), u1.max()), WINDOWS + 1)
+    return float(np.nanmax(np.abs(window_means(u1, f1, edges) - window_means(u0, f0, edges))) / np.max(f0))

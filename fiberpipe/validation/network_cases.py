@@ -226,7 +226,7 @@ def convergence_row(case: str, config_name: str, run, finer: dict, setting: str,
     figures and the load-cell curve's change between the two, case 7's measure (window means of
     F(U) over the largest load)."""
     from .compaction_runs import compact
-    from .quasi_static import curve_change
+    from .compaction_runs import curve_change
 
     fine = compact(config_name, run.seed, overrides=finer)
     base_value, fine_value = figure(run), figure(fine)

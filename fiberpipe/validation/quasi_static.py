@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from .compaction_runs import curve_change
 from .network_cases import runs_by_seed
 from .rows import ValidationRow
 
@@ -25,26 +26,8 @@ KINETIC_BOUND = 0.01
 #: two speeds agree within half the largest load, and the kinetic energy stays below the strain
 #: energy in the loaded phase (the loading is no impact)
 QUICK_BOUNDS = {"curve": (0.0, 0.5), "kinetic": (0.0, 1.0)}
-WINDOWS = 10
 SOURCE_SPEED = "quasi-static: the response does not depend on the loading speed (half of it: ≤ 5 %)"
 SOURCE_KE = "the study's Eq. 5: K_e ≤ 0.01 S_e in the loaded phase (Abaqus' quasi-static criterion)"
-
-
-def window_means(travel, force, edges) -> np.ndarray:
-    idx = np.digitize(travel, edges) - 1
-    return np.array([force[idx == k].mean() if np.any(idx == k) else np.nan for k in range(len(edges) - 1)])
-
-
-def curve_change(base, slow) -> float:
-    """Largest change of the window means of the upper plate's force between two runs over their
-    first loading, relative to the base run's largest force."""
-    def curve(run):
-        h = run.simulation.history
-        return np.asarray(h["plate_displacement"], float).sum(axis=1), np.asarray(h["plate_force"], float)[:, 1]
-
-    (u0, f0), (u1, f1) = curve(base), curve(slow)
-    edges = np.linspace(0.0, min(u0.max(), u1.max()), WINDOWS + 1)
-    return float(np.nanmax(np.abs(window_means(u1, f1, edges) - window_means(u0, f0, edges))) / np.max(f0))
 
 
 def kinetic_over_strain(run) -> float:
