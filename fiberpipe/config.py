@@ -771,6 +771,8 @@ class SolverConfig(Section):
                              "docs/contact.md); the run warns once a contact law's slope (ωΔt)² passes "
                              "4 dt_safety², the same margin (docs/contact.md, a law that stiffens past the step)")
     dt: Optional[Time] = Field(None, description="fixed time step; default: the stable step × dt_safety")
+    force_dt: bool = Field(False, description="run with solver.dt above the stable limit anyway (refused otherwise; "
+                           "a run that blows up stops with its diagnosis and keeps its last good state)")
     end_time: Optional[Time] = None
     output_frames: int = Field(21, ge=2)
     history_every: Optional[int] = Field(None, ge=1)

@@ -47,6 +47,7 @@ def build_simulation(mesh, cfg) -> tuple[Model, list[Term], SimulationSettings]:
     check_scene_geometry(model, terms)
     settings = SimulationSettings(
         dt_safety=float(solver.dt_safety), dt_s=getattr(solver, "dt", None), end_time_s=solver.end_time,
+        force_dt=bool(getattr(solver, "force_dt", False)),
         output_frames=int(solver.output_frames), history_every=getattr(solver, "history_every", None),
         checkpoint_every=getattr(solver, "checkpoint_every", None),
         threads=int(getattr(solver, "threads", 1) or 1),

@@ -168,7 +168,7 @@ def choose_time_step(model: Model, effects: Sequence[Term], settings: Simulation
             f"solver dt {settings.dt_s:.4g} s is above the stable limit {rep.dt_stable_s:.4g} s "
             f"({rep.governing_mode} mode of element {rep.governing_element}); the explicit scheme "
             f"would blow up. Use dt ≤ {rep.dt_stable_s:.4g} s, leave dt unset to use dt_safety × limit, "
-            f"or set force_dt to run anyway")
+            f"or set solver.force_dt: true to run anyway")
     return float(settings.dt_s), rep
 
 

@@ -56,3 +56,18 @@ solver: {output_frames: 3}
     assert h["plate_force"].shape[1] == 2 and h["wall_force"].shape[1] == 2
     assert h["plate_displacement"][-1, 0] == pytest.approx(1e-5, rel=1e-6)
     assert h["plate_force"][-1, 1] > 0
+
+
+def test_solver_force_dt_runs_a_step_above_the_stable_limit_that_is_refused_without_it():
+    """``solver.dt`` above the stable limit is refused with a message naming ``solver.force_dt``; with
+    ``solver.force_dt: true`` the run takes that step (the cantilever's stable step is ~1.9e-7 s)."""
+    from fiberpipe.errors import FiberpipeError
+    from fiberpipe.solver.integrator import choose_time_step
+
+    cfg = load_config(CONFIGS / "cantilever-small.yaml", {"solver.dt": "5e-7 s"})
+    model, effects, settings = build_simulation(_mesh(cfg), cfg)
+    with pytest.raises(FiberpipeError, match=r"solver\.force_dt: true"):
+        choose_time_step(model, effects, settings)
+    cfg = load_config(CONFIGS / "cantilever-small.yaml", {"solver.dt": "5e-7 s", "solver.force_dt": True})
+    model, effects, settings = build_simulation(_mesh(cfg), cfg)
+    assert choose_time_step(model, effects, settings)[0] == pytest.approx(5e-7)
