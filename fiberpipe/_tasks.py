@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from numba import njit
 
+# tasks of a scatter split by nodes (the contact and friction passes' forces onto the nodes, each
+# task adding those on its share of the nodes in pair order): each task reads every pair's row, so
+# more than two cost more reading than they save in adding
+SCATTER_TASKS = 2
+
 
 @njit(cache=True)
 def task_count(n_items, min_items, max_tasks):

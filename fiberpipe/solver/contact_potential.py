@@ -42,10 +42,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import njit, prange
 
 from .._prefetch import prefetch_row
-from .._tasks import task_count
+from .._tasks import SCATTER_TASKS, task_count
 from ._specialise import specialise
 from .contact_pairs import record_pair
 from .contact_state import PairRecords
@@ -939,7 +939,7 @@ def _pairs_pass(x, seg_nodes, seg_radius, seg_arc, pairs, law_id, law_params, gx
     # the forces in pair order, each task adding those on its share of the nodes (every node's
     # additions in the serial pass's order: the same sums bit for bit)
     n_nodes = f_out.shape[0]
-    n_owners = get_num_threads()
+    n_owners = SCATTER_TASKS
     for owner in prange(n_owners):
         _scatter_owned(f_out, seg_nodes, pairs, rows, listed,
                        (owner * n_nodes // n_owners, (owner + 1) * n_nodes // n_owners))

@@ -39,9 +39,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import njit, prange
 
-from .._tasks import task_count
+from .._tasks import SCATTER_TASKS, task_count
 from .contact_state import PairRecords
 from .geometry import apply_pair_force, apply_pair_force_owned, pair_nodes
 
@@ -308,7 +308,7 @@ def _friction_scatter_pass(seg_nodes, pairs, rec, f_out, lazy, n_visit, fpair):
     sums bit for bit). Not cached, as :func:`_friction_task_pass`."""
     c_s, c_t, c_active = rec.s, rec.t, rec.active
     n_nodes = f_out.shape[0]
-    n_owners = get_num_threads()
+    n_owners = SCATTER_TASKS
     for owner in prange(n_owners):
         owned = (owner * n_nodes // n_owners, (owner + 1) * n_nodes // n_owners)
         for kk in range(n_visit):

@@ -126,3 +126,20 @@ def test_package_stamp_covers_the_terms_subpackage():
     """A term's module (``fiberpipe/solver/terms/``) is in the stamp of every cached solver kernel."""
     assert "terms/contact.py" in _jitcache._solver_sources()
     assert "terms/planes.py" in _jitcache._solver_sources()
+
+
+def test_no_kernel_asks_numba_for_its_threads():
+    """numba's ``get_num_threads()`` in a kernel reads a ctypes pointer, a dynamic global: every step
+    loop that links the kernel then stays out of numba's cache ("Cannot cache compiled function ...
+    as it uses dynamic globals") and compiles again in every run. The passes fix their task counts
+    without it (``fiberpipe._tasks``)."""
+    import re
+    from pathlib import Path
+
+    import fiberpipe
+
+    root = Path(fiberpipe.__file__).parent
+    calls = [f"{path.relative_to(root)}:{n}" for path in sorted(root.rglob("*.py"))
+             for n, line in enumerate(path.read_text().splitlines(), 1)
+             if re.search(r"get_num_threads\s*\(", line.split("#")[0])]
+    assert not calls, calls
