@@ -32,6 +32,12 @@ class ArtifactError(FiberpipeError):
 
 
 class SimulationDiverged(FiberpipeError):
-    """A simulation stopped because it diverged; the message holds the diagnosis."""
+    """A simulation stopped because it diverged; the message holds the diagnosis, ``step`` and
+    ``time_s`` where the solver found it (None where not known)."""
 
     exit_code = 3
+
+    def __init__(self, message: str = "", step: int | None = None, time_s: float | None = None):
+        super().__init__(message)
+        self.step = step
+        self.time_s = time_s

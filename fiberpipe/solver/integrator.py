@@ -461,7 +461,7 @@ def advance(model: Model, state: State, n_steps: int, effects: Sequence[Term] = 
     integrator = Integrator(model, effects, dt, history_every=max(1, n_steps))
     status, done, bad = integrator.advance(state, n_steps)
     if status != STATUS_OK:
-        raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None))
+        raise SimulationDiverged(_diagnose(model, state, status, bad, dt, None), step=state.step, time_s=state.t)
     return state
 
 
@@ -783,12 +783,13 @@ class _Run:
         integrator = self.integrator
         row = integrator.hist[integrator.h_row - 1] if integrator.h_row > 0 else None
         msg = _diagnose(self.model, state, status, bad, self.plan.dt_s, self.plan.timestep, detail, row)
+        at_step, at_time_s = state.step, state.t
         # keep the last good state as the partial result's final state (and last frame)
         state.x[:], state.q[:], state.v[:], state.w[:] = last_good.x, last_good.q, last_good.v, last_good.w
         state.t, state.step, state.acc[:] = last_good.t, last_good.step, last_good.acc
         if not self.frame_times or state.t > self.frame_times[-1]:
             self.take_frame(state, None)
-        exc = SimulationDiverged(msg)
+        exc = SimulationDiverged(msg, step=at_step, time_s=at_time_s)
         exc.partial_result = self.result(state, False)
         exc.partial_result.notes.append(f"diverged; the last frame is the last good state (t = {state.t:.6g} s)")
         exc.diagnosis = msg

@@ -287,7 +287,8 @@ def run_simulate(cfg: Config, mesh_path: Path, out: Path, *, config_sha256: str 
             kept.append(f"last good frames kept in {keep}")
         if ck_path.exists():
             kept.append(f"last checkpoint {ck_path.name} kept")
-        raise SimulationDiverged(f"{exc}" + (f" ({'; '.join(kept)})" if kept else "")) from None
+        raise SimulationDiverged(f"{exc}" + (f" ({'; '.join(kept)})" if kept else ""), step=exc.step,
+                                 time_s=exc.time_s) from None
     finally:
         if bar is not None:
             bar.close()

@@ -31,7 +31,6 @@ import hashlib
 import json
 import math
 import os
-import re
 import shutil
 import time
 from pathlib import Path
@@ -173,17 +172,17 @@ def member_jobs(raw: dict, seeds: list[int], out: Path) -> list[tuple[str, dict,
 
 
 DIVERGED_FILE = "diverged.json"  # in a member's run folder: why its last attempt diverged
-_DIVERGED_AT = re.compile(r"at t = ([-+0-9.eE]+) s \(step (\d+)\)")  # the solver's diagnosis names both
 
 
-def divergence_record(seed: int, diagnosis: str, stage: str) -> dict:
+def divergence_record(seed: int, exc: SimulationDiverged, stage: str) -> dict:
     """A diverged member as ``ensemble.json`` lists it: the seed, the stage that diverged (the
-    specimen's settling or closing, or the compaction), the step and time the solver names, and the
-    solver's diagnosis (its first line)."""
+    specimen's settling or closing, or the compaction), the step and time where the solver found it,
+    and its diagnosis (the first line)."""
+    diagnosis = str(exc)
     first = diagnosis.splitlines()[0] if diagnosis else "simulation diverged"
-    found = _DIVERGED_AT.search(first)
-    return {"seed": int(seed), "stage": stage, "step": int(found.group(2)) if found else None,
-            "time_s": float(found.group(1)) if found else None, "diagnosis": first}
+    step, time_s = getattr(exc, "step", None), getattr(exc, "time_s", None)
+    return {"seed": int(seed), "stage": stage, "step": None if step is None else int(step),
+            "time_s": None if time_s is None else float(time_s), "diagnosis": first}
 
 
 def member_outcome(raw: dict, run_dir: str, where: str, specimen_store: str, member=None,
@@ -198,7 +197,7 @@ def member_outcome(raw: dict, run_dir: str, where: str, specimen_store: str, mem
     try:
         return (member or run_member)(raw, run_dir, where, specimen_store=specimen_store)
     except SimulationDiverged as exc:
-        record = divergence_record(int(raw["specimen"].get("seed", 0)), str(exc), getattr(exc, "stage", "compaction"))
+        record = divergence_record(int(raw["specimen"].get("seed", 0)), exc, getattr(exc, "stage", "compaction"))
         record_path.parent.mkdir(parents=True, exist_ok=True)
         write_json_atomic(record_path, record)
         return {"diverged": record, "wall_time_s": time.perf_counter() - started}
