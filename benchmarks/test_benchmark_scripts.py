@@ -82,7 +82,7 @@ def test_fast_ensemble_specimens_runs_the_reference_on_the_first_specimens_only(
     import bench_fast_ensemble as bfe
 
     U = np.linspace(0.0, 1e-3, 101)
-    level = {("ref", "spec-s0"): 1.05, ("fast", "spec-s0"): 1.0, ("fast", "spec-s1"): 1.2}
+    level = {("ref", "specimen-s0"): 1.05, ("fast", "specimen-s0"): 1.0, ("fast", "specimen-s1"): 1.2}
     calls = []
 
     def fake_run_one(overrides, run, path, gravity_step, config):
@@ -91,15 +91,15 @@ def test_fast_ensemble_specimens_runs_the_reference_on_the_first_specimens_only(
         np.savez(path, U=U, F_cell=F, wall_s=2.0, wall_steady_s=2.0, cpu_s=1.5, steps=10, completed=True)
 
     monkeypatch.setattr(bfe, "run_one", fake_run_one)
-    configs = [str(tmp_path / f"spec-s{k}" / "config.yaml") for k in (0, 1)]
+    configs = [str(tmp_path / f"specimen-s{k}" / "config.yaml") for k in (0, 1)]
     bfe.main(["--out", str(tmp_path / "out"), "--runs", "1", "--reference-specimens", "1", "--window-mm", "0.5",
               "--config", configs[0], "--config", configs[1], "--setting", "ref:solver.mass_scaling=1",
               "--setting", "fast:"])
-    assert sorted(calls) == [("fast_00", "spec-s0"), ("fast_00", "spec-s1"), ("ref_00", "spec-s0")]
+    assert sorted(calls) == [("fast_00", "specimen-s0"), ("fast_00", "specimen-s1"), ("ref_00", "specimen-s0")]
     printed = capsys.readouterr().out
-    assert "fast vs ref on spec-s0: max |ΔF| 0.0500 N = 4.76 % of ref's largest window mean" in printed
+    assert "fast vs ref on specimen-s0: max |ΔF| 0.0500 N = 4.76 % of ref's largest window mean" in printed
     assert "fast over 2 specimens: max sd 12.86 %, max range 18.18 % of its largest mean window mean" in printed
-    assert "| fast | spec-s1 | 10 | 2.0 | 1.5 |" in printed
+    assert "| fast | specimen-s1 | 10 | 2.0 | 1.5 |" in printed
 
 
 def test_perf_profile_names_numba_functions_and_groups_samples_per_thread():
